@@ -1,0 +1,1 @@
+"""Analyses: per-scene report, paper reproduction, what-if studies."""

@@ -1,0 +1,5 @@
+import sys
+
+from coherence.cli import main
+
+sys.exit(main())
