@@ -1,0 +1,338 @@
+"""Cache hierarchy configuration: frozen, validated, saved to TOML or JSON.
+
+A :class:`Hierarchy` is a tuple of :class:`CacheLevel` from the level next to
+the CPU (L1) down to the last level before memory, plus the memory latency and
+an inclusion policy. Any number of sets is allowed (96 KB 3-way with 64-byte
+lines has 512 sets; 96 KB 2-way would have 768). Line sizes are powers of two
+and may only grow towards memory.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+POLICIES = ("lru", "fifo", "random")
+INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
+MAX_LEVELS = 8
+
+
+def _is_power_of_two(value: int) -> bool:
+    return value > 0 and value & (value - 1) == 0
+
+
+def _require_int(owner: str, name: str, value, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value}")
+    return value
+
+
+def _require_number(owner: str, name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+        raise ValueError(f"{owner}.{name} must be a finite number >= 0 (cycles), got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class CacheLevel:
+    """One cache level.
+
+    Parameters
+    ----------
+    name : str
+        Label used in tables (``"L1"``).
+    size : int
+        Capacity in bytes; a multiple of ``line_size * assoc``.
+    line_size : int
+        Line (block) size in bytes, a power of two.
+    assoc : int or "full"
+        Ways per set; 1 is direct-mapped, ``"full"`` is fully associative.
+    policy : {"lru", "fifo", "random"}
+        Replacement policy. ``"random"`` draws victims from a generator seeded
+        with ``seed``, so runs are reproducible.
+    latency : float
+        Hit latency in CPU cycles.
+    seed : int
+        Seed of the random replacement policy (ignored otherwise).
+    """
+
+    name: str
+    size: int
+    line_size: int
+    assoc: int | str = 1
+    policy: str = "lru"
+    latency: float = 1.0
+    seed: int = 0
+
+    def __post_init__(self):
+        owner = f"CacheLevel({self.name!r})" if isinstance(self.name, str) else "CacheLevel"
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"CacheLevel.name must be a non-empty string, got {self.name!r}")
+        _require_int(owner, "size", self.size, 1)
+        _require_int(owner, "line_size", self.line_size, 1)
+        if not _is_power_of_two(self.line_size):
+            raise ValueError(f"{owner}.line_size must be a power of two, got {self.line_size}")
+        if self.line_size > self.size:
+            raise ValueError(f"{owner}.line_size ({self.line_size}) must not exceed size ({self.size})")
+        if isinstance(self.assoc, str):
+            if self.assoc.lower() != "full":
+                raise ValueError(f"{owner}.assoc must be a positive integer or 'full', got {self.assoc!r}")
+            object.__setattr__(self, "assoc", "full")
+        else:
+            _require_int(owner, "assoc", self.assoc, 1)
+        ways = self.ways
+        if self.size % (self.line_size * ways) != 0:
+            raise ValueError(
+                f"{owner}.size ({self.size}) must be a multiple of line_size * assoc "
+                f"({self.line_size} * {ways} = {self.line_size * ways}) so that the sets are whole"
+            )
+        if not isinstance(self.policy, str) or self.policy.lower() not in POLICIES:
+            raise ValueError(f"{owner}.policy must be one of {', '.join(POLICIES)}; got {self.policy!r}")
+        object.__setattr__(self, "policy", self.policy.lower())
+        object.__setattr__(self, "latency", _require_number(owner, "latency", self.latency))
+        _require_int(owner, "seed", self.seed, 0)
+
+    @property
+    def ways(self) -> int:
+        """Number of ways (lines per set)."""
+        return self.size // self.line_size if self.assoc == "full" else int(self.assoc)
+
+    @property
+    def n_sets(self) -> int:
+        """Number of sets (any positive integer, not only powers of two)."""
+        return self.size // (self.line_size * self.ways)
+
+    @property
+    def n_lines(self) -> int:
+        """Capacity in lines."""
+        return self.size // self.line_size
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "size": self.size,
+            "line_size": self.line_size,
+            "assoc": self.assoc,
+            "policy": self.policy,
+            "latency": self.latency,
+            "seed": self.seed,
+        }
+
+
+@dataclass(frozen=True)
+class Hierarchy:
+    """A private cache hierarchy of one CPU.
+
+    Parameters
+    ----------
+    levels : tuple of CacheLevel
+        From the level next to the CPU to the last level before memory.
+    memory_latency : float
+        Cycles to serve an access that misses every level.
+    inclusion : {"non-inclusive", "inclusive", "exclusive"}
+        ``non-inclusive``: a miss fills every level that missed; levels evict
+        independently. ``inclusive``: the same fills, and a line evicted from
+        a lower level is invalidated in every level above it
+        (back-invalidation). ``exclusive``: a line lives in one level at most;
+        misses fill only the first level, its victims move one level down, and
+        a hit in a lower level moves the line up to the first level.
+    name : str
+        Label for reports.
+    """
+
+    levels: tuple[CacheLevel, ...]
+    memory_latency: float = 100.0
+    inclusion: str = "non-inclusive"
+    name: str = "custom"
+
+    def __post_init__(self):
+        levels = tuple(self.levels) if isinstance(self.levels, (list, tuple)) else None
+        if not levels:
+            raise ValueError("Hierarchy.levels must be a non-empty sequence of CacheLevel")
+        if len(levels) > MAX_LEVELS:
+            raise ValueError(f"Hierarchy.levels may hold at most {MAX_LEVELS} levels, got {len(levels)}")
+        for index, level in enumerate(levels):
+            if not isinstance(level, CacheLevel):
+                raise ValueError(f"Hierarchy.levels[{index}] must be a CacheLevel, got {type(level).__name__}")
+        object.__setattr__(self, "levels", levels)
+        names = [level.name for level in levels]
+        if len(set(names)) != len(names):
+            raise ValueError(f"Hierarchy.levels must have distinct names, got {names}")
+        object.__setattr__(self, "memory_latency", _require_number("Hierarchy", "memory_latency", self.memory_latency))
+        if not isinstance(self.inclusion, str) or self.inclusion.lower() not in INCLUSIONS:
+            raise ValueError(f"Hierarchy.inclusion must be one of {', '.join(INCLUSIONS)}; got {self.inclusion!r}")
+        object.__setattr__(self, "inclusion", self.inclusion.lower())
+        for upper, lower in zip(levels, levels[1:]):
+            if lower.line_size < upper.line_size:
+                raise ValueError(
+                    f"Hierarchy: line_size may only grow towards memory, but {lower.name} has "
+                    f"{lower.line_size} B lines below {upper.name} with {upper.line_size} B"
+                )
+            if self.inclusion == "inclusive" and lower.size < upper.size:
+                raise ValueError(
+                    f"Hierarchy: an inclusive {lower.name} ({lower.size} B) cannot hold all of "
+                    f"{upper.name} ({upper.size} B) above it"
+                )
+            if self.inclusion == "exclusive" and lower.line_size != upper.line_size:
+                raise ValueError(
+                    f"Hierarchy: exclusive levels must share one line size; {upper.name} has "
+                    f"{upper.line_size} B and {lower.name} {lower.line_size} B"
+                )
+        if not isinstance(self.name, str):
+            raise ValueError(f"Hierarchy.name must be a string, got {self.name!r}")
+
+    @property
+    def level_names(self) -> list[str]:
+        return [level.name for level in self.levels]
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "memory_latency": self.memory_latency,
+            "inclusion": self.inclusion,
+            "levels": [level.to_dict() for level in self.levels],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "hierarchy") -> "Hierarchy":
+        """Build from a mapping as written by :meth:`to_dict`.
+
+        ``source`` names the file or object in error messages.
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"{source}: expected a table with 'levels', got {type(data).__name__}")
+        unknown = set(data) - {"name", "memory_latency", "inclusion", "levels"}
+        if unknown:
+            raise ValueError(f"{source}: unknown field(s) {sorted(unknown)}; allowed: name, memory_latency, inclusion, levels")
+        raw_levels = data.get("levels")
+        if not isinstance(raw_levels, list) or not raw_levels:
+            raise ValueError(f"{source}: 'levels' must be a non-empty list of tables")
+        levels = []
+        allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed"}
+        for index, raw in enumerate(raw_levels):
+            where = f"{source}: levels[{index}]"
+            if not isinstance(raw, dict):
+                raise ValueError(f"{where} must be a table")
+            extra = set(raw) - allowed
+            if extra:
+                raise ValueError(f"{where}: unknown field(s) {sorted(extra)}; allowed: {', '.join(sorted(allowed))}")
+            missing = {"name", "size", "line_size"} - set(raw)
+            if missing:
+                raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
+            try:
+                levels.append(CacheLevel(**raw))
+            except ValueError as error:
+                raise ValueError(f"{where}: {error}") from None
+        kwargs = {key: data[key] for key in ("name", "memory_latency", "inclusion") if key in data}
+        try:
+            return cls(levels=tuple(levels), **kwargs)
+        except ValueError as error:
+            raise ValueError(f"{source}: {error}") from None
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write to ``.toml`` or ``.json`` (chosen by suffix), atomically."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".toml":
+            import tomli_w
+
+            text = tomli_w.dumps(self.to_dict())
+        elif suffix == ".json":
+            text = json.dumps(self.to_dict(), indent=2) + "\n"
+        else:
+            raise ValueError(f"{path}: hierarchy files must end in .toml or .json")
+        write_text_atomic(path, text)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Hierarchy":
+        """Read a hierarchy written by :meth:`save` (or by hand)."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such hierarchy file")
+        suffix = path.suffix.lower()
+        text = path.read_text(encoding="utf-8")
+        try:
+            if suffix == ".toml":
+                data = tomllib.loads(text)
+            elif suffix == ".json":
+                data = json.loads(text)
+            else:
+                raise ValueError(f"{path}: hierarchy files must end in .toml or .json")
+        except tomllib.TOMLDecodeError as error:
+            raise ValueError(f"{path}: not valid TOML: {error}") from None
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
+        return cls.from_dict(data, source=str(path))
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path``, then rename it."""
+    path = Path(path)
+    handle, temporary = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as stream:
+            stream.write(text)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def alpha21164() -> Hierarchy:
+    """The Alpha 21164 of the AlphaServer 8400 (DESIGN.md §3), per CPU.
+
+    L1 data 8 KB direct-mapped, 32-byte lines; L2 (S-cache) 96 KB 3-way,
+    64-byte lines (512 sets); L3 (B-cache) 4 MB direct-mapped, 64-byte lines.
+    Latencies 2 / 8 / 12 cycles and 80 for memory are approximate defaults.
+    """
+    return Hierarchy(
+        levels=(
+            CacheLevel("L1", 8 * 1024, 32, 1, "lru", latency=2),
+            CacheLevel("L2", 96 * 1024, 64, 3, "lru", latency=8),
+            CacheLevel("L3", 4 * 1024 * 1024, 64, 1, "lru", latency=12),
+        ),
+        memory_latency=80,
+        name="alpha21164",
+    )
+
+
+def modern() -> Hierarchy:
+    """A current desktop core, for what-if studies (values are typical, not one product).
+
+    L1 data 32 KB 8-way; L2 1 MB 16-way; L3 32 MB 16-way (modelled as private
+    to the core); 64-byte lines everywhere; latencies 4 / 14 / 50 cycles and
+    300 cycles for memory.
+    """
+    return Hierarchy(
+        levels=(
+            CacheLevel("L1", 32 * 1024, 64, 8, "lru", latency=4),
+            CacheLevel("L2", 1024 * 1024, 64, 16, "lru", latency=14),
+            CacheLevel("L3", 32 * 1024 * 1024, 64, 16, "lru", latency=50),
+        ),
+        memory_latency=300,
+        name="modern",
+    )
+
+
+PRESETS = {"alpha21164": alpha21164, "modern": modern}
+
+
+def get_hierarchy(name_or_path: str | os.PathLike | Hierarchy) -> Hierarchy:
+    """A preset by name (``alpha21164``, ``modern``), a file path, or a Hierarchy."""
+    if isinstance(name_or_path, Hierarchy):
+        return name_or_path
+    key = str(name_or_path)
+    if key in PRESETS:
+        return PRESETS[key]()
+    path = Path(key)
+    if path.suffix.lower() in (".toml", ".json"):
+        return Hierarchy.load(path)
+    raise ValueError(f"unknown hierarchy {key!r}: use a preset ({', '.join(PRESETS)}) or a .toml/.json file")
+

@@ -1,0 +1,318 @@
+"""Simulation of byte-address streams through a cache hierarchy.
+
+>>> from cachesim import simulate, alpha21164
+>>> result = simulate(addresses, alpha21164())           # doctest: +SKIP
+>>> result.to_frame()                                    # doctest: +SKIP
+
+A :class:`CacheState` holds the contents of every level. Passing a state
+instead of a hierarchy continues it, so a stream run in pieces gives exactly
+the totals of one run; :meth:`CacheState.copy` clones it (for what-if
+branches) and :meth:`CacheState.reset` empties it. :func:`simulate_many` runs
+independent states (one per simulated CPU) on many streams in one call.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from cachesim import _kernels as K
+from cachesim.config import Hierarchy
+
+_POLICY_CODES = {"lru": K.LRU, "fifo": K.FIFO, "random": K.RANDOM}
+_INCLUSION_CODES = {"non-inclusive": K.NON_INCLUSIVE, "inclusive": K.INCLUSIVE, "exclusive": K.EXCLUSIVE}
+
+
+class _Geometry:
+    """Kernel parameters of a hierarchy as flat int64 arrays."""
+
+    def __init__(self, hierarchy: Hierarchy):
+        levels = hierarchy.levels
+        shifts = np.array([level.line_size.bit_length() - 1 for level in levels], dtype=np.int64)
+        self.shift0 = int(shifts[0])
+        self.rel_shift = shifts - shifts[0]
+        self.n_sets = np.array([level.n_sets for level in levels], dtype=np.int64)
+        self.set_mask = np.array(
+            [n - 1 if n & (n - 1) == 0 else -1 for n in self.n_sets], dtype=np.int64
+        )
+        self.ways = np.array([level.ways for level in levels], dtype=np.int64)
+        self.policy = np.array([_POLICY_CODES[level.policy] for level in levels], dtype=np.int64)
+        sizes = self.n_sets * self.ways
+        self.offset = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
+        self.total_ways = int(sizes.sum())
+        self.inclusion = _INCLUSION_CODES[hierarchy.inclusion]
+        self.seeds = np.array([_seed_state(level.seed, index) for index, level in enumerate(levels)],
+                              dtype=np.uint64)
+
+    def args(self):
+        return (self.shift0, self.rel_shift, self.n_sets, self.set_mask, self.ways, self.policy,
+                self.offset, self.inclusion)
+
+
+def _seed_state(seed: int, level: int) -> int:
+    # xorshift needs a non-zero state; mix the level in so levels differ.
+    value = (seed * 0x9E3779B97F4A7C15 + (level + 1) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    return value or 0x2545F4914F6CDD1D
+
+
+class CacheState:
+    """Contents and cumulative counters of one hierarchy (one CPU).
+
+    Parameters
+    ----------
+    hierarchy : Hierarchy
+        The configuration; fixed for the life of the state.
+    """
+
+    def __init__(self, hierarchy: Hierarchy):
+        if not isinstance(hierarchy, Hierarchy):
+            raise ValueError(f"CacheState needs a Hierarchy, got {type(hierarchy).__name__}")
+        self.hierarchy = hierarchy
+        self._geometry = _Geometry(hierarchy)
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty every level and zero the counters (random generators reseeded)."""
+        n_levels = len(self.hierarchy.levels)
+        self.tags = np.full(self._geometry.total_ways, -1, dtype=np.int64)
+        self.stamps = np.zeros(self._geometry.total_ways, dtype=np.int64)
+        self.rng = self._geometry.seeds.copy()
+        self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
+        self.clock = 0
+
+    def copy(self) -> "CacheState":
+        """An independent clone: continuing either leaves the other untouched."""
+        clone = CacheState.__new__(CacheState)
+        clone.hierarchy = self.hierarchy
+        clone._geometry = self._geometry
+        clone.tags = self.tags.copy()
+        clone.stamps = self.stamps.copy()
+        clone.rng = self.rng.copy()
+        clone.counts = self.counts.copy()
+        clone.clock = self.clock
+        return clone
+
+    def totals(self) -> "SimulationResult":
+        """Cumulative counts of everything run on this state since the last reset."""
+        return SimulationResult(self.hierarchy, self.counts.copy())
+
+    def resident_lines(self, level: int | str) -> np.ndarray:
+        """Sorted line numbers (address // line_size) held by one level."""
+        index = self.hierarchy.level_names.index(level) if isinstance(level, str) else int(level)
+        geometry = self._geometry
+        start = geometry.offset[index]
+        stop = start + geometry.n_sets[index] * geometry.ways[index]
+        lines = self.tags[start:stop]
+        return np.sort(lines[lines >= 0])
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Per-level counts of one simulation call.
+
+    Attributes
+    ----------
+    hierarchy : Hierarchy
+    counts : ndarray of int64, shape (L, 5)
+        accesses, hits, misses, evictions, back-invalidations per level.
+    served_by : ndarray of uint8, shape (N,), or None
+        Level that served each access (``L`` means memory), when requested.
+    state : CacheState or None
+        The state after the call, to continue from.
+    """
+
+    hierarchy: Hierarchy
+    counts: np.ndarray
+    served_by: np.ndarray | None = None
+    state: CacheState | None = None
+
+    @property
+    def accesses(self) -> np.ndarray:
+        return self.counts[:, K.ACCESSES]
+
+    @property
+    def hits(self) -> np.ndarray:
+        return self.counts[:, K.HITS]
+
+    @property
+    def misses(self) -> np.ndarray:
+        return self.counts[:, K.MISSES]
+
+    @property
+    def evictions(self) -> np.ndarray:
+        return self.counts[:, K.EVICTIONS]
+
+    @property
+    def invalidations(self) -> np.ndarray:
+        return self.counts[:, K.INVALIDATIONS]
+
+    @property
+    def hit_rate(self) -> np.ndarray:
+        """Hits / accesses per level (NaN where a level saw no access)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.accesses > 0, self.hits / np.maximum(self.accesses, 1), np.nan)
+
+    @property
+    def memory_accesses(self) -> int:
+        """Accesses served by memory: the misses of the last level."""
+        return int(self.misses[-1])
+
+    def to_frame(self) -> pd.DataFrame:
+        """One row per level: level, size, line_size, ways, accesses, hits,
+        misses, evictions, invalidations, hit_rate."""
+        levels = self.hierarchy.levels
+        return pd.DataFrame({
+            "level": pd.Series([level.name for level in levels], dtype="string"),
+            "size": np.array([level.size for level in levels], dtype=np.int64),
+            "line_size": np.array([level.line_size for level in levels], dtype=np.int64),
+            "ways": np.array([level.ways for level in levels], dtype=np.int64),
+            "accesses": self.accesses.astype(np.int64),
+            "hits": self.hits.astype(np.int64),
+            "misses": self.misses.astype(np.int64),
+            "evictions": self.evictions.astype(np.int64),
+            "invalidations": self.invalidations.astype(np.int64),
+            "hit_rate": self.hit_rate.astype(np.float64),
+        })
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready numbers, with the hierarchy."""
+        return {
+            "hierarchy": self.hierarchy.to_dict(),
+            "levels": [
+                {key: (None if isinstance(value, float) and np.isnan(value) else value)
+                 for key, value in row.items()}
+                for row in self.to_frame().astype(object).to_dict(orient="records")
+            ],
+            "memory_accesses": self.memory_accesses,
+        }
+
+
+def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
+    """Validate and convert to a contiguous uint64 array of byte addresses.
+
+    Accepts any integer array or sequence of non-negative integers below 2**64.
+    Floats, booleans, negative values and non-numeric input raise ValueError.
+    """
+    if isinstance(addresses, np.ndarray):
+        array = addresses
+    else:
+        try:
+            array = np.asarray(addresses)
+        except (OverflowError, ValueError, TypeError) as error:
+            raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+        if array.dtype == object:
+            try:
+                array = np.array([int(value) for value in array.ravel()], dtype=np.uint64)
+            except (OverflowError, ValueError, TypeError) as error:
+                raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+    if array.ndim != 1:
+        if array.size == 0:
+            array = array.reshape(0)
+        else:
+            raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
+    if array.size == 0:
+        return np.zeros(0, dtype=np.uint64)
+    if array.dtype.kind == "u":
+        return np.ascontiguousarray(array, dtype=np.uint64)
+    if array.dtype.kind == "i":
+        lowest = array.min()
+        if lowest < 0:
+            raise ValueError(f"{name} must be non-negative; found {lowest} at index {int(np.argmin(array))}")
+        return np.ascontiguousarray(array, dtype=np.uint64)
+    raise ValueError(f"{name} must be integers (got dtype {array.dtype}); byte addresses are whole numbers")
+
+
+def _check_line_range(addresses: np.ndarray, hierarchy: Hierarchy) -> None:
+    # Line numbers are kept as int64; with 1-byte lines an address >= 2**63
+    # would not fit.
+    if hierarchy.levels[0].line_size == 1 and addresses.size and addresses.max() >= 2**63:
+        raise ValueError("with a 1-byte first-level line, addresses must be below 2**63")
+
+
+def simulate(addresses, hierarchy: Hierarchy | CacheState, *, return_levels: bool = False) -> SimulationResult:
+    """Run a stream of byte addresses through a cache hierarchy in one compiled call.
+
+    Parameters
+    ----------
+    addresses : array_like of int, shape (N,)
+        Byte addresses (non-negative, below 2**64), in access order. Every
+        access is a read of the line holding that byte.
+    hierarchy : Hierarchy or CacheState
+        A configuration (runs on empty caches) or a state to continue; a
+        state is updated in place.
+    return_levels : bool
+        Also return ``served_by`` (uint8, (N,)): the level index that served
+        each access, ``L`` meaning memory.
+
+    Returns
+    -------
+    SimulationResult
+        Counts of this call only, and the state after it (``.state``).
+    """
+    state = hierarchy if isinstance(hierarchy, CacheState) else CacheState(hierarchy)
+    addresses = as_addresses(addresses)
+    _check_line_range(addresses, state.hierarchy)
+    served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
+    before = state.counts.copy()
+    state.clock = int(K.simulate_stream(
+        addresses, *state._geometry.args(), state.tags, state.stamps, state.rng, state.counts,
+        state.clock, served_by, return_levels))
+    return SimulationResult(state.hierarchy, state.counts - before,
+                            served_by if return_levels else None, state)
+
+
+def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[CacheState] | None = None,
+                  return_levels: bool = False) -> list[SimulationResult]:
+    """Run independent streams, each on its own hierarchy state, in one parallel call.
+
+    Parameters
+    ----------
+    streams : sequence of array_like, length S
+        Stream ``s`` runs on state ``s`` (one simulated CPU each).
+    hierarchy : Hierarchy, optional
+        Configuration of fresh states; omit when ``states`` is given.
+    states : list of CacheState, optional
+        States to continue (updated in place), all of one hierarchy.
+    return_levels : bool
+        Also return per-access ``served_by`` for every stream.
+
+    Returns
+    -------
+    list of SimulationResult, length S
+    """
+    streams = [as_addresses(stream, name=f"streams[{index}]") for index, stream in enumerate(streams)]
+    if states is None:
+        if hierarchy is None:
+            raise ValueError("simulate_many needs a hierarchy or a list of states")
+        states = [CacheState(hierarchy) for _ in streams]
+    if len(states) != len(streams):
+        raise ValueError(f"simulate_many got {len(streams)} streams but {len(states)} states")
+    if not streams:
+        return []
+    reference = states[0].hierarchy
+    if hierarchy is not None and hierarchy != reference:
+        raise ValueError("simulate_many: the states were made for another hierarchy than the one given")
+    for index, state in enumerate(states):
+        if state.hierarchy != reference:
+            raise ValueError(f"simulate_many: states[{index}] has another hierarchy than states[0]")
+        _check_line_range(streams[index], reference)
+    lengths = np.array([stream.size for stream in streams], dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
+    addresses = np.concatenate(streams)
+    tags = np.stack([state.tags for state in states])
+    stamps = np.stack([state.stamps for state in states])
+    rng = np.stack([state.rng for state in states])
+    counts = np.stack([state.counts for state in states])
+    before = counts.copy()
+    clocks = np.array([state.clock for state in states], dtype=np.int64)
+    served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
+    K.simulate_streams(addresses, starts, *states[0]._geometry.args(), tags, stamps, rng, counts,
+                       clocks, served_by, return_levels)
+    results = []
+    for index, state in enumerate(states):
+        state.tags, state.stamps, state.rng = tags[index].copy(), stamps[index].copy(), rng[index].copy()
+        state.counts, state.clock = counts[index].copy(), int(clocks[index])
+        levels = served_by[starts[index]:starts[index + 1]] if return_levels else None
+        results.append(SimulationResult(reference, counts[index] - before[index], levels, state))
+    return results

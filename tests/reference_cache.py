@@ -1,0 +1,132 @@
+"""Slow, obvious reference models used to check the compiled simulator.
+
+LRU and FIFO sets are OrderedDicts (oldest first); random replacement keeps a
+list of ways and draws victims from the same documented xorshift64* generator
+as the simulator, so the victim sequences can be compared exactly.
+"""
+from collections import OrderedDict
+
+import numpy as np
+
+from cachesim.simulate import _seed_state
+
+MASK64 = (1 << 64) - 1
+
+
+class _XorShift:
+    def __init__(self, state):
+        self.state = state
+
+    def next(self):
+        x = self.state
+        x ^= x >> 12
+        x ^= (x << 25) & MASK64
+        x ^= x >> 27
+        self.state = x
+        return (x * 2685821657736338717) & MASK64
+
+
+class ReferenceLevel:
+    def __init__(self, level, index):
+        self.line_size = level.line_size
+        self.n_sets = level.n_sets
+        self.ways = level.ways
+        self.policy = level.policy
+        if self.policy == "random":
+            self.sets = [[None] * self.ways for _ in range(self.n_sets)]
+            self.rng = _XorShift(_seed_state(level.seed, index))
+        else:
+            self.sets = [OrderedDict() for _ in range(self.n_sets)]
+
+    def _set(self, line):
+        return self.sets[line % self.n_sets]
+
+    def lookup(self, line):
+        entries = self._set(line)
+        if line not in entries:
+            return False
+        if self.policy == "lru":
+            entries.move_to_end(line)
+        return True
+
+    def remove(self, line):
+        entries = self._set(line)
+        if self.policy == "random":
+            if line in entries:
+                entries[entries.index(line)] = None
+                return True
+            return False
+        return entries.pop(line, None) is not None
+
+    def insert(self, line):
+        """Place line; return the evicted line or None."""
+        entries = self._set(line)
+        if self.policy == "random":
+            if None in entries:
+                entries[entries.index(None)] = line
+                return None
+            way = self.rng.next() % self.ways
+            evicted, entries[way] = entries[way], line
+            return evicted
+        evicted = None
+        if len(entries) == self.ways:
+            evicted, _ = entries.popitem(last=False)
+        entries[line] = True
+        return evicted
+
+
+def reference_simulate(addresses, hierarchy):
+    """Return (counts (L, 5) int64, served_by list) like cachesim.simulate."""
+    levels = [ReferenceLevel(level, index) for index, level in enumerate(hierarchy.levels)]
+    n_levels = len(levels)
+    counts = np.zeros((n_levels, 5), dtype=np.int64)
+    served_by = []
+    for address in (int(a) for a in addresses):
+        lines = [address // level.line_size for level in levels]
+        served = n_levels
+        for index, level in enumerate(levels):
+            counts[index, 0] += 1
+            if level.lookup(lines[index]):
+                counts[index, 1] += 1
+                served = index
+                break
+            counts[index, 2] += 1
+        served_by.append(served)
+        if served == 0:
+            continue
+        if hierarchy.inclusion == "exclusive":
+            if served < n_levels:
+                levels[served].remove(lines[served])
+            line = lines[0]
+            for index, level in enumerate(levels):
+                line = level.insert(line)
+                if line is None:
+                    break
+                counts[index, 3] += 1
+            continue
+        for index in range(served - 1, -1, -1):
+            evicted = levels[index].insert(lines[index])
+            if evicted is None:
+                continue
+            counts[index, 3] += 1
+            if hierarchy.inclusion == "inclusive":
+                for upper in range(index):
+                    ratio = levels[index].line_size // levels[upper].line_size
+                    for sub in range(evicted * ratio, (evicted + 1) * ratio):
+                        if levels[upper].remove(sub):
+                            counts[upper, 4] += 1
+    return counts, served_by
+
+
+def reference_reuse_distances(addresses, line_size):
+    """O(N^2) reuse distances: distinct lines since the previous same-line access."""
+    lines = [int(a) // line_size for a in addresses]
+    last_seen = {}
+    distances = []
+    for i, line in enumerate(lines):
+        if line in last_seen:
+            distances.append(len(set(lines[last_seen[line] + 1:i])))
+        else:
+            distances.append(-1)
+        last_seen[line] = i
+    return np.array(distances, dtype=np.int64)

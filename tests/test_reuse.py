@@ -1,0 +1,61 @@
+"""Reuse distances against the O(N^2) reference, and the miss-ratio property."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cachesim import CacheLevel, Hierarchy, reuse_distances, reuse_profile, simulate
+from reference_cache import reference_reuse_distances
+
+
+def test_by_hand():
+    # lines: a b c a a b d c  (line size 16)
+    stream = [0, 16, 32, 0, 4, 16, 48, 32]
+    assert reuse_distances(stream, 16).tolist() == [-1, -1, -1, 2, 0, 2, -1, 3]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_matches_reference_on_random_streams(seed):
+    rng = np.random.default_rng(seed)
+    span = [1 << 8, 1 << 12, 1 << 40, 1 << 63][seed]
+    stream = rng.integers(0, span, 3000, dtype=np.uint64)
+    if seed == 1:
+        stream = np.repeat(stream, rng.integers(1, 4, stream.size))  # runs of one line
+    line_size = [1, 16, 64, 4096][seed]
+    assert np.array_equal(reuse_distances(stream, line_size), reference_reuse_distances(stream, line_size))
+
+
+def test_growing_hash_table_keeps_exact_distances():
+    # more distinct lines than the initial table holds, then every line again
+    lines = np.arange(10000, dtype=np.uint64)
+    stream = np.concatenate([lines, lines[::-1]]) * 64
+    distances = reuse_distances(stream, 64)
+    assert (distances[:10000] == -1).all()
+    assert distances[10000:].tolist() == list(range(10000))
+
+
+@settings(max_examples=40, deadline=None)
+@given(stream=st.lists(st.integers(0, 2047), max_size=300), capacity=st.integers(1, 40))
+def test_fully_associative_lru_misses_equal_distance_tail(stream, capacity):
+    profile = reuse_profile(stream, 32)
+    hierarchy = Hierarchy((CacheLevel("FA", 32 * capacity, 32, "full", "lru"),))
+    assert int(profile.misses(capacity)) == int(simulate(stream, hierarchy).misses[0])
+
+
+def test_miss_ratio_curve_is_monotone_and_complete():
+    rng = np.random.default_rng(5)
+    stream = rng.integers(0, 1 << 16, 20000)
+    curve = reuse_profile(stream, 64).miss_ratio_curve()
+    assert list(curve.columns) == ["size", "capacity_lines", "misses", "miss_ratio"]
+    assert (np.diff(curve["misses"]) <= 0).all()
+    distinct = np.unique(stream // 64).size
+    assert curve["misses"].iloc[-1] == distinct  # a cache holding every line misses only cold
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="line_size"):
+        reuse_distances([1, 2], 48)
+    with pytest.raises(ValueError, match="non-negative"):
+        reuse_distances([1, -2], 64)
+    assert reuse_distances([], 64).size == 0
+    assert reuse_profile([], 64).accesses == 0
