@@ -24,7 +24,7 @@ ACCESSES, HITS, MISSES, EVICTIONS, INVALIDATIONS = 0, 1, 2, 3, 4
 N_COUNTERS = 5
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _set_base(line, level, n_sets, set_mask, ways, offset):
     mask = set_mask[level]
     if mask >= 0:
@@ -34,7 +34,7 @@ def _set_base(line, level, n_sets, set_mask, ways, offset):
     return offset[level] + set_index * ways[level]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _find(tags, base, n_ways, line):
     for way in range(n_ways):
         if tags[base + way] == line:
@@ -43,17 +43,18 @@ def _find(tags, base, n_ways, line):
 
 
 @njit(cache=True)
-def _next_random(rng, level):
-    # xorshift64*: small, fast and reproducible from the level's seed.
+def _random_way(rng, level, n_ways):
+    # xorshift64*: small, fast and reproducible from the level's seed. Kept
+    # out of line: inlined, it slows every insert of the other policies.
     x = rng[level]
     x ^= x >> np.uint64(12)
     x ^= x << np.uint64(25)
     x ^= x >> np.uint64(27)
     rng[level] = x
-    return x * np.uint64(2685821657736338717)
+    return np.int64((x * np.uint64(2685821657736338717)) % np.uint64(n_ways))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _insert(tags, stamps, rng, level, base, n_ways, policy, line, clock):
     """Place ``line`` in its set; return the evicted line or -1."""
     victim = base
@@ -69,7 +70,7 @@ def _insert(tags, stamps, rng, level, base, n_ways, policy, line, clock):
             oldest = stamps[slot]
             victim = slot
     if full and policy == RANDOM:
-        victim = base + np.int64(_next_random(rng, level) % np.uint64(n_ways))
+        victim = base + _random_way(rng, level, n_ways)
     evicted = tags[victim]
     tags[victim] = line
     stamps[victim] = clock
@@ -101,41 +102,55 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
     """
     n_levels = rel_shift.shape[0]
     lines = np.empty(n_levels, dtype=np.int64)
+    # The first level serves most accesses: keep its geometry in scalars and
+    # its counters local, and leave the general loop to the misses.
+    mask0 = set_mask[0]
+    n_sets0 = n_sets[0]
+    ways0 = ways[0]
+    track0 = policy[0] == LRU and ways0 > 1  # one way: nothing to order
+    shift = np.uint64(shift0)
     previous = np.int64(-1)
-    repeats = np.int64(0)
+    first_hits = np.int64(0)
+    level_hits = np.zeros(n_levels, dtype=np.int64)
     for i in range(addresses.shape[0]):
-        line0 = np.int64(addresses[i] >> np.uint64(shift0))
+        line0 = np.int64(addresses[i] >> shift)
         clock += 1
         if line0 == previous:
             # The previous access left this line in the first level as its
             # set's most recent entry; a repeat is a hit that changes nothing.
-            repeats += 1
+            first_hits += 1
             if record:
                 served_by[i] = 0
             continue
         previous = line0
+        base0 = (line0 & mask0 if mask0 >= 0 else line0 % n_sets0) * ways0
+        slot = _find(tags, base0, ways0, line0)
+        if slot >= 0:
+            first_hits += 1
+            if track0:
+                stamps[slot] = clock
+            if record:
+                served_by[i] = 0
+            continue
+        lines[0] = line0
         served = n_levels
-        for level in range(n_levels):
+        for level in range(1, n_levels):
             line = line0 >> rel_shift[level]
             lines[level] = line
             base = _set_base(line, level, n_sets, set_mask, ways, offset)
-            counts[level, ACCESSES] += 1
             slot = _find(tags, base, ways[level], line)
             if slot >= 0:
-                counts[level, HITS] += 1
+                level_hits[level] += 1
                 if policy[level] == LRU:
                     stamps[slot] = clock
                 served = level
-                if inclusion == EXCLUSIVE and level > 0:
+                if inclusion == EXCLUSIVE:
                     tags[slot] = -1  # the line moves up to the first level
                 break
-            counts[level, MISSES] += 1
         if record:
             served_by[i] = served
-        if served == 0:
-            continue
         if inclusion == EXCLUSIVE:
-            line = lines[0]
+            line = line0
             for level in range(n_levels):
                 base = _set_base(line, level, n_sets, set_mask, ways, offset)
                 line = _insert(tags, stamps, rng, level, base, ways[level], policy[level], line, clock)
@@ -154,8 +169,14 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
                     if inclusion == INCLUSIVE and level > 0:
                         _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets,
                                          set_mask, ways, offset)
-    counts[0, ACCESSES] += repeats
-    counts[0, HITS] += repeats
+    # Only misses go down a level: accesses of level l + 1 are the misses of l.
+    level_hits[0] = first_hits
+    entering = np.int64(addresses.shape[0])
+    for level in range(n_levels):
+        counts[level, ACCESSES] += entering
+        counts[level, HITS] += level_hits[level]
+        counts[level, MISSES] += entering - level_hits[level]
+        entering -= level_hits[level]
     return clock
 
 

@@ -1,0 +1,93 @@
+"""Cache simulator throughput against pycachesim, in one run on one core.
+
+Builds a seeded 10-million-access stream with ray-tracer-like locality
+(bursts of consecutive 8-byte records around a drifting position inside a
+4 MB scene, with occasional far jumps), runs it through the alpha21164
+hierarchy with our ``simulate`` and with pycachesim's bulk load (in a
+subprocess: its import name is also ``cachesim``), checks that the counts
+agree, and times the exact reuse-distance pass. Ends with one JSON line.
+
+    python benchmarks/bench_cachesim.py [--accesses N] [--repeats R]
+"""
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+import pycachesim_oracle  # noqa: E402
+
+from cachesim import alpha21164, reuse_distances, simulate  # noqa: E402
+
+
+def ray_tracer_like_stream(n_accesses: int, seed: int = 2024) -> np.ndarray:
+    """Bursts of consecutive 8-byte reads around a drifting position (uint64, (N,))."""
+    rng = np.random.default_rng(seed)
+    scene_bytes = 4 << 20
+    n_bursts = n_accesses // 6 + 1
+    lengths = rng.geometric(1 / 6, n_bursts)
+    far = rng.random(n_bursts) < 0.15
+    steps = rng.normal(0, 2048, n_bursts).astype(np.int64)
+    position = np.cumsum(np.where(far, 0, steps)) % scene_bytes
+    jumps = rng.integers(0, scene_bytes, n_bursts)
+    starts = np.where(far, jumps, position) & ~np.int64(7)
+    burst = np.repeat(np.arange(n_bursts), lengths)
+    offset = np.arange(burst.size) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    stream = (starts[burst] + 8 * offset) % scene_bytes + 0x10000000
+    return stream[:n_accesses].astype(np.uint64)
+
+
+def best_of(repeats, function):
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = function()
+        times.append(time.perf_counter() - start)
+    return min(times), result
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--accesses", type=int, default=10_000_000)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+    stream = ray_tracer_like_stream(args.accesses)
+    hierarchy = alpha21164()
+    simulate(stream[:1000], hierarchy)  # compile (or load from cache) outside the timing
+    reuse_distances(stream[:1000], 64)
+
+    ours_seconds, ours = best_of(args.repeats, lambda: simulate(stream, hierarchy))
+    ours_rate = stream.size / ours_seconds
+    print(f"stream: {stream.size:,} accesses, hit rates "
+          + ", ".join(f"{name} {rate:.3f}" for name, rate in zip(hierarchy.level_names, ours.hit_rate)))
+    print(f"ours       : {ours_seconds:8.3f} s  {ours_rate / 1e6:8.1f} M accesses/s")
+
+    figures = {"accesses": int(stream.size), "ours_seconds": ours_seconds,
+               "ours_maccesses_per_s": ours_rate / 1e6}
+    if pycachesim_oracle.available():
+        theirs = pycachesim_oracle.run(stream, hierarchy)
+        agree = (theirs["hits"] == ours.hits.tolist() and theirs["misses"] == ours.misses.tolist())
+        theirs_rate = stream.size / theirs["seconds"]
+        print(f"pycachesim : {theirs['seconds']:8.3f} s  {theirs_rate / 1e6:8.1f} M accesses/s  "
+              f"(bulk load; counts {'agree' if agree else 'DISAGREE'})")
+        print(f"ratio ours/pycachesim: {ours_rate / theirs_rate:.1f}x")
+        figures.update(pycachesim_seconds=theirs["seconds"], pycachesim_maccesses_per_s=theirs_rate / 1e6,
+                       ratio=ours_rate / theirs_rate, counts_agree=agree)
+    else:
+        print(f"pycachesim : not installed in {pycachesim_oracle.ORACLE_DIR}; ratio not measured")
+
+    reuse_seconds, _ = best_of(args.repeats, lambda: reuse_distances(stream, 64))
+    reuse_rate = stream.size / reuse_seconds
+    print(f"reuse dist.: {reuse_seconds:8.3f} s  {reuse_rate / 1e6:8.1f} M accesses/s (64 B lines)")
+    figures.update(reuse_seconds=reuse_seconds, reuse_maccesses_per_s=reuse_rate / 1e6)
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()
