@@ -142,3 +142,287 @@ class Scene:
     def n_lights(self) -> int:
         """Number of point lights."""
         return int(self.light_position.shape[0])
+
+    def counts(self) -> dict[str, int]:
+        """Number of elements per primitive kind.
+
+        Returns
+        -------
+        dict of str to int
+            Keys are the lower-case ``ElementKind`` names in kind order
+            (``sphere``, ``triangle``, ``polygon``, ``patch``, ``cone``).
+        """
+        per_kind = np.bincount(self.element_kind.astype(np.int64), minlength=len(ElementKind))
+        return {kind.name.lower(): int(per_kind[kind]) for kind in ElementKind}
+
+    def bounding_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Axis-aligned box around all geometry, or ``None`` without elements.
+
+        Spheres count with ``|radius|``; a cone counts as the boxes of its two
+        end discs grown by ``|radius|`` in every axis (conservative).
+
+        Returns
+        -------
+        (lo, hi) : tuple of ndarray, shape (3,) each, or None
+        """
+        points = []
+        if len(self.sphere_radius):
+            r = np.abs(self.sphere_radius)[:, None]
+            points += [self.sphere_center - r, self.sphere_center + r]
+        if len(self.triangle_vertices):
+            points.append(self.triangle_vertices.reshape(-1, 3))
+        for vertices in (self.polygon_vertices, self.patch_vertices):
+            if len(vertices):
+                points.append(vertices)
+        if len(self.cone_base_radius):
+            for centre, radius in ((self.cone_base, self.cone_base_radius),
+                                   (self.cone_apex, self.cone_apex_radius)):
+                r = np.abs(radius)[:, None]
+                points += [centre - r, centre + r]
+        if not points:
+            return None
+        stacked = np.concatenate(points)
+        return stacked.min(axis=0), stacked.max(axis=0)
+
+    def summary(self) -> dict:
+        """What the scene holds, as plain Python types (JSON-serialisable).
+
+        Returns
+        -------
+        dict
+            ``name``; ``elements`` (total); ``counts`` (per kind, see
+            :meth:`counts`); ``polygon_vertices`` and ``patch_vertices``
+            (CSR vertex totals); ``materials``; ``lights``;
+            ``bounding_box`` (``{"min": [x, y, z], "max": [x, y, z]}`` or
+            ``None``); ``max_depth``; ``camera`` (eye, look_at, up, angle,
+            hither, resolution as lists/floats/ints); ``background``.
+        """
+        box = self.bounding_box()
+        cam = self.camera
+        return {
+            "name": str(self.name),
+            "elements": self.n_elements,
+            "counts": self.counts(),
+            "polygon_vertices": int(self.polygon_vertices.shape[0]),
+            "patch_vertices": int(self.patch_vertices.shape[0]),
+            "materials": int(self.material_kd.shape[0]),
+            "lights": self.n_lights,
+            "bounding_box": None if box is None else {
+                "min": [float(v) for v in box[0]], "max": [float(v) for v in box[1]]},
+            "max_depth": int(self.max_depth),
+            "camera": {
+                "eye": list(cam.eye), "look_at": list(cam.look_at), "up": list(cam.up),
+                "angle": float(cam.angle), "hither": float(cam.hither),
+                "resolution": list(cam.resolution),
+            },
+            "background": [float(v) for v in self.background],
+        }
+
+
+# Fields of ``Scene`` that hold arrays, in declaration order.
+ARRAY_FIELDS = tuple(
+    name for name in Scene.__dataclass_fields__
+    if name not in ("name", "camera", "max_depth")
+)
+
+
+def scenes_equal(a: Scene, b: Scene, *, rtol: float = 0.0, atol: float = 0.0) -> bool:
+    """Whether two scenes have the same camera, depth and arrays.
+
+    Arrays must agree in dtype and shape; values within ``rtol``/``atol``
+    (exactly, by default). The name is not compared.
+    """
+    if a.camera != b.camera or a.max_depth != b.max_depth:
+        return False
+    for name in ARRAY_FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        if x.dtype != y.dtype or x.shape != y.shape:
+            return False
+        if not np.allclose(x, y, rtol=rtol, atol=atol, equal_nan=False):
+            return False
+    return True
+
+
+@dataclass(frozen=True)
+class Material:
+    """Surface description of NFF ``f``: ``colour Kd Ks shine T ior``.
+
+    Parameters
+    ----------
+    color : tuple of 3 float
+        Surface colour (r, g, b).
+    kd, ks : float
+        Diffuse and specular (reflection) coefficients; ``ks > 0`` spawns a
+        reflection ray.
+    shine : float
+        Phong exponent of the highlight.
+    t : float
+        Transmittance; ``t > 0`` spawns a refraction ray.
+    ior : float
+        Index of refraction.
+    """
+
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    kd: float = 1.0
+    ks: float = 0.0
+    shine: float = 0.0
+    t: float = 0.0
+    ior: float = 1.0
+
+    def __post_init__(self):
+        if len(self.color) != 3:
+            raise ValueError(f"Material.color must be 3 numbers, got {self.color!r}")
+        object.__setattr__(self, "color", tuple(float(c) for c in self.color))
+        for name in ("kd", "ks", "shine", "t", "ior"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        values = (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
+        if not all(np.isfinite(v) for v in values):
+            raise ValueError(f"Material values must be finite, got {values!r}")
+
+    def as_tuple(self) -> tuple[float, ...]:
+        """``(r, g, b, kd, ks, shine, t, ior)`` as in NFF ``f``."""
+        return (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
+
+
+class SceneBuilder:
+    """Collects primitives in element order and builds a :class:`Scene`.
+
+    Materials are deduplicated: identical :class:`Material` values share one
+    row, rows are numbered in order of first use by an element, and a
+    material never used by an element gets no row. NFF reading and all
+    generators go through this class, so their scenes share that canonical
+    material order (what makes NFF round trips exact).
+
+    Examples
+    --------
+    >>> b = SceneBuilder("demo")
+    >>> b.material(Material((1, 0, 0), 0.8, 0.2, 20.0))
+    >>> b.sphere((0, 0, 0), 1.0)
+    0
+    >>> b.build().n_elements
+    1
+    """
+
+    def __init__(self, name: str = "scene"):
+        self.name = name
+        self.camera = Camera()
+        self.background = (0.0, 0.0, 0.0)
+        self.max_depth = 5
+        self._material = Material()
+        self._material_rows: dict[tuple, int] = {}
+        self._kind: list[int] = []
+        self._index: list[int] = []
+        self._element_material: list[int] = []
+        self._spheres: list[tuple] = []
+        self._triangles: list = []
+        self._polygons: list = []
+        self._patches: list = []
+        self._patch_normals: list = []
+        self._cones: list[tuple] = []
+        self._lights: list[tuple] = []
+
+    @property
+    def n_elements(self) -> int:
+        """Elements added so far."""
+        return len(self._kind)
+
+    def material(self, material: Material) -> None:
+        """Use ``material`` for the elements added from now on."""
+        self._material = material
+
+    def light(self, position, color=(1.0, 1.0, 1.0)) -> None:
+        """Add a point light at ``position`` (3,) with ``color`` (3,)."""
+        self._lights.append((tuple(map(float, position)), tuple(map(float, color))))
+
+    def _add(self, kind: ElementKind, index: int) -> int:
+        key = self._material.as_tuple()
+        row = self._material_rows.setdefault(key, len(self._material_rows))
+        self._kind.append(int(kind))
+        self._index.append(index)
+        self._element_material.append(row)
+        return len(self._kind) - 1
+
+    def sphere(self, center, radius: float) -> int:
+        """Add a sphere; returns its element id."""
+        self._spheres.append((*map(float, center), float(radius)))
+        return self._add(ElementKind.SPHERE, len(self._spheres) - 1)
+
+    def triangle(self, vertices) -> int:
+        """Add a triangle from ``vertices`` (3, 3); returns its element id."""
+        self._triangles.append(np.asarray(vertices, dtype=np.float64).reshape(3, 3))
+        return self._add(ElementKind.TRIANGLE, len(self._triangles) - 1)
+
+    def polygon(self, vertices) -> int:
+        """Add a polygon from ``vertices`` (n, 3).
+
+        Three vertices make a TRIANGLE element, more a POLYGON element
+        (NFF ``p n``); returns the element id.
+        """
+        v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        if len(v) < 3:
+            raise ValueError(f"a polygon needs at least 3 vertices, got {len(v)}")
+        if len(v) == 3:
+            return self.triangle(v)
+        self._polygons.append(v)
+        return self._add(ElementKind.POLYGON, len(self._polygons) - 1)
+
+    def patch(self, vertices, normals) -> int:
+        """Add a polygon patch with per-vertex normals, both (n, 3), n >= 3."""
+        v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        if len(v) < 3 or len(v) != len(n):
+            raise ValueError("a patch needs n >= 3 vertices and as many normals")
+        self._patches.append(v)
+        self._patch_normals.append(n)
+        return self._add(ElementKind.PATCH, len(self._patches) - 1)
+
+    def cone(self, base, base_radius: float, apex, apex_radius: float) -> int:
+        """Add a cone or cylinder without caps; returns its element id."""
+        self._cones.append((tuple(map(float, base)), float(base_radius),
+                            tuple(map(float, apex)), float(apex_radius)))
+        return self._add(ElementKind.CONE, len(self._cones) - 1)
+
+    def build(self) -> Scene:
+        """The scene with everything added so far (the builder stays usable)."""
+        def csr(parts):
+            offsets = np.zeros(len(parts) + 1, dtype=np.int64)
+            offsets[1:] = np.cumsum([len(p) for p in parts], dtype=np.int64)
+            flat = np.concatenate(parts) if parts else np.zeros((0, 3))
+            return offsets, np.ascontiguousarray(flat, dtype=np.float64)
+
+        materials = np.array(list(self._material_rows), dtype=np.float64).reshape(-1, 8)
+        spheres = np.array(self._spheres, dtype=np.float64).reshape(-1, 4)
+        polygon_offsets, polygon_vertices = csr(self._polygons)
+        patch_offsets, patch_vertices = csr(self._patches)
+        _, patch_normals = csr(self._patch_normals)
+        cones = self._cones
+        lights = self._lights
+        return Scene(
+            name=self.name,
+            camera=self.camera,
+            background=np.array(self.background, dtype=np.float64),
+            max_depth=int(self.max_depth),
+            element_kind=np.array(self._kind, dtype=np.uint8),
+            element_index=np.array(self._index, dtype=np.int64),
+            element_material=np.array(self._element_material, dtype=np.int64),
+            sphere_center=np.ascontiguousarray(spheres[:, :3]),
+            sphere_radius=np.ascontiguousarray(spheres[:, 3]),
+            triangle_vertices=np.array(self._triangles, dtype=np.float64).reshape(-1, 3, 3),
+            polygon_offsets=polygon_offsets,
+            polygon_vertices=polygon_vertices,
+            patch_offsets=patch_offsets,
+            patch_vertices=patch_vertices,
+            patch_normals=patch_normals,
+            cone_base=np.array([c[0] for c in cones], dtype=np.float64).reshape(-1, 3),
+            cone_base_radius=np.array([c[1] for c in cones], dtype=np.float64),
+            cone_apex=np.array([c[2] for c in cones], dtype=np.float64).reshape(-1, 3),
+            cone_apex_radius=np.array([c[3] for c in cones], dtype=np.float64),
+            material_color=np.ascontiguousarray(materials[:, :3]),
+            material_kd=np.ascontiguousarray(materials[:, 3]),
+            material_ks=np.ascontiguousarray(materials[:, 4]),
+            material_shine=np.ascontiguousarray(materials[:, 5]),
+            material_t=np.ascontiguousarray(materials[:, 6]),
+            material_ior=np.ascontiguousarray(materials[:, 7]),
+            light_position=np.array([p for p, _ in lights], dtype=np.float64).reshape(-1, 3),
+            light_color=np.array([c for _, c in lights], dtype=np.float64).reshape(-1, 3),
+        )
