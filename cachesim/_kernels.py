@@ -8,7 +8,8 @@ State layout for one hierarchy of ``L`` levels (see :mod:`cachesim.state`):
   ``offset[l] + s * ways[l]``.
 - ``stamps`` int64 (total_ways,): the access clock of the last use (LRU) or
   of the fill (FIFO); unused for random replacement.
-- ``rng`` uint64 (L,): xorshift64* state per level (random replacement).
+- ``seeds`` uint64 (L,): per-level seed of random replacement, whose victim
+  is a hash of the seed and the access clock (no generator state).
 - ``counts`` int64 (L, 5): accesses, hits, misses, evictions,
   back-invalidations per level.
 
@@ -42,20 +43,24 @@ def _find(tags, base, n_ways, line):
     return -1
 
 
-@njit(cache=True)
-def _random_way(rng, level, n_ways):
-    # xorshift64*: small, fast and reproducible from the level's seed. Kept
-    # out of line: inlined, it slows every insert of the other policies.
-    x = rng[level]
-    x ^= x >> np.uint64(12)
-    x ^= x << np.uint64(25)
+@njit(cache=True, inline="always")
+def _random_way(seed, clock, n_ways):
+    # A stateless draw: a strong 64-bit mix (splitmix64 finaliser) of the
+    # access clock and the level's seed, reduced to [0, n_ways) by a
+    # multiply-shift on its top 32 bits. No state to write and no division
+    # keeps the other policies' inserts fast; the clock makes it a fresh
+    # draw at every access and reproducible after copy or continuation.
+    x = np.uint64(clock) ^ seed
+    x ^= x >> np.uint64(30)
+    x *= np.uint64(0xBF58476D1CE4E5B9)
     x ^= x >> np.uint64(27)
-    rng[level] = x
-    return np.int64((x * np.uint64(2685821657736338717)) % np.uint64(n_ways))
+    x *= np.uint64(0x94D049BB133111EB)
+    x ^= x >> np.uint64(31)
+    return np.int64(((x >> np.uint64(32)) * np.uint64(n_ways)) >> np.uint64(32))
 
 
 @njit(cache=True, inline="always")
-def _insert(tags, stamps, rng, level, base, n_ways, policy, line, clock):
+def _insert(tags, stamps, seed, base, n_ways, policy, line, clock):
     """Place ``line`` in its set; return the evicted line or -1."""
     victim = base
     oldest = np.int64(9223372036854775807)
@@ -70,7 +75,7 @@ def _insert(tags, stamps, rng, level, base, n_ways, policy, line, clock):
             oldest = stamps[slot]
             victim = slot
     if full and policy == RANDOM:
-        victim = base + _random_way(rng, level, n_ways)
+        victim = base + _random_way(seed, clock, n_ways)
     evicted = tags[victim]
     tags[victim] = line
     stamps[victim] = clock
@@ -93,13 +98,157 @@ def _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets, set_mask, 
 
 @njit(cache=True)
 def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                    inclusion, tags, stamps, rng, counts, clock, served_by, record):
+                    inclusion, tags, stamps, seeds, counts, clock, served_by, record):
     """Run ``addresses`` (uint64, (N,)) through one hierarchy's state.
 
     Returns the clock after the last access. When ``record`` is true,
     ``served_by[i]`` receives the level that served access ``i`` (``L`` for
-    memory).
+    memory). Both paths below give identical states and counts for a
+    non-inclusive hierarchy; the level-by-level one is faster.
     """
+    if inclusion == NON_INCLUSIVE:
+        return _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy,
+                                  offset, tags, stamps, seeds, counts, clock, served_by, record)
+    return _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                               inclusion, tags, stamps, seeds, counts, clock, served_by, record)
+
+
+# Accesses handled per chunk by the level-by-level path: the chunk's two
+# buffers (256 KB) stay in the host's second-level cache.
+CHUNK = 16384
+
+
+@njit(cache=True)
+def _level_pass(lines, clocks, n_in, level, shift, n_sets, set_mask, ways, policy, offset,
+                tags, stamps, seed, counts, served_by, record, first_clock):
+    """Run ``lines[:n_in]`` (with their access clocks) through one level.
+
+    The misses are compacted in place to the front of ``lines``/``clocks``
+    (shifted to the next level's line size by ``shift``); returns their
+    number. In a non-inclusive hierarchy a level's contents depend only on
+    the accesses that reach it, so each level can run on the misses of the
+    one above, in order.
+    """
+    n_ways = ways[level]
+    mask = set_mask[level]
+    sets = n_sets[level]
+    base0 = offset[level]
+    level_policy = policy[level]
+    lru = level_policy == LRU
+    n_out = 0
+    evictions = 0
+    if n_ways == 1:
+        # Direct-mapped: one compare, no ordering to keep.
+        for j in range(n_in):
+            line = lines[j]
+            slot = base0 + (line & mask if mask >= 0 else line % sets)
+            held = tags[slot]
+            miss = held != line
+            evictions += miss & (held >= 0)
+            tags[slot] = line
+            lines[n_out] = line >> shift
+            clocks[n_out] = clocks[j]
+            n_out += miss
+            if record and miss:
+                served_by[clocks[j] - first_clock] = level + 1
+    elif level_policy != RANDOM:
+        # LRU and FIFO: one pass over the set finds the line and the victim
+        # (the first empty way, else the oldest stamp) without early exits,
+        # which the host's branch predictor handles far better.
+        for j in range(n_in):
+            line = lines[j]
+            clock = clocks[j]
+            base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
+            hit = -1
+            victim = base
+            oldest = np.int64(9223372036854775807)
+            for slot in range(base, base + n_ways):
+                held = tags[slot]
+                hit = slot if held == line else hit
+                age = stamps[slot] if held >= 0 else np.int64(-1)
+                if age < oldest:
+                    oldest = age
+                    victim = slot
+            # Hit or miss, write the same way: the hit way keeps its line
+            # (and, under FIFO, its stamp); the victim takes the new line.
+            miss = hit < 0
+            target = victim if miss else hit
+            evictions += miss & (tags[target] >= 0)
+            tags[target] = line
+            stamps[target] = clock if (miss or lru) else stamps[target]
+            lines[n_out] = line >> shift
+            clocks[n_out] = clock
+            n_out += miss
+            if record and miss:
+                served_by[clock - first_clock] = level + 1
+    else:
+        for j in range(n_in):
+            line = lines[j]
+            base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
+            slot = _find(tags, base, n_ways, line)
+            if slot >= 0:
+                if lru:
+                    stamps[slot] = clocks[j]
+                continue
+            if _insert(tags, stamps, seed, base, n_ways, level_policy, line, clocks[j]) >= 0:
+                evictions += 1
+            lines[n_out] = line >> shift
+            clocks[n_out] = clocks[j]
+            n_out += 1
+            if record:
+                served_by[clocks[j] - first_clock] = level + 1
+    counts[level, ACCESSES] += n_in
+    counts[level, HITS] += n_in - n_out
+    counts[level, MISSES] += n_out
+    counts[level, EVICTIONS] += evictions
+    return n_out
+
+
+@njit(cache=True)
+def _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                       tags, stamps, seeds, counts, clock, served_by, record):
+    """Non-inclusive hierarchy: each chunk runs through level 0, its misses
+    through level 1, and so on. Clocks are the global access clock, so stamps
+    and random draws are those of :func:`_simulate_by_access`."""
+    n_levels = rel_shift.shape[0]
+    n = addresses.shape[0]
+    lines = np.empty(CHUNK, dtype=np.int64)
+    clocks = np.empty(CHUNK, dtype=np.int64)
+    shifts = np.zeros(n_levels, dtype=np.int64)
+    for level in range(n_levels - 1):
+        shifts[level] = rel_shift[level + 1] - rel_shift[level]
+    shift = np.uint64(shift0)
+    previous = np.int64(-1)
+    for start in range(0, n, CHUNK):
+        stop = min(n, start + CHUNK)
+        # Collapse repeats of the previous line: the previous access left it
+        # in level 0 as its set's most recent entry, so a repeat is a hit
+        # that changes nothing.
+        kept = 0
+        for i in range(start, stop):
+            line = np.int64(addresses[i] >> shift)
+            lines[kept] = line
+            clocks[kept] = clock + 1 + i
+            kept += line != previous
+            previous = line
+        counts[0, ACCESSES] += (stop - start) - kept
+        counts[0, HITS] += (stop - start) - kept
+        if record:
+            served_by[start:stop] = 0
+        first_clock = clock + 1
+        for level in range(n_levels):
+            if kept == 0:
+                break
+            kept = _level_pass(lines, clocks, kept, level, shifts[level], n_sets, set_mask, ways,
+                               policy, offset, tags, stamps, seeds[level], counts, served_by,
+                               record, first_clock)
+    return clock + n
+
+
+@njit(cache=True)
+def _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                        inclusion, tags, stamps, seeds, counts, clock, served_by, record):
+    """Any inclusion policy: every access walks down the levels in turn."""
     n_levels = rel_shift.shape[0]
     lines = np.empty(n_levels, dtype=np.int64)
     # The first level serves most accesses: keep its geometry in scalars and
@@ -153,7 +302,7 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
             line = line0
             for level in range(n_levels):
                 base = _set_base(line, level, n_sets, set_mask, ways, offset)
-                line = _insert(tags, stamps, rng, level, base, ways[level], policy[level], line, clock)
+                line = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
                 if line < 0:
                     break
                 counts[level, EVICTIONS] += 1
@@ -162,7 +311,7 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
             # remove the line just placed above them.
             for level in range(served - 1, -1, -1):
                 base = _set_base(lines[level], level, n_sets, set_mask, ways, offset)
-                evicted = _insert(tags, stamps, rng, level, base, ways[level], policy[level],
+                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level],
                                   lines[level], clock)
                 if evicted >= 0:
                     counts[level, EVICTIONS] += 1
@@ -182,10 +331,10 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
 
 @njit(cache=True, parallel=True)
 def simulate_streams(addresses, starts, shift0, rel_shift, n_sets, set_mask, ways, policy,
-                     offset, inclusion, tags, stamps, rng, counts, clocks, served_by, record):
+                     offset, inclusion, tags, stamps, seeds, counts, clocks, served_by, record):
     """Run stream ``s`` = ``addresses[starts[s]:starts[s+1]]`` on state row ``s``.
 
-    ``tags``, ``stamps`` (S, total_ways), ``rng`` (S, L), ``counts`` (S, L, 5),
+    ``tags``, ``stamps`` (S, total_ways), ``seeds`` (L,), ``counts`` (S, L, 5),
     ``clocks`` (S,). Streams are independent, so they run in parallel.
     """
     for stream in prange(starts.shape[0] - 1):
@@ -194,5 +343,5 @@ def simulate_streams(addresses, starts, shift0, rel_shift, n_sets, set_mask, way
         out = served_by[start:stop] if record else served_by[:0]
         clocks[stream] = simulate_stream(
             addresses[start:stop], shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-            inclusion, tags[stream], stamps[stream], rng[stream], counts[stream],
+            inclusion, tags[stream], stamps[stream], seeds, counts[stream],
             clocks[stream], out, record)

@@ -54,8 +54,9 @@ class CacheLevel:
     assoc : int or "full"
         Ways per set; 1 is direct-mapped, ``"full"`` is fully associative.
     policy : {"lru", "fifo", "random"}
-        Replacement policy. ``"random"`` draws victims from a generator seeded
-        with ``seed``, so runs are reproducible.
+        Replacement policy. ``"random"`` evicts a way drawn from a hash of
+        ``seed`` and the access clock, so runs are reproducible and a stream
+        run in pieces evicts exactly as in one run.
     latency : float
         Hit latency in CPU cycles.
     seed : int

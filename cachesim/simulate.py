@@ -51,7 +51,7 @@ class _Geometry:
 
 
 def _seed_state(seed: int, level: int) -> int:
-    # xorshift needs a non-zero state; mix the level in so levels differ.
+    # Mix the level in so that levels with one seed draw differently.
     value = (seed * 0x9E3779B97F4A7C15 + (level + 1) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
     return value or 0x2545F4914F6CDD1D
 
@@ -73,11 +73,10 @@ class CacheState:
         self.reset()
 
     def reset(self) -> None:
-        """Empty every level and zero the counters (random generators reseeded)."""
+        """Empty every level and zero the counters."""
         n_levels = len(self.hierarchy.levels)
         self.tags = np.full(self._geometry.total_ways, -1, dtype=np.int64)
         self.stamps = np.zeros(self._geometry.total_ways, dtype=np.int64)
-        self.rng = self._geometry.seeds.copy()
         self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
         self.clock = 0
 
@@ -88,7 +87,6 @@ class CacheState:
         clone._geometry = self._geometry
         clone.tags = self.tags.copy()
         clone.stamps = self.stamps.copy()
-        clone.rng = self.rng.copy()
         clone.counts = self.counts.copy()
         clone.clock = self.clock
         return clone
@@ -256,7 +254,7 @@ def simulate(addresses, hierarchy: Hierarchy | CacheState, *, return_levels: boo
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
     before = state.counts.copy()
     state.clock = int(K.simulate_stream(
-        addresses, *state._geometry.args(), state.tags, state.stamps, state.rng, state.counts,
+        addresses, *state._geometry.args(), state.tags, state.stamps, state._geometry.seeds, state.counts,
         state.clock, served_by, return_levels))
     return SimulationResult(state.hierarchy, state.counts - before,
                             served_by if return_levels else None, state)
@@ -302,16 +300,15 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
     addresses = np.concatenate(streams)
     tags = np.stack([state.tags for state in states])
     stamps = np.stack([state.stamps for state in states])
-    rng = np.stack([state.rng for state in states])
     counts = np.stack([state.counts for state in states])
     before = counts.copy()
     clocks = np.array([state.clock for state in states], dtype=np.int64)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
-    K.simulate_streams(addresses, starts, *states[0]._geometry.args(), tags, stamps, rng, counts,
+    K.simulate_streams(addresses, starts, *states[0]._geometry.args(), tags, stamps, states[0]._geometry.seeds, counts,
                        clocks, served_by, return_levels)
     results = []
     for index, state in enumerate(states):
-        state.tags, state.stamps, state.rng = tags[index].copy(), stamps[index].copy(), rng[index].copy()
+        state.tags, state.stamps = tags[index].copy(), stamps[index].copy()
         state.counts, state.clock = counts[index].copy(), int(clocks[index])
         levels = served_by[starts[index]:starts[index + 1]] if return_levels else None
         results.append(SimulationResult(reference, counts[index] - before[index], levels, state))

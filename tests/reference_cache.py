@@ -1,8 +1,9 @@
 """Slow, obvious reference models used to check the compiled simulator.
 
 LRU and FIFO sets are OrderedDicts (oldest first); random replacement keeps a
-list of ways and draws victims from the same documented xorshift64* generator
-as the simulator, so the victim sequences can be compared exactly.
+list of ways and draws victims with the same documented hash of (level seed,
+access clock) as the simulator, so the victim sequences can be compared
+exactly. The clock counts accesses from 1.
 """
 from collections import OrderedDict
 
@@ -13,17 +14,15 @@ from cachesim.simulate import _seed_state
 MASK64 = (1 << 64) - 1
 
 
-class _XorShift:
-    def __init__(self, state):
-        self.state = state
-
-    def next(self):
-        x = self.state
-        x ^= x >> 12
-        x ^= (x << 25) & MASK64
-        x ^= x >> 27
-        self.state = x
-        return (x * 2685821657736338717) & MASK64
+def random_way(seed, clock, ways):
+    """splitmix64's finaliser of clock XOR seed; top 32 bits scaled to [0, ways)."""
+    x = (clock ^ seed) & MASK64
+    x ^= x >> 30
+    x = (x * 0xBF58476D1CE4E5B9) & MASK64
+    x ^= x >> 27
+    x = (x * 0x94D049BB133111EB) & MASK64
+    x ^= x >> 31
+    return ((x >> 32) * ways) >> 32
 
 
 class ReferenceLevel:
@@ -34,7 +33,7 @@ class ReferenceLevel:
         self.policy = level.policy
         if self.policy == "random":
             self.sets = [[None] * self.ways for _ in range(self.n_sets)]
-            self.rng = _XorShift(_seed_state(level.seed, index))
+            self.seed = _seed_state(level.seed, index)
         else:
             self.sets = [OrderedDict() for _ in range(self.n_sets)]
 
@@ -58,14 +57,14 @@ class ReferenceLevel:
             return False
         return entries.pop(line, None) is not None
 
-    def insert(self, line):
-        """Place line; return the evicted line or None."""
+    def insert(self, line, clock):
+        """Place line at access ``clock``; return the evicted line or None."""
         entries = self._set(line)
         if self.policy == "random":
             if None in entries:
                 entries[entries.index(None)] = line
                 return None
-            way = self.rng.next() % self.ways
+            way = random_way(self.seed, clock, self.ways)
             evicted, entries[way] = entries[way], line
             return evicted
         evicted = None
@@ -81,7 +80,7 @@ def reference_simulate(addresses, hierarchy):
     n_levels = len(levels)
     counts = np.zeros((n_levels, 5), dtype=np.int64)
     served_by = []
-    for address in (int(a) for a in addresses):
+    for clock, address in enumerate((int(a) for a in addresses), start=1):
         lines = [address // level.line_size for level in levels]
         served = n_levels
         for index, level in enumerate(levels):
@@ -99,13 +98,13 @@ def reference_simulate(addresses, hierarchy):
                 levels[served].remove(lines[served])
             line = lines[0]
             for index, level in enumerate(levels):
-                line = level.insert(line)
+                line = level.insert(line, clock)
                 if line is None:
                     break
                 counts[index, 3] += 1
             continue
         for index in range(served - 1, -1, -1):
-            evicted = levels[index].insert(lines[index])
+            evicted = levels[index].insert(lines[index], clock)
             if evicted is None:
                 continue
             counts[index, 3] += 1
