@@ -1,0 +1,50 @@
+"""Versions and parameters recorded beside every result file.
+
+Result files are written atomically (a temporary name beside the target,
+then a rename), so a crash never leaves half a file. Each table gets a
+sidecar ``<name>.meta.json`` with the parameters and package versions that
+produced it; no timestamps, so the same inputs give byte-identical outputs.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+from cachesim.config import write_text_atomic
+
+_PACKAGES = ("raytrace-coherence", "numpy", "numba", "pandas", "scipy")
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages that shape results."""
+    versions = {"python": platform.python_version()}
+    for package in _PACKAGES:
+        try:
+            versions[package] = version(package)
+        except PackageNotFoundError:
+            versions[package] = "not installed"
+    return versions
+
+
+def provenance(**parameters) -> dict:
+    """``{"parameters": ..., "versions": ...}`` for a result file."""
+    return {"parameters": parameters, "versions": package_versions()}
+
+
+def write_csv_atomic(table, path: str | os.PathLike, meta: dict) -> Path:
+    """Write a DataFrame to CSV and ``meta`` to ``<path>.meta.json``, both atomically.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the target folder does not exist.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
+    write_text_atomic(path, table.to_csv(index=False, lineterminator="\n"))
+    write_text_atomic(path.with_name(path.name + ".meta.json"), json.dumps(meta, indent=2) + "\n")
+    return path
