@@ -1,0 +1,96 @@
+"""The study's scenes by name, and user scenes by path.
+
+>>> from tracer.scenes import load, PAPER_SCENES
+>>> PAPER_SCENES
+('balls', 'tetra', 'shell', 'room', 'fluid')
+>>> load("tetra").n_elements
+4096
+
+Named scenes get the paper's maximum depth (balls, tetra, shell: 2; room: 4;
+fluid: 5), not the SPD procedure's 5; ``max_depth`` overrides it. Files keep
+the depth they carry (:func:`tracer.nff.read_nff`: a ``# max_depth N``
+comment, else 5; OBJ: 5) unless ``max_depth`` is given.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from tracer import spd, standins
+from tracer.scene import Scene
+
+__all__ = ["PAPER_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
+
+PAPER_SCENES = ("balls", "tetra", "shell", "room", "fluid")
+PAPER_DEPTH = {"balls": 2, "tetra": 2, "shell": 2, "room": 4, "fluid": 5}
+PAPER_ELEMENTS = {"balls": 7382, "tetra": 4096, "shell": 5761, "room": 7786, "fluid": 2899}
+
+_GENERATORS = {
+    "balls": spd.balls,
+    "tetra": spd.tetra,
+    "shell": spd.shells,
+    "room": standins.room,
+    "fluid": standins.fluid,
+}
+_ALIASES = {"shells": "shell"}  # the SPD generator's own name
+_SUFFIXES = (".nff", ".obj")
+
+
+def _check_depth(max_depth) -> int:
+    if isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < 0:
+        raise ValueError(f"max_depth must be an integer >= 0, got {max_depth!r}")
+    return max_depth
+
+
+def load(name_or_path, max_depth: int | None = None) -> Scene:
+    """A paper scene by name, or an NFF/OBJ scene from a file.
+
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        One of :data:`PAPER_SCENES` (case-insensitive; ``"shells"`` is
+        accepted for ``"shell"``), or a path ending in ``.nff`` or ``.obj``.
+    max_depth : int, optional
+        Maximum recursion depth; default the paper's for a named scene and
+        the file's (see module docstring) for a path.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    ValueError
+        Unknown name (the message lists the valid names), unsupported file
+        type, bad ``max_depth``, or a malformed file
+        (:class:`tracer.nff.NFFError`, :class:`tracer.obj.OBJError`).
+    FileNotFoundError
+        A path that does not exist.
+    """
+    if max_depth is not None:
+        max_depth = _check_depth(max_depth)
+    text = os.fspath(name_or_path)
+    key = _ALIASES.get(text.lower(), text.lower())
+    if key in _GENERATORS and not isinstance(name_or_path, Path):
+        scene = _GENERATORS[key]()
+        scene.name = key
+        scene.max_depth = PAPER_DEPTH[key] if max_depth is None else max_depth
+        return scene
+    path = Path(text)
+    suffix = path.suffix.lower()
+    if suffix in _SUFFIXES:
+        if not path.exists():
+            raise FileNotFoundError(f"scene file not found: {text!r}")
+        if suffix == ".nff":
+            from tracer.nff import read_nff
+
+            return read_nff(path, max_depth=max_depth)
+        from tracer.obj import read_obj
+
+        return read_obj(path, max_depth=5 if max_depth is None else max_depth)
+    if path.exists():
+        raise ValueError(f"unsupported scene file {text!r}: expected a .nff or .obj file")
+    if path.suffix or os.sep in text or "/" in text:
+        raise FileNotFoundError(f"scene file not found: {text!r}")
+    raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(PAPER_SCENES)} "
+                     "or a path to a .nff or .obj file")
