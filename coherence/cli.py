@@ -15,6 +15,7 @@ import sys
 # Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
     "coherence.commands.cachesim",
+    "coherence.commands.scene",
 )
 
 
