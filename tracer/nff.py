@@ -173,7 +173,9 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
         expected; no partial scene is returned.
     """
     tokens = _Tokens(text, source)
-    builder = SceneBuilder(name if name is not None else Path(source).stem or "scene")
+    if name is None:
+        name = "scene" if source.startswith("<") else (Path(source).stem or "scene")
+    builder = SceneBuilder(name)
     view: dict | None = None
     view_at = 0
     seen_object = False
