@@ -1,0 +1,421 @@
+"""Ray/primitive intersection and the flat geometry arrays the kernels read.
+
+:func:`prepare_geometry` turns a :class:`~tracer.scene.Scene` into a tuple of
+arrays (``Geometry``) with per-primitive quantities precomputed once
+(triangle edges, polygon plane normals, cone frames). The compiled functions
+here take that tuple and scalars only, so the kd-tree traversal, the renderer
+and the brute-force reference in the tests share one intersection routine
+per primitive kind.
+
+Conventions
+-----------
+* Ray directions are unit vectors; ``t`` is a distance along the ray.
+* A test returns the nearest ``t`` with ``tmin < t < tmax`` or ``inf``.
+* Intersection is two-sided; normals are *one-sided*: the normal a primitive
+  defines (polygon winding, sphere outward, cone outward, flipped for a
+  negative cone radius) is returned as is, even when the ray hits the back.
+  Shading decides what a back-facing normal means (SPD rules).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from tracer.scene import ElementKind, Scene
+
+INF = np.inf
+
+# Positions in the ``Geometry`` tuple (documented for readers of kernels).
+GEOMETRY_FIELDS = (
+    "sphere_center",    # (S, 3)
+    "sphere_radius",    # (S,)  |r|
+    "triangle_v0e1e2",  # (T, 3, 3): v0, v1 - v0, v2 - v0
+    "triangle_normal",  # (T, 3) unit, (v1 - v0) x (v2 - v0)
+    "polygon_offsets",  # (P + 1,) int64
+    "polygon_vertices", # (V, 3)
+    "polygon_normal",   # (P, 3) unit Newell normal (counter-clockwise front)
+    "patch_offsets",    # (Q + 1,) int64
+    "patch_vertices",   # (W, 3)
+    "patch_vnormals",   # (W, 3) unit vertex normals
+    "patch_normal",     # (Q, 3) unit Newell plane normal
+    "cone_base",        # (C, 3)
+    "cone_axis",        # (C, 3) unit, base -> apex
+    "cone_height",      # (C,)
+    "cone_r0",          # (C,) |base radius|
+    "cone_r1",          # (C,) |apex radius|
+    "cone_sign",        # (C,) +1 (outside visible) or -1 (inside visible)
+)
+
+
+def _unit_rows(v: np.ndarray, what: str) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=1)
+    if np.any(norm == 0.0) or not np.all(np.isfinite(norm)):
+        bad = int(np.flatnonzero((norm == 0.0) | ~np.isfinite(norm))[0])
+        raise ValueError(f"Scene.{what}: degenerate entry at row {bad} (zero or non-finite normal)")
+    return v / norm[:, None]
+
+
+def _newell(offsets: np.ndarray, vertices: np.ndarray, what: str) -> np.ndarray:
+    n = len(offsets) - 1
+    normals = np.zeros((n, 3))
+    if n == 0:
+        return normals
+    counts = np.diff(offsets)
+    if np.any(counts < 3):
+        raise ValueError(f"Scene.{what}: every polygon needs at least 3 vertices")
+    idx = np.arange(len(vertices))
+    owner = np.repeat(np.arange(n), counts)
+    nxt = idx + 1
+    last = offsets[1:] - 1
+    nxt[last] = offsets[:-1]
+    a, b = vertices, vertices[nxt]
+    terms = np.stack([(a[:, 1] - b[:, 1]) * (a[:, 2] + b[:, 2]),
+                      (a[:, 2] - b[:, 2]) * (a[:, 0] + b[:, 0]),
+                      (a[:, 0] - b[:, 0]) * (a[:, 1] + b[:, 1])], axis=1)
+    np.add.at(normals, owner, terms)
+    return _unit_rows(normals, what)
+
+
+def prepare_geometry(scene: Scene) -> tuple:
+    """Precompute the per-primitive arrays the kernels read.
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Returns
+    -------
+    tuple of ndarray
+        In the order of :data:`GEOMETRY_FIELDS`, all C-contiguous float64
+        (offsets int64).
+
+    Raises
+    ------
+    ValueError
+        If a triangle, polygon or cone is degenerate (naming the field).
+    """
+    f = lambda a, shape: np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
+    sc = f(scene.sphere_center, (-1, 3))
+    sr = np.abs(f(scene.sphere_radius, (-1,)))
+    tv = f(scene.triangle_vertices, (-1, 3, 3))
+    tri = np.empty_like(tv)
+    tri[:, 0] = tv[:, 0]
+    tri[:, 1] = tv[:, 1] - tv[:, 0]
+    tri[:, 2] = tv[:, 2] - tv[:, 0]
+    tn = np.cross(tri[:, 1], tri[:, 2]) if len(tv) else np.zeros((0, 3))
+    tn = _unit_rows(tn, "triangle_vertices") if len(tv) else tn
+    po = np.ascontiguousarray(scene.polygon_offsets, dtype=np.int64)
+    pv = f(scene.polygon_vertices, (-1, 3))
+    pn = _newell(po, pv, "polygon_vertices")
+    qo = np.ascontiguousarray(scene.patch_offsets, dtype=np.int64)
+    qv = f(scene.patch_vertices, (-1, 3))
+    qvn = f(scene.patch_normals, (-1, 3))
+    qvn = _unit_rows(qvn, "patch_normals") if len(qvn) else qvn
+    qn = _newell(qo, qv, "patch_vertices")
+    cb = f(scene.cone_base, (-1, 3))
+    ca = f(scene.cone_apex, (-1, 3))
+    axis = ca - cb
+    height = np.linalg.norm(axis, axis=1) if len(cb) else np.zeros(0)
+    if np.any(height == 0.0):
+        raise ValueError("Scene.cone_apex: a cone has apex == base (zero height)")
+    axis = axis / height[:, None] if len(cb) else axis
+    r0 = f(scene.cone_base_radius, (-1,))
+    r1 = f(scene.cone_apex_radius, (-1,))
+    sign = np.where((r0 < 0) | ((r0 == 0) & (r1 < 0)), -1.0, 1.0)
+    return (sc, sr, tri, tn, po, pv, pn, qo, qv, qvn, qn,
+            np.ascontiguousarray(cb), np.ascontiguousarray(axis), np.ascontiguousarray(height),
+            np.abs(r0), np.abs(r1), sign)
+
+
+def element_bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounds of every element, in element-id order.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (N, 3) float64
+    """
+    n = scene.n_elements
+    lo = np.zeros((n, 3))
+    hi = np.zeros((n, 3))
+    kind = np.asarray(scene.element_kind, dtype=np.int64)
+    index = np.asarray(scene.element_index, dtype=np.int64)
+    for k in ElementKind:
+        sel = np.flatnonzero(kind == k)
+        if len(sel) == 0:
+            continue
+        rows = index[sel]
+        if k == ElementKind.SPHERE:
+            c = scene.sphere_center[rows]
+            r = np.abs(scene.sphere_radius[rows])[:, None]
+            lo[sel], hi[sel] = c - r, c + r
+        elif k == ElementKind.TRIANGLE:
+            v = scene.triangle_vertices[rows]
+            lo[sel], hi[sel] = v.min(axis=1), v.max(axis=1)
+        elif k in (ElementKind.POLYGON, ElementKind.PATCH):
+            off = scene.polygon_offsets if k == ElementKind.POLYGON else scene.patch_offsets
+            vert = scene.polygon_vertices if k == ElementKind.POLYGON else scene.patch_vertices
+            plo = np.minimum.reduceat(vert, off[:-1], axis=0)
+            phi = np.maximum.reduceat(vert, off[:-1], axis=0)
+            lo[sel], hi[sel] = plo[rows], phi[rows]
+        else:
+            # A cone is the hull of its two end discs; a disc of radius r
+            # with unit normal a spans r * sqrt(1 - a_i^2) along axis i.
+            b, a = scene.cone_base[rows], scene.cone_apex[rows]
+            ax = a - b
+            ax = ax / np.linalg.norm(ax, axis=1)[:, None]
+            ext = np.sqrt(np.clip(1.0 - ax * ax, 0.0, 1.0))
+            e0 = np.abs(scene.cone_base_radius[rows])[:, None] * ext
+            e1 = np.abs(scene.cone_apex_radius[rows])[:, None] * ext
+            lo[sel] = np.minimum(b - e0, a - e1)
+            hi[sel] = np.maximum(b + e0, a + e1)
+    return lo, hi
+
+
+def element_clip_shapes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shapes used to clip elements to kd-tree nodes.
+
+    Returns
+    -------
+    offsets : ndarray, shape (N + 1,) int64
+        CSR offsets into ``vertices``; planar elements (triangles, polygons,
+        patches) have their vertices, other kinds none.
+    vertices : ndarray, shape (V, 3) float64
+    spheres : ndarray, shape (N, 4) float64
+        Centre and radius for sphere elements, radius -1 for other kinds.
+    """
+    n = scene.n_elements
+    kind = np.asarray(scene.element_kind, dtype=np.int64)
+    index = np.asarray(scene.element_index, dtype=np.int64)
+    counts = np.zeros(n, dtype=np.int64)
+    counts[kind == ElementKind.TRIANGLE] = 3
+    for k, off in ((ElementKind.POLYGON, scene.polygon_offsets), (ElementKind.PATCH, scene.patch_offsets)):
+        sel = kind == k
+        counts[sel] = np.diff(off)[index[sel]]
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(counts)
+    vertices = np.zeros((offsets[-1], 3))
+    for e in np.flatnonzero(counts):
+        k, i = kind[e], index[e]
+        if k == ElementKind.TRIANGLE:
+            v = scene.triangle_vertices[i]
+        elif k == ElementKind.POLYGON:
+            v = scene.polygon_vertices[scene.polygon_offsets[i]:scene.polygon_offsets[i + 1]]
+        else:
+            v = scene.patch_vertices[scene.patch_offsets[i]:scene.patch_offsets[i + 1]]
+        vertices[offsets[e]:offsets[e + 1]] = v
+    spheres = np.full((n, 4), -1.0)
+    sel = kind == ElementKind.SPHERE
+    spheres[sel, :3] = scene.sphere_center[index[sel]]
+    spheres[sel, 3] = np.abs(scene.sphere_radius[index[sel]])
+    return offsets, vertices, spheres
+
+
+# --------------------------------------------------------------------------
+# compiled intersection routines
+# --------------------------------------------------------------------------
+
+@njit(cache=True, error_model="numpy")
+def hit_sphere(cx, cy, cz, r, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Nearest ``t`` in ``(tmin, tmax)`` of a unit-direction ray and a sphere."""
+    px, py, pz = ox - cx, oy - cy, oz - cz
+    b = px * dx + py * dy + pz * dz
+    c = px * px + py * py + pz * pz - r * r
+    disc = b * b - c
+    if disc < 0.0:
+        return INF
+    s = math.sqrt(disc)
+    t = -b - s
+    if t > tmin and t < tmax:
+        return t
+    t = -b + s
+    if t > tmin and t < tmax:
+        return t
+    return INF
+
+
+@njit(cache=True, error_model="numpy")
+def hit_triangle(tri, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Moller-Trumbore test of triangle ``i`` of ``tri`` (T, 3, 3) = v0, e1, e2."""
+    e1x, e1y, e1z = tri[i, 1, 0], tri[i, 1, 1], tri[i, 1, 2]
+    e2x, e2y, e2z = tri[i, 2, 0], tri[i, 2, 1], tri[i, 2, 2]
+    px = dy * e2z - dz * e2y
+    py = dz * e2x - dx * e2z
+    pz = dx * e2y - dy * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    if det == 0.0:
+        return INF
+    inv = 1.0 / det
+    sx, sy, sz = ox - tri[i, 0, 0], oy - tri[i, 0, 1], oz - tri[i, 0, 2]
+    u = (sx * px + sy * py + sz * pz) * inv
+    if u < 0.0 or u > 1.0:
+        return INF
+    qx = sy * e1z - sz * e1y
+    qy = sz * e1x - sx * e1z
+    qz = sx * e1y - sy * e1x
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return INF
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    if t > tmin and t < tmax:
+        return t
+    return INF
+
+
+@njit(cache=True, error_model="numpy")
+def hit_convex(offsets, vertices, normal, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Test convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal``)."""
+    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
+    denom = nx * dx + ny * dy + nz * dz
+    if denom == 0.0:
+        return INF
+    a = offsets[i]
+    b = offsets[i + 1]
+    t = (nx * (vertices[a, 0] - ox) + ny * (vertices[a, 1] - oy) + nz * (vertices[a, 2] - oz)) / denom
+    if not (t > tmin and t < tmax):
+        return INF
+    hx, hy, hz = ox + t * dx, oy + t * dy, oz + t * dz
+    for k in range(a, b):
+        k1 = k + 1 if k + 1 < b else a
+        ex = vertices[k1, 0] - vertices[k, 0]
+        ey = vertices[k1, 1] - vertices[k, 1]
+        ez = vertices[k1, 2] - vertices[k, 2]
+        wx = hx - vertices[k, 0]
+        wy = hy - vertices[k, 1]
+        wz = hz - vertices[k, 2]
+        # (e x w) . n must not be negative for a point inside (CCW about n)
+        s = (ey * wz - ez * wy) * nx + (ez * wx - ex * wz) * ny + (ex * wy - ey * wx) * nz
+        if s < 0.0:
+            return INF
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def hit_cone(base, axis, height, r0s, r1s, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Test the lateral surface of truncated cone ``i`` (no caps)."""
+    ax, ay, az = axis[i, 0], axis[i, 1], axis[i, 2]
+    h = height[i]
+    r0 = r0s[i]
+    k = (r1s[i] - r0) / h
+    qx, qy, qz = ox - base[i, 0], oy - base[i, 1], oz - base[i, 2]
+    zo = qx * ax + qy * ay + qz * az
+    zd = dx * ax + dy * ay + dz * az
+    wox, woy, woz = qx - zo * ax, qy - zo * ay, qz - zo * az
+    wdx, wdy, wdz = dx - zd * ax, dy - zd * ay, dz - zd * az
+    rr = r0 + k * zo
+    a = wdx * wdx + wdy * wdy + wdz * wdz - k * k * zd * zd
+    b = 2.0 * (wox * wdx + woy * wdy + woz * wdz - rr * k * zd)
+    c = wox * wox + woy * woy + woz * woz - rr * rr
+    t0 = INF
+    t1 = INF
+    if abs(a) < 1e-300:
+        if b == 0.0:
+            return INF
+        t0 = -c / b
+    else:
+        disc = b * b - 4.0 * a * c
+        if disc < 0.0:
+            return INF
+        s = math.sqrt(disc)
+        # numerically stable roots
+        qq = -0.5 * (b + s) if b >= 0.0 else -0.5 * (b - s)
+        ra = qq / a
+        rb = c / qq if qq != 0.0 else INF
+        t0 = min(ra, rb)
+        t1 = max(ra, rb)
+    for j in range(2):
+        t = t0 if j == 0 else t1
+        if t > tmin and t < tmax:
+            z = zo + t * zd
+            if z >= 0.0 and z <= h and r0 + k * z >= 0.0:
+                return t
+    return INF
+
+
+@njit(cache=True, error_model="numpy")
+def hit_element(kind, idx, geo, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Nearest ``t`` of element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``."""
+    if kind == 0:
+        c = geo[0]
+        return hit_sphere(c[idx, 0], c[idx, 1], c[idx, 2], geo[1][idx], ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == 1:
+        return hit_triangle(geo[2], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == 2:
+        return hit_convex(geo[4], geo[5], geo[6], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == 3:
+        return hit_convex(geo[7], geo[8], geo[10], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return hit_cone(geo[11], geo[12], geo[13], geo[14], geo[15], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
+
+
+@njit(cache=True, error_model="numpy")
+def _patch_normal(offsets, vertices, vnormals, plane, i, hx, hy, hz):
+    # Fan-triangulate from vertex 0 and interpolate the normals of the fan
+    # triangle holding the point (barycentric in the plane).
+    a = offsets[i]
+    b = offsets[i + 1]
+    nx, ny, nz = plane[i, 0], plane[i, 1], plane[i, 2]
+    best = 0.0
+    bx, by, bz = nx, ny, nz
+    first = True
+    for k in range(a + 1, b - 1):
+        v0x, v0y, v0z = vertices[a, 0], vertices[a, 1], vertices[a, 2]
+        e1x, e1y, e1z = vertices[k, 0] - v0x, vertices[k, 1] - v0y, vertices[k, 2] - v0z
+        e2x, e2y, e2z = vertices[k + 1, 0] - v0x, vertices[k + 1, 1] - v0y, vertices[k + 1, 2] - v0z
+        wx, wy, wz = hx - v0x, hy - v0y, hz - v0z
+        cx = e1y * e2z - e1z * e2y
+        cy = e1z * e2x - e1x * e2z
+        cz = e1x * e2y - e1y * e2x
+        area = cx * nx + cy * ny + cz * nz
+        if area == 0.0:
+            continue
+        # barycentric (u on e1, v on e2)
+        u = ((wy * e2z - wz * e2y) * nx + (wz * e2x - wx * e2z) * ny + (wx * e2y - wy * e2x) * nz) / area
+        v = ((e1y * wz - e1z * wy) * nx + (e1z * wx - e1x * wz) * ny + (e1x * wy - e1y * wx) * nz) / area
+        w = 1.0 - u - v
+        inside = min(u, min(v, w))
+        if first or inside > best:
+            first = False
+            best = inside
+            bx = w * vnormals[a, 0] + u * vnormals[k, 0] + v * vnormals[k + 1, 0]
+            by = w * vnormals[a, 1] + u * vnormals[k, 1] + v * vnormals[k + 1, 1]
+            bz = w * vnormals[a, 2] + u * vnormals[k, 2] + v * vnormals[k + 1, 2]
+            if inside >= 0.0:
+                break
+    ln = math.sqrt(bx * bx + by * by + bz * bz)
+    if ln == 0.0:
+        return nx, ny, nz
+    return bx / ln, by / ln, bz / ln
+
+
+@njit(cache=True, error_model="numpy")
+def element_normal(kind, idx, geo, hx, hy, hz):
+    """Unit shading normal (one-sided, see module notes) at hit point ``h``."""
+    if kind == 0:
+        c = geo[0]
+        r = geo[1][idx]
+        return (hx - c[idx, 0]) / r, (hy - c[idx, 1]) / r, (hz - c[idx, 2]) / r
+    if kind == 1:
+        n = geo[3]
+        return n[idx, 0], n[idx, 1], n[idx, 2]
+    if kind == 2:
+        n = geo[6]
+        return n[idx, 0], n[idx, 1], n[idx, 2]
+    if kind == 3:
+        return _patch_normal(geo[7], geo[8], geo[9], geo[10], idx, hx, hy, hz)
+    base = geo[11]
+    axis = geo[12]
+    h = geo[13][idx]
+    k = (geo[15][idx] - geo[14][idx]) / h
+    ax, ay, az = axis[idx, 0], axis[idx, 1], axis[idx, 2]
+    qx, qy, qz = hx - base[idx, 0], hy - base[idx, 1], hz - base[idx, 2]
+    z = qx * ax + qy * ay + qz * az
+    wx, wy, wz = qx - z * ax, qy - z * ay, qz - z * az
+    lw = math.sqrt(wx * wx + wy * wy + wz * wz)
+    if lw == 0.0:
+        return ax, ay, az
+    # gradient of |w| - (r0 + k z): w/|w| - k a
+    nx, ny, nz = wx / lw - k * ax, wy / lw - k * ay, wz / lw - k * az
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    s = geo[16][idx] / ln
+    return nx * s, ny * s, nz * s

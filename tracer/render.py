@@ -1,0 +1,583 @@
+"""Instrumented Whitted ray tracer (numba, parallel over pixels).
+
+:func:`render` traces one ray through every pixel centre (or, with
+``corner_rays``, a (W+1) x (H+1) grid through the pixel corners, as SPD's
+published counts use), shades by Whitted's rules and, with ``log=True``,
+returns an :class:`~tracer.trace.AccessTrace` of every scene record each
+pixel read (see :mod:`tracer.trace` for the record order).
+
+Rules (SPD test procedure, see ``reference/spd/README.md``):
+
+* camera: ``angle`` spans the centres of the outermost pixel rows; square
+  pixels; primary rays ignore hits closer than ``hither``;
+* ambient ``a * Kd * colour`` plus, per light with ``N.L > 0`` (normals are
+  one-sided, so no shadow ray where the surface faces away from the light),
+  a shadow ray and, if unblocked, ``Kd * colour * N.L + Ks * (R.V)^shine``
+  times the light colour; with ``n`` lights the ambient level and every
+  light are scaled by ``sqrt(n) / (2 n)`` (SPD's suggestion);
+* a reflection ray if ``Ks > 0`` (weight Ks), a refraction ray if ``T > 0``
+  (weight T, Snell; none under total internal reflection), while the ray's
+  depth (primary = 1) is below the scene's ``max_depth``;
+* any hit blocks a shadow ray (transparent objects cast full shadows).
+
+Logging is deterministic: a first pass counts each pixel's records, a prefix
+sum gives offsets, a second pass writes them, both parallel over pixels; the
+image does not depend on logging (same arithmetic, bit for bit).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numba import njit, prange
+
+from tracer.geometry import element_normal, prepare_geometry
+from tracer.kdtree import KdTree, KdTreeConfig, brute_force, build_kdtree, traverse
+from tracer.scene import Scene
+from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versions
+
+N_COUNTERS = len(COUNTER_NAMES)
+DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
+STACK = 64
+
+
+@dataclass(eq=False)
+class RenderResult:
+    """What :func:`render` returns.
+
+    Attributes
+    ----------
+    image : ndarray, shape (H, W, 3) float64
+        Linear RGB, not clipped.
+    counters : ndarray, shape (H * W, K) int64
+        Per-pixel counters, columns :data:`tracer.trace.COUNTER_NAMES`.
+    trace : AccessTrace or None
+        The access log (``log=True``), possibly memory-mapped from disk.
+    tree : KdTree
+    timings : dict
+        Seconds: ``build``, ``count`` (first pass), ``fill`` (second pass),
+        ``render`` (a pass without logging), ``total``.
+    width, height : int
+        Samples per row and rows (W + 1, H + 1 with corner rays).
+    """
+
+    image: np.ndarray
+    counters: np.ndarray
+    trace: AccessTrace | None
+    tree: KdTree
+    timings: dict = field(default_factory=dict)
+    width: int = 0
+    height: int = 0
+
+    def totals(self) -> dict:
+        """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
+        sums = self.counters.sum(axis=0)
+        out = {name: int(v) for name, v in zip(COUNTER_NAMES, sums)}
+        out["rays"] = (out["primary_rays"] + out["shadow_rays"]
+                       + out["reflection_rays"] + out["refraction_rays"])
+        out["intersection_tests"] = sum(out[n] for n in COUNTER_NAMES if n.startswith("tests_"))
+        if self.trace is not None:
+            out["records"] = self.trace.n_records
+        return out
+
+
+# --------------------------------------------------------------------------
+# camera
+# --------------------------------------------------------------------------
+
+def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = False) -> np.ndarray:
+    """Camera parameters the kernel uses, as one float64 array (16,).
+
+    ``eye (3), forward (3), right (3), up (3), pitch, cx, cy, samples_x``:
+    sample ``(i, j)`` (column, row from the top) looks along
+    ``forward + (i - cx) * pitch * right + (cy - j) * pitch * up``.
+    """
+    cam = scene.camera
+    eye = np.array(cam.eye, dtype=np.float64)
+    fwd = np.array(cam.look_at, dtype=np.float64) - eye
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, np.array(cam.up, dtype=np.float64))
+    if np.linalg.norm(right) == 0.0:
+        raise ValueError("Camera.up must not be parallel to the viewing direction")
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    span = 2.0 * math.tan(math.radians(cam.angle) / 2.0)
+    # angle = the centres of the outermost rows; aspect 1 (square pixels)
+    pitch = span / (height - 1) if height > 1 else span
+    if corner_rays:
+        cx, cy, sx = width / 2.0, height / 2.0, width + 1
+    else:
+        cx, cy, sx = (width - 1) / 2.0, (height - 1) / 2.0, width
+    return np.concatenate([eye, fwd, right, up, [pitch, cx, cy, sx]]).astype(np.float64)
+
+
+def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Primary rays of :func:`render` (for comparisons with other tracers).
+
+    Returns
+    -------
+    origin : ndarray, shape (3,)
+    directions : ndarray, shape (H', W', 3) unit vectors, H' = H (+1 with corner rays)
+    """
+    width, height = _resolve_size(scene, size)
+    cam = camera_frame(scene, width, height, corner_rays)
+    sx = width + 1 if corner_rays else width
+    sy = height + 1 if corner_rays else height
+    i = np.arange(sx, dtype=np.float64)
+    j = np.arange(sy, dtype=np.float64)
+    u = (i - cam[13]) * cam[12]
+    v = (cam[14] - j) * cam[12]
+    d = cam[3:6][None, None, :] + u[None, :, None] * cam[6:9] + v[:, None, None] * cam[9:12]
+    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    return cam[0:3].copy(), d
+
+
+# --------------------------------------------------------------------------
+# kernels
+# --------------------------------------------------------------------------
+
+@njit(cache=True, error_model="numpy")
+def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
+                  nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                  mats, lights, ambient, background,
+                  rec, pos, write, cnt, st_node, st_t0, st_t1, rays):
+    # Whitted ray tree, depth first with an explicit stack (rays: (S, 11) =
+    # origin, direction, weight rgb, depth, type); pushing refraction before
+    # reflection reproduces the recursive order (reflection subtree first).
+    cr = 0.0
+    cg = 0.0
+    cb = 0.0
+    rays[0, 0] = ox
+    rays[0, 1] = oy
+    rays[0, 2] = oz
+    rays[0, 3] = dx
+    rays[0, 4] = dy
+    rays[0, 5] = dz
+    rays[0, 6] = 1.0
+    rays[0, 7] = 1.0
+    rays[0, 8] = 1.0
+    rays[0, 9] = 1.0
+    rays[0, 10] = 0.0
+    n = 1
+    n_lights = lights.shape[0]
+    while n > 0:
+        n -= 1
+        rox, roy, roz = rays[n, 0], rays[n, 1], rays[n, 2]
+        rdx, rdy, rdz = rays[n, 3], rays[n, 4], rays[n, 5]
+        wr, wg, wb = rays[n, 6], rays[n, 7], rays[n, 8]
+        depth = np.int64(rays[n, 9])
+        typ = np.int64(rays[n, 10])  # 0 primary, 1 reflection, 2 refraction
+        tmin = hither if typ == 0 else eps
+        ray_col = 0 if typ == 0 else (4 if typ == 1 else 6)
+        cnt[ray_col] += 1
+        t, e, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
+                             rox, roy, roz, rdx, rdy, rdz, tmin, np.inf, False,
+                             rec, pos, write, cnt, st_node, st_t0, st_t1)
+        if e < 0:
+            cr += wr * background[0]
+            cg += wg * background[1]
+            cb += wb * background[2]
+            continue
+        cnt[ray_col + 1] += 1
+        hx, hy, hz = rox + t * rdx, roy + t * rdy, roz + t * rdz
+        k = np.int64(ekind[e])
+        nx, ny, nz = element_normal(k, eidx[e], geo, hx, hy, hz)
+        m = emat[e]
+        if write:
+            rec[pos] = (7 << 28) | m
+        pos += 1
+        cnt[16] += 1
+        mr, mg, mb = mats[m, 0], mats[m, 1], mats[m, 2]
+        kd, ks, shine, tr, ior = mats[m, 3], mats[m, 4], mats[m, 5], mats[m, 6], mats[m, 7]
+        lr = ambient * kd * mr
+        lg = ambient * kd * mg
+        lb = ambient * kd * mb
+        for li in range(n_lights):
+            if write:
+                rec[pos] = (8 << 28) | li
+            pos += 1
+            cnt[17] += 1
+            lx, ly, lz = lights[li, 0] - hx, lights[li, 1] - hy, lights[li, 2] - hz
+            dist = math.sqrt(lx * lx + ly * ly + lz * lz)
+            if dist == 0.0:
+                continue
+            lx, ly, lz = lx / dist, ly / dist, lz / dist
+            ndl = nx * lx + ny * ly + nz * lz
+            if ndl <= 0.0:
+                continue
+            cnt[2] += 1
+            ts, es, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
+                                   hx, hy, hz, lx, ly, lz, eps, dist, True,
+                                   rec, pos, write, cnt, st_node, st_t0, st_t1)
+            if es >= 0:
+                cnt[3] += 1
+                continue
+            diff = kd * ndl
+            spec = 0.0
+            if ks > 0.0:
+                # Phong: R = 2 (N.L) N - L against V = -d
+                rv = -((2.0 * ndl * nx - lx) * rdx + (2.0 * ndl * ny - ly) * rdy + (2.0 * ndl * nz - lz) * rdz)
+                if rv > 0.0:
+                    spec = ks * rv ** shine
+            lr += lights[li, 3] * (diff * mr + spec)
+            lg += lights[li, 4] * (diff * mg + spec)
+            lb += lights[li, 5] * (diff * mb + spec)
+        cr += wr * lr
+        cg += wg * lg
+        cb += wb * lb
+        if depth >= max_depth:
+            continue
+        ddn = rdx * nx + rdy * ny + rdz * nz
+        if tr > 0.0:
+            # Snell; entering when the ray meets the front of the normal
+            if ddn < 0.0:
+                eta = 1.0 / ior
+                cosi = -ddn
+                fx, fy, fz = nx, ny, nz
+            else:
+                eta = ior
+                cosi = ddn
+                fx, fy, fz = -nx, -ny, -nz
+            k2 = 1.0 - eta * eta * (1.0 - cosi * cosi)
+            if k2 >= 0.0:
+                c2 = eta * cosi - math.sqrt(k2)
+                tx, ty, tz = eta * rdx + c2 * fx, eta * rdy + c2 * fy, eta * rdz + c2 * fz
+                ln = math.sqrt(tx * tx + ty * ty + tz * tz)
+                rays[n, 0] = hx
+                rays[n, 1] = hy
+                rays[n, 2] = hz
+                rays[n, 3] = tx / ln
+                rays[n, 4] = ty / ln
+                rays[n, 5] = tz / ln
+                rays[n, 6] = wr * tr
+                rays[n, 7] = wg * tr
+                rays[n, 8] = wb * tr
+                rays[n, 9] = depth + 1
+                rays[n, 10] = 2.0
+                n += 1
+        if ks > 0.0:
+            qx, qy, qz = rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny, rdz - 2.0 * ddn * nz
+            ln = math.sqrt(qx * qx + qy * qy + qz * qz)
+            rays[n, 0] = hx
+            rays[n, 1] = hy
+            rays[n, 2] = hz
+            rays[n, 3] = qx / ln
+            rays[n, 4] = qy / ln
+            rays[n, 5] = qz / ln
+            rays[n, 6] = wr * ks
+            rays[n, 7] = wg * ks
+            rays[n, 8] = wb * ks
+            rays[n, 9] = depth + 1
+            rays[n, 10] = 1.0
+            n += 1
+    return cr, cg, cb, pos
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _render_kernel(p0, p1, cam, hither, eps, max_depth,
+                   nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                   mats, lights, ambient, background,
+                   mode, offsets, rec, image, counters, counts):
+    # mode 0: image and counters; 1: also count records per pixel;
+    # 2: also write records of pixels p0..p1 into rec (rec[0] = offsets[p0])
+    write = mode == 2
+    sx = np.int64(cam[15])
+    base = offsets[p0] if write else 0
+    for p in prange(p0, p1):
+        i = p % sx
+        j = p // sx
+        u = (i - cam[13]) * cam[12]
+        v = (cam[14] - j) * cam[12]
+        dx = cam[3] + u * cam[6] + v * cam[9]
+        dy = cam[4] + u * cam[7] + v * cam[10]
+        dz = cam[5] + u * cam[8] + v * cam[11]
+        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+        cnt = np.zeros(counters.shape[1], np.int64)
+        st_node = np.empty(64, np.int64)
+        st_t0 = np.empty(64)
+        st_t1 = np.empty(64)
+        rays = np.empty((2 * max_depth + 2, 11))
+        start = offsets[p] - base if write else 0
+        r, g, b, end = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
+                                     hither, eps, max_depth,
+                                     nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                                     mats, lights, ambient, background,
+                                     rec, start, write, cnt, st_node, st_t0, st_t1, rays)
+        image[p, 0] = r
+        image[p, 1] = g
+        image[p, 2] = b
+        counters[p, :] = cnt
+        if mode == 1:
+            counts[p] = end - start
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _closest_kernel(orig, dirs, tmin, tmax, nodes, fnodes, pidx, blo, bhi, ekind, eidx, geo,
+                    n_counters, out_t, out_e, out_nodes):
+    dummy = np.empty(0, np.uint32)
+    for r in prange(orig.shape[0]):
+        cnt = np.zeros(n_counters, np.int64)
+        st_node = np.empty(64, np.int64)
+        st_t0 = np.empty(64)
+        st_t1 = np.empty(64)
+        t, e, _ = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
+                           orig[r, 0], orig[r, 1], orig[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
+                           tmin[r], tmax[r], False, dummy, 0, False, cnt, st_node, st_t0, st_t1)
+        out_t[r] = t
+        out_e[r] = e
+        out_nodes[r] = cnt[8]
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _brute_kernel(orig, dirs, tmin, tmax, ekind, eidx, geo, out_t, out_e):
+    for r in prange(orig.shape[0]):
+        t, e = brute_force(ekind, eidx, geo, orig[r, 0], orig[r, 1], orig[r, 2],
+                           dirs[r, 0], dirs[r, 1], dirs[r, 2], tmin[r], tmax[r])
+        out_t[r] = t
+        out_e[r] = e
+
+
+# --------------------------------------------------------------------------
+# public API
+# --------------------------------------------------------------------------
+
+def _resolve_size(scene: Scene, size) -> tuple[int, int]:
+    if size is None:
+        return scene.camera.resolution
+    if np.ndim(size) == 0:
+        size = (size, size)
+    if len(size) != 2 or any(int(s) != s or int(s) < 1 for s in size):
+        raise ValueError(f"size must be a positive int or (width, height), got {size!r}")
+    return int(size[0]), int(size[1])
+
+
+def _scene_arrays(scene: Scene):
+    n = scene.n_elements
+    for name in ("element_index", "element_material"):
+        if getattr(scene, name).shape != (n,):
+            raise ValueError(f"Scene.{name} must have shape ({n},)")
+    ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
+    eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
+    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
+    if n and ekind.max() > 4:
+        raise ValueError("Scene.element_kind holds a value outside ElementKind (0..4)")
+    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
+                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
+    mats = np.ascontiguousarray(mats.reshape(-1, 8))
+    if n and (emat.min() < 0 or emat.max() >= len(mats)):
+        raise ValueError("Scene.element_material refers to a material row that does not exist")
+    return ekind, eidx, emat, mats
+
+
+def _tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | None):
+    if tree is None:
+        tree = build_kdtree(scene, kd_config)
+    elif not isinstance(tree, KdTree):
+        raise ValueError(f"tree must be a KdTree, got {type(tree).__name__}")
+    nodes = np.ascontiguousarray(tree.nodes, dtype=np.uint32)
+    return tree, nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32), \
+        np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1])
+
+
+def _rays(origins, directions):
+    o = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 3))
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    if o.shape != d.shape:
+        raise ValueError(f"origins and directions must both be (R, 3), got {o.shape} and {d.shape}")
+    norm = np.linalg.norm(d, axis=1)
+    if np.any(norm == 0.0):
+        raise ValueError("directions must be non-zero")
+    return o, np.ascontiguousarray(d / norm[:, None])
+
+
+def _bounds(value, n, what):
+    a = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
+    return np.ascontiguousarray(a)
+
+
+def closest_hit(scene: Scene, tree: KdTree | None, origins, directions, tmin=0.0, tmax=np.inf):
+    """Closest hit of each ray through the kd-tree.
+
+    Parameters
+    ----------
+    scene : Scene
+    tree : KdTree or None
+        Built with :func:`~tracer.kdtree.build_kdtree` if None.
+    origins, directions : array_like, shape (R, 3)
+        Directions are normalised here (``t`` is a distance).
+    tmin, tmax : float or array_like (R,)
+
+    Returns
+    -------
+    t : ndarray, shape (R,) float64, ``inf`` on a miss
+    element : ndarray, shape (R,) int64, -1 on a miss
+    node_visits : ndarray, shape (R,) int64
+    """
+    o, d = _rays(origins, directions)
+    tree, nodes, fnodes, pidx, blo, bhi = _tree_arrays(scene, tree, None)
+    ekind, eidx, _, _ = _scene_arrays(scene)
+    geo = prepare_geometry(scene)
+    r = len(o)
+    out_t = np.empty(r)
+    out_e = np.empty(r, np.int64)
+    out_n = np.empty(r, np.int64)
+    _closest_kernel(o, d, _bounds(tmin, r, "tmin"), _bounds(tmax, r, "tmax"), nodes, fnodes, pidx,
+                    blo, bhi, ekind, eidx, geo, N_COUNTERS, out_t, out_e, out_n)
+    return out_t, out_e, out_n
+
+
+def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf):
+    """Closest hit of each ray by testing every element (the slow reference).
+
+    Returns
+    -------
+    t : ndarray, shape (R,) float64
+    element : ndarray, shape (R,) int64
+    """
+    o, d = _rays(origins, directions)
+    ekind, eidx, _, _ = _scene_arrays(scene)
+    geo = prepare_geometry(scene)
+    r = len(o)
+    out_t = np.empty(r)
+    out_e = np.empty(r, np.int64)
+    _brute_kernel(o, d, _bounds(tmin, r, "tmin"), _bounds(tmax, r, "tmax"), ekind, eidx, geo, out_t, out_e)
+    return out_t, out_e
+
+
+def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: bool = False,
+           log: bool = True, kd_config: KdTreeConfig | None = None, max_depth: int | None = None,
+           trace_path=None, memory_budget: int = DEFAULT_MEMORY_BUDGET,
+           metadata: dict | None = None) -> RenderResult:
+    """Render ``scene`` and, with ``log``, record every scene access per pixel.
+
+    Parameters
+    ----------
+    scene : Scene
+    tree : KdTree, optional
+        Built from ``kd_config`` when omitted.
+    size : int or (int, int), optional
+        Image width and height; default the camera's resolution.
+    corner_rays : bool
+        Trace (W+1) x (H+1) rays through the pixel corners (SPD counting)
+        instead of W x H through the centres.
+    log : bool
+        Produce the :class:`AccessTrace` (two passes) or only the image and
+        counters (one pass).
+    kd_config : KdTreeConfig, optional
+    max_depth : int, optional
+        Ray-tree depth (primary = 1); default ``scene.max_depth``.
+    trace_path : path, optional
+        Also save the trace there (atomically). A trace whose records exceed
+        ``memory_budget`` bytes requires it: records are then written in
+        chunks straight to disk and the returned trace is memory-mapped.
+    memory_budget : int
+        Bytes of records held in memory at once (>= 4).
+    metadata : dict, optional
+        Extra JSON-serialisable entries for the trace's metadata.
+
+    Returns
+    -------
+    RenderResult
+    """
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a Scene, got {type(scene).__name__}")
+    width, height = _resolve_size(scene, size)
+    depth = scene.max_depth if max_depth is None else max_depth
+    if int(depth) != depth or not 1 <= depth <= 64:
+        raise ValueError(f"max_depth must be an int in 1..64, got {depth!r}")
+    depth = int(depth)
+    if int(memory_budget) != memory_budget or memory_budget < 4:
+        raise ValueError(f"memory_budget must be an int >= 4 bytes, got {memory_budget!r}")
+    timings = {}
+    t_start = time.perf_counter()
+    tree, nodes, fnodes, pidx, blo, bhi = _tree_arrays(scene, tree, kd_config)
+    timings["build"] = time.perf_counter() - t_start
+    ekind, eidx, emat, mats = _scene_arrays(scene)
+    geo = prepare_geometry(scene)
+    n_lights = scene.n_lights
+    scale = math.sqrt(n_lights) / (2.0 * n_lights) if n_lights else 0.5
+    lights = np.ascontiguousarray(np.column_stack([scene.light_position.reshape(-1, 3),
+                                                   scene.light_color.reshape(-1, 3) * scale]).reshape(-1, 6))
+    background = np.ascontiguousarray(np.asarray(scene.background, dtype=np.float64).reshape(3))
+    diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
+    eps = 1e-8 * max(diag, 1e-300) if diag > 0 else 1e-12
+    hither = float(scene.camera.hither)
+    cam = camera_frame(scene, width, height, corner_rays)
+    sx = width + 1 if corner_rays else width
+    sy = height + 1 if corner_rays else height
+    n_pix = sx * sy
+    image = np.zeros((n_pix, 3))
+    counters = np.zeros((n_pix, N_COUNTERS), np.int64)
+    counts = np.zeros(n_pix, np.int64)
+    offsets = np.zeros(n_pix + 1, np.int64)
+    args = (cam, hither, eps, depth, nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+            mats, lights, scale, background)
+    empty = np.empty(0, np.uint32)
+    trace = None
+    t0 = time.perf_counter()
+    if not log:
+        _render_kernel(0, n_pix, *args, 0, offsets, empty, image, counters, counts)
+        timings["render"] = time.perf_counter() - t0
+    else:
+        _render_kernel(0, n_pix, *args, 1, offsets, empty, image, counters, counts)
+        timings["count"] = time.perf_counter() - t0
+        np.cumsum(counts, out=offsets[1:])
+        total = int(offsets[-1])
+        t1 = time.perf_counter()
+        meta = {
+            "scene": scene.name, "width": sx, "height": sy, "image_size": [width, height],
+            "corner_rays": bool(corner_rays), "max_depth": depth, "hither": hither, "epsilon": eps,
+            "kd_config": tree.config.to_dict(), "kd_stats": tree.stats,
+            "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
+            "packages": package_versions(),
+            "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
+        }
+        meta.update(metadata or {})
+        scratch_image = np.empty_like(image)
+        scratch_counters = np.empty_like(counters)
+        if 4 * total <= memory_budget:
+            records = np.empty(total, np.uint32)
+            _render_kernel(0, n_pix, *args, 2, offsets, records, scratch_image, scratch_counters, counts)
+            trace = AccessTrace(offsets, records, counters, sx, sy, meta)
+            if trace_path is not None:
+                trace.save(trace_path)
+        else:
+            if trace_path is None:
+                raise ValueError(f"the trace needs {4 * total} bytes, more than memory_budget "
+                                 f"({memory_budget}); pass trace_path to write it to disk in chunks")
+            per_chunk = max(1, memory_budget // 4)
+            with TraceWriter(trace_path, total) as writer:
+                p = 0
+                buf = np.empty(min(per_chunk, total), np.uint32)
+                while p < n_pix:
+                    # greedily take pixels while their records fit the buffer
+                    q = int(np.searchsorted(offsets, offsets[p] + per_chunk, side="right")) - 1
+                    q = min(max(q, p + 1), n_pix)
+                    need = int(offsets[q] - offsets[p])
+                    chunk = buf[:need] if need <= len(buf) else np.empty(need, np.uint32)
+                    _render_kernel(p, q, *args, 2, offsets, chunk, scratch_image, scratch_counters, counts)
+                    writer.records[offsets[p]:offsets[q]] = chunk
+                    p = q
+                trace = writer.finish(offsets, counters, sx, sy, meta)
+        timings["fill"] = time.perf_counter() - t1
+    timings["total"] = time.perf_counter() - t_start
+    return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
+                        timings=timings, width=sx, height=sy)
+
+
+def save_png(image, path) -> Path:
+    """Save a linear RGB image (H, W, 3) as PNG, clipped to [0, 1]."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    plt.imsave(path, np.clip(image, 0.0, 1.0))
+    return path

@@ -1,0 +1,316 @@
+"""Per-pixel access logs: record packing, counters and :class:`AccessTrace`.
+
+A *record* is one read of one scene record, packed into a uint32 as
+``kind << 28 | index`` (4-bit kind, 28-bit index):
+
+=============  ===============================================================
+KD_NODE        kd-tree node ``index`` (row of ``KdTree.nodes``), each visit;
+               a ray that misses the scene box still reads the root (0)
+INDEX_ENTRY    entry ``index`` of ``KdTree.primitive_indices`` read in a leaf
+SPHERE ...     primitive tested; ``index`` is the row in *that kind's* arrays
+CONE           (``Scene.element_index``), not the element id
+MATERIAL       material row read to shade a hit
+LIGHT          light row read while shading (once per light per hit)
+=============  ===============================================================
+
+In a leaf, each entry read is followed by the test of the primitive it names;
+a ray reads the nodes it visits in traversal order; shading reads the
+material, then per light the light record, then that light's shadow ray
+records. Rays of one pixel appear in depth-first (recursive Whitted) order.
+"""
+from __future__ import annotations
+
+import enum
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+KIND_SHIFT = 28
+INDEX_MASK = (1 << KIND_SHIFT) - 1
+FORMAT_VERSION = 1
+
+
+class RecordKind(enum.IntEnum):
+    """Kinds of scene records a pixel reads (4 bits in a packed record)."""
+
+    KD_NODE = 0
+    INDEX_ENTRY = 1
+    SPHERE = 2
+    TRIANGLE = 3
+    POLYGON = 4
+    PATCH = 5
+    CONE = 6
+    MATERIAL = 7
+    LIGHT = 8
+
+
+# Per-pixel counter columns of AccessTrace.counters / RenderResult.counters.
+COUNTER_NAMES = (
+    "primary_rays", "primary_hits",
+    "shadow_rays", "shadow_blocked",
+    "reflection_rays", "reflection_hits",
+    "refraction_rays", "refraction_hits",
+    "node_visits", "leaf_visits", "index_reads",
+    "tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tests_cone",
+    "shading", "light_reads",
+)
+
+# Which counter equals the number of records of each kind.
+COUNTER_OF_KIND = {
+    RecordKind.KD_NODE: "node_visits",
+    RecordKind.INDEX_ENTRY: "index_reads",
+    RecordKind.SPHERE: "tests_sphere",
+    RecordKind.TRIANGLE: "tests_triangle",
+    RecordKind.POLYGON: "tests_polygon",
+    RecordKind.PATCH: "tests_patch",
+    RecordKind.CONE: "tests_cone",
+    RecordKind.MATERIAL: "shading",
+    RecordKind.LIGHT: "light_reads",
+}
+
+
+def pack(kind, index) -> np.ndarray:
+    """Pack ``kind`` and ``index`` (scalars or arrays) into uint32 records.
+
+    Raises
+    ------
+    ValueError
+        If a kind is not a :class:`RecordKind` or an index is outside
+        ``0 .. 2**28 - 1``.
+    """
+    kind = np.asarray(kind, dtype=np.int64)
+    index = np.asarray(index, dtype=np.int64)
+    if np.any((kind < 0) | (kind > max(RecordKind))):
+        raise ValueError("pack: kind must be a RecordKind value (0..8)")
+    if np.any((index < 0) | (index > INDEX_MASK)):
+        raise ValueError(f"pack: index must be in 0..{INDEX_MASK}")
+    return ((kind << KIND_SHIFT) | index).astype(np.uint32)
+
+
+def unpack(records) -> tuple[np.ndarray, np.ndarray]:
+    """Split uint32 records into ``(kind, index)`` arrays (uint8, uint32)."""
+    records = np.asarray(records, dtype=np.uint32)
+    return (records >> KIND_SHIFT).astype(np.uint8), records & np.uint32(INDEX_MASK)
+
+
+def package_versions() -> dict:
+    """Versions of the packages that decide a trace's content."""
+    import numba
+    import sys
+    versions = {"python": sys.version.split()[0], "numpy": np.__version__, "numba": numba.__version__}
+    try:
+        from importlib.metadata import version
+        versions["raytrace-coherence"] = version("raytrace-coherence")
+    except Exception:  # pragma: no cover - not installed as a distribution
+        versions["raytrace-coherence"] = "unknown"
+    return versions
+
+
+@dataclass(eq=False)
+class AccessTrace:
+    """Ordered per-pixel access logs of one render, CSR style.
+
+    Attributes
+    ----------
+    pixel_offsets : ndarray, shape (P + 1,) int64
+        Records of pixel ``p`` (row-major, ``p = y * width + x``, top row
+        first) are ``records[pixel_offsets[p]:pixel_offsets[p + 1]]``.
+    records : ndarray, shape (R,) uint32
+        Packed records (see module docstring); may be a read-only memmap.
+    counters : ndarray, shape (P, K) int64
+        Per-pixel counters, columns :data:`COUNTER_NAMES`.
+    width, height : int
+    metadata : dict
+        JSON-serialisable: scene, resolution, tree config and stats, render
+        options, package versions.
+    """
+
+    pixel_offsets: np.ndarray
+    records: np.ndarray
+    counters: np.ndarray
+    width: int
+    height: int
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        p = int(self.width) * int(self.height)
+        if self.pixel_offsets.shape != (p + 1,):
+            raise ValueError(f"AccessTrace.pixel_offsets must have shape ({p + 1},), got {self.pixel_offsets.shape}")
+        if self.counters.shape != (p, len(COUNTER_NAMES)):
+            raise ValueError(f"AccessTrace.counters must have shape ({p}, {len(COUNTER_NAMES)}), got {self.counters.shape}")
+        if self.records.ndim != 1 or self.records.dtype != np.uint32:
+            raise ValueError("AccessTrace.records must be a 1-D uint32 array")
+        if int(self.pixel_offsets[-1]) != len(self.records):
+            raise ValueError("AccessTrace.pixel_offsets[-1] must equal len(records)")
+
+    @property
+    def n_pixels(self) -> int:
+        return int(self.width) * int(self.height)
+
+    @property
+    def n_records(self) -> int:
+        return int(self.records.shape[0])
+
+    def pixel(self, p: int) -> np.ndarray:
+        """Records of pixel ``p``, shape (n,) uint32."""
+        return self.records[self.pixel_offsets[p]:self.pixel_offsets[p + 1]]
+
+    def counter(self, name: str) -> np.ndarray:
+        """Column ``name`` of :attr:`counters` as an (H, W) image."""
+        try:
+            col = COUNTER_NAMES.index(name)
+        except ValueError:
+            raise ValueError(f"unknown counter {name!r}; one of {COUNTER_NAMES}") from None
+        return self.counters[:, col].reshape(self.height, self.width)
+
+    def totals(self) -> dict:
+        """Sum of every counter over all pixels, plus ``records``."""
+        sums = self.counters.sum(axis=0)
+        out = {name: int(v) for name, v in zip(COUNTER_NAMES, sums)}
+        out["records"] = self.n_records
+        return out
+
+    def kind_counts(self, chunk: int = 1 << 24) -> dict:
+        """Number of records of each kind (read in chunks; works on memmaps)."""
+        counts = np.zeros(16, dtype=np.int64)
+        for a in range(0, self.n_records, chunk):
+            counts += np.bincount(np.asarray(self.records[a:a + chunk]) >> KIND_SHIFT, minlength=16)
+        return {k: int(counts[k]) for k in RecordKind}
+
+    # ------------------------------------------------------------------ I/O
+    def save(self, directory) -> Path:
+        """Write the trace to ``directory`` atomically.
+
+        Files: ``pixel_offsets.npy``, ``records.npy``, ``counters.npy`` and
+        ``meta.json``. They are written to a temporary sibling directory that
+        is renamed into place, so a reader never sees a half-written trace.
+        Records are copied in chunks (a memmapped trace is not loaded).
+
+        Returns
+        -------
+        pathlib.Path
+        """
+        directory = Path(directory)
+        tmp = _temp_sibling(directory)
+        try:
+            np.save(tmp / "pixel_offsets.npy", np.asarray(self.pixel_offsets, dtype=np.int64))
+            np.save(tmp / "counters.npy", np.asarray(self.counters, dtype=np.int64))
+            out = np.lib.format.open_memmap(tmp / "records.npy", mode="w+", dtype=np.uint32,
+                                            shape=(self.n_records,))
+            step = 1 << 24
+            for a in range(0, self.n_records, step):
+                out[a:a + step] = self.records[a:a + step]
+            out.flush()
+            del out
+            _write_meta(tmp, self.width, self.height, self.n_records, self.metadata)
+            _publish(tmp, directory)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return directory
+
+    @classmethod
+    def load(cls, directory, *, mmap: bool = True) -> "AccessTrace":
+        """Read a trace written by :meth:`save` (records memory-mapped by default).
+
+        Raises
+        ------
+        FileNotFoundError
+            If the directory or one of its files is missing.
+        ValueError
+            If the files are inconsistent.
+        """
+        directory = Path(directory)
+        if not directory.is_dir():
+            raise FileNotFoundError(f"no such trace directory: {str(directory)!r}")
+        for name in ("meta.json", "pixel_offsets.npy", "records.npy", "counters.npy"):
+            if not (directory / name).is_file():
+                raise FileNotFoundError(f"trace {str(directory)!r} lacks {name}")
+        meta = json.loads((directory / "meta.json").read_text())
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise ValueError(f"trace {str(directory)!r}: unsupported format_version {meta.get('format_version')!r}")
+        records = np.load(directory / "records.npy", mmap_mode="r" if mmap else None)
+        return cls(pixel_offsets=np.load(directory / "pixel_offsets.npy"),
+                   records=records,
+                   counters=np.load(directory / "counters.npy"),
+                   width=int(meta["width"]), height=int(meta["height"]),
+                   metadata=meta.get("metadata", {}))
+
+
+def _temp_sibling(directory: Path) -> Path:
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=f".{directory.name}.", suffix=".tmp", dir=directory.parent))
+
+
+def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: dict) -> None:
+    meta = {"format_version": FORMAT_VERSION, "width": int(width), "height": int(height),
+            "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
+            "counter_names": list(COUNTER_NAMES), "metadata": metadata}
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1, default=_json_default))
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def _publish(tmp: Path, directory: Path) -> None:
+    # Replace an existing trace: move it aside, rename the new one in, then
+    # delete the old one, so the path holds a complete trace at every moment
+    # except between the two renames.
+    old = None
+    if directory.exists():
+        if not (directory / "meta.json").is_file() and any(directory.iterdir()):
+            raise ValueError(f"{str(directory)!r} exists and is not a trace directory; not overwriting")
+        old = directory.with_name(f".{directory.name}.old-{os.getpid()}")
+        os.replace(directory, old)
+    os.replace(tmp, directory)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+class TraceWriter:
+    """Writes a trace directly to disk (used when it exceeds a memory budget).
+
+    The records file is created with its final size and filled in slices by
+    the renderer; :meth:`finish` adds the other files and publishes the
+    directory atomically. Use as a context manager: on error the temporary
+    directory is removed.
+    """
+
+    def __init__(self, directory, n_records: int):
+        self.directory = Path(directory)
+        self.tmp = _temp_sibling(self.directory)
+        self.records = np.lib.format.open_memmap(self.tmp / "records.npy", mode="w+",
+                                                 dtype=np.uint32, shape=(int(n_records),))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is not None:
+            self.abort()
+        return False
+
+    def abort(self) -> None:
+        self.records = None
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def finish(self, pixel_offsets, counters, width, height, metadata) -> AccessTrace:
+        """Write the remaining files, publish, and return the trace memory-mapped."""
+        self.records.flush()
+        n = int(self.records.shape[0])
+        self.records = None
+        np.save(self.tmp / "pixel_offsets.npy", np.asarray(pixel_offsets, dtype=np.int64))
+        np.save(self.tmp / "counters.npy", np.asarray(counters, dtype=np.int64))
+        _write_meta(self.tmp, width, height, n, metadata)
+        _publish(self.tmp, self.directory)
+        return AccessTrace.load(self.directory, mmap=True)
