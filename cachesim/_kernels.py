@@ -96,6 +96,11 @@ def _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets, set_mask, 
                 counts[upper, INVALIDATIONS] += 1
 
 
+# Accesses handled per chunk by the level-by-level path: the chunk's two
+# buffers (256 KB) stay in the host's second-level cache.
+CHUNK = 16384
+
+
 @njit(cache=True)
 def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
                     inclusion, tags, stamps, seeds, counts, clock, served_by, record):
@@ -103,19 +108,32 @@ def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy
 
     Returns the clock after the last access. When ``record`` is true,
     ``served_by[i]`` receives the level that served access ``i`` (``L`` for
-    memory). Both paths below give identical states and counts for a
-    non-inclusive hierarchy; the level-by-level one is faster.
+    memory).
+    """
+    work_lines = np.empty(CHUNK, dtype=np.int64)
+    work_clocks = np.empty(CHUNK, dtype=np.int64)
+    return simulate_into(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                         inclusion, tags, stamps, seeds, counts, clock, served_by, record,
+                         work_lines, work_clocks)
+
+
+@njit(cache=True)
+def simulate_into(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                  inclusion, tags, stamps, seeds, counts, clock, served_by, record,
+                  work_lines, work_clocks):
+    """:func:`simulate_stream` with caller-owned work buffers (int64, (CHUNK,)).
+
+    The entry point for other packages' compiled code that feeds many short
+    streams (one pixel's reads, say) to one state. Both paths below give
+    identical states and counts for a non-inclusive hierarchy; the
+    level-by-level one is faster.
     """
     if inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy,
-                                  offset, tags, stamps, seeds, counts, clock, served_by, record)
+                                  offset, tags, stamps, seeds, counts, clock, served_by, record,
+                                  work_lines, work_clocks)
     return _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
                                inclusion, tags, stamps, seeds, counts, clock, served_by, record)
-
-
-# Accesses handled per chunk by the level-by-level path: the chunk's two
-# buffers (256 KB) stay in the host's second-level cache.
-CHUNK = 16384
 
 
 @njit(cache=True)
@@ -206,21 +224,20 @@ def _level_pass(lines, clocks, n_in, level, shift, n_sets, set_mask, ways, polic
 
 @njit(cache=True)
 def _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                       tags, stamps, seeds, counts, clock, served_by, record):
+                       tags, stamps, seeds, counts, clock, served_by, record, lines, clocks):
     """Non-inclusive hierarchy: each chunk runs through level 0, its misses
     through level 1, and so on. Clocks are the global access clock, so stamps
     and random draws are those of :func:`_simulate_by_access`."""
     n_levels = rel_shift.shape[0]
     n = addresses.shape[0]
-    lines = np.empty(CHUNK, dtype=np.int64)
-    clocks = np.empty(CHUNK, dtype=np.int64)
     shifts = np.zeros(n_levels, dtype=np.int64)
     for level in range(n_levels - 1):
         shifts[level] = rel_shift[level + 1] - rel_shift[level]
     shift = np.uint64(shift0)
     previous = np.int64(-1)
-    for start in range(0, n, CHUNK):
-        stop = min(n, start + CHUNK)
+    chunk = lines.shape[0]
+    for start in range(0, n, chunk):
+        stop = min(n, start + chunk)
         # Collapse repeats of the previous line: the previous access left it
         # in level 0 as its set's most recent entry, so a repeat is a hit
         # that changes nothing.

@@ -285,10 +285,11 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
     for kernel in (K._simulate_by_level, K._simulate_by_access):
         state = CacheState(hierarchy)
         served_by = np.zeros(stream.size, dtype=np.uint8)
-        extra = () if kernel is K._simulate_by_level else (K.NON_INCLUSIVE,)
-        args = geometry.args()[:7] + extra
+        by_level = kernel is K._simulate_by_level
+        args = geometry.args()[:7] + (() if by_level else (K.NON_INCLUSIVE,))
+        buffers = (np.empty(K.CHUNK, np.int64), np.empty(K.CHUNK, np.int64)) if by_level else ()
         clock = kernel(stream, *args, state.tags, state.stamps, geometry.seeds, state.counts,
-                       5, served_by, True)
+                       5, served_by, True, *buffers)
         outputs.append((clock, state.tags.copy(), state.counts.copy(), served_by))
     (clock_a, tags_a, counts_a, served_a), (clock_b, tags_b, counts_b, served_b) = outputs
     assert clock_a == clock_b == 5 + stream.size
