@@ -171,7 +171,7 @@ def room(scale: float = 1.0, seed: int = 1999) -> Scene:
     b.camera = Camera((0.45, 0.55, 1.65), (5.6, 4.3, 0.95), (0.0, 0.0, 1.0), 60.0, 0.01,
                       (512, 512))
     b.light((3.8, 2.8, 2.05), (0.75, 0.7, 0.6))   # under the ceiling lamp
-    b.light((6.55, 5.45, 1.12), (0.5, 0.45, 0.35))  # desk lamp
+    b.light((6.55, 5.47, 1.0), (0.5, 0.45, 0.35))  # under the desk lamp's shade, off its arm
     b.light((7.2, 2.2, 2.6), (0.45, 0.5, 0.6))    # daylight near the window
     W, D, H = 8.0, 6.0, 3.0
 
