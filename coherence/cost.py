@@ -1,0 +1,184 @@
+"""Cycles per operation: from a pixel's counters and cache outcomes to time.
+
+A pixel's time in CPU cycles is its *compute* cycles, a weighted sum of its
+operation counters (rays, kd-node visits, index reads, intersection tests by
+primitive type, shading operations), plus its *memory* cycles: every access
+costs the hit latency of the cache level that served it, or the memory
+latency. Latencies belong to the :class:`cachesim.Hierarchy`, so a what-if on
+latency changes one place.
+
+``CostModel.calibrate`` fits the per-operation cycles by non-negative least
+squares to measured times, as the study's sequential times (DESIGN.md §2)
+can be fitted with traces of the five scenes.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+import pandas as pd
+
+# Cost fields and the trace counters each one multiplies.
+OPERATIONS = {
+    "ray": ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays"),
+    "node_visit": ("node_visits",),
+    "index_read": ("index_reads",),
+    "test_sphere": ("tests_sphere",),
+    "test_triangle": ("tests_triangle",),
+    "test_polygon": ("tests_polygon",),
+    "test_patch": ("tests_patch",),
+    "test_cone": ("tests_cone",),
+    "shading": ("shading",),
+}
+
+
+@dataclass(frozen=True)
+class CostModel:
+    """Cycles per operation and the clock rate.
+
+    Parameters
+    ----------
+    ray : float
+        Cycles to set up and finish one ray of any type.
+    node_visit, index_read : float
+        Cycles per kd-node visit and per leaf primitive-index read.
+    test_sphere, test_triangle, test_polygon, test_patch, test_cone : float
+        Cycles per intersection test of each primitive type.
+    shading : float
+        Cycles per shading operation (one hit shaded with all its lights).
+    clock_hz : float
+        CPU clock rate, to turn cycles into seconds.
+    name : str
+    """
+
+    ray: float = 400.0
+    node_visit: float = 60.0
+    index_read: float = 10.0
+    test_sphere: float = 300.0
+    test_triangle: float = 350.0
+    test_polygon: float = 450.0
+    test_patch: float = 500.0
+    test_cone: float = 500.0
+    shading: float = 1500.0
+    clock_hz: float = 300e6
+    name: str = "custom"
+
+    def __post_init__(self):
+        for name in (*OPERATIONS, "clock_hz"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value) \
+                    or value < 0:
+                raise ValueError(f"CostModel.{name} must be a finite number >= 0, got {value!r}")
+        if self.clock_hz <= 0:
+            raise ValueError(f"CostModel.clock_hz must be > 0, got {self.clock_hz}")
+
+    def weights(self, counter_names) -> np.ndarray:
+        """Cycles per unit of each counter, float64 (K,), in ``counter_names`` order."""
+        weights = np.zeros(len(counter_names), dtype=np.float64)
+        column = {name: index for index, name in enumerate(counter_names)}
+        for operation, counters in OPERATIONS.items():
+            for counter in counters:
+                if counter in column:
+                    weights[column[counter]] = getattr(self, operation)
+        return weights
+
+    def compute_cycles(self, counters, counter_names) -> np.ndarray:
+        """Compute cycles per row of ``counters`` (int, (P, K)) -> float64 (P,)."""
+        return np.asarray(counters, dtype=np.float64) @ self.weights(counter_names)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def calibrate(cls, measurements: pd.DataFrame, *, clock_hz: float = 300e6, name: str = "calibrated",
+                  fixed: dict | None = None):
+        """Fit cycles per operation to measured times by non-negative least squares.
+
+        Parameters
+        ----------
+        measurements : DataFrame
+            One row per measured run: ``seconds`` (measured time), optional
+            ``memory_cycles`` (simulated memory cycles, subtracted first) and
+            one column per operation counter (``primary_rays``,
+            ``node_visits``, ``tests_sphere``, ...; missing ones count 0).
+        clock_hz : float
+            Clock rate of the measured machine.
+        fixed : dict of str to float, optional
+            Operations held at a given cost instead of fitted (useful when
+            fewer runs than operations are measured).
+
+        Returns
+        -------
+        model : CostModel
+        residuals : DataFrame
+            Per run: measured and fitted seconds, residual and relative error.
+        """
+        if "seconds" not in measurements:
+            raise ValueError("calibrate: measurements need a 'seconds' column")
+        fixed = dict(fixed or {})
+        unknown = sorted(set(fixed) - set(OPERATIONS))
+        if unknown:
+            raise ValueError(f"calibrate: unknown operations in fixed: {unknown}; use {sorted(OPERATIONS)}")
+        seconds = measurements["seconds"].to_numpy(dtype=np.float64)
+        if np.any(~np.isfinite(seconds)) or np.any(seconds <= 0):
+            raise ValueError("calibrate: 'seconds' must be finite and > 0")
+        target = seconds * clock_hz
+        if "memory_cycles" in measurements:
+            target = target - measurements["memory_cycles"].to_numpy(dtype=np.float64)
+        columns = {}
+        for operation, counters in OPERATIONS.items():
+            present = [counter for counter in counters if counter in measurements]
+            total = measurements[present].to_numpy(dtype=np.float64).sum(axis=1) if present \
+                else np.zeros(len(measurements))
+            if operation in fixed:
+                target = target - fixed[operation] * total
+            elif total.any():
+                columns[operation] = total
+        if not columns:
+            raise ValueError("calibrate: no operation counters to fit (all missing, zero or fixed)")
+        from scipy.optimize import nnls
+
+        matrix = np.column_stack(list(columns.values()))
+        scale = matrix.max(axis=0)
+        solution, _ = nnls(matrix / scale, target)
+        fitted = dict(zip(columns, solution / scale))
+        model = replace(cls(clock_hz=clock_hz, name=name), **fixed, **fitted)
+        predicted = (matrix @ (solution / scale) + (seconds * clock_hz - target)) / clock_hz
+        residuals = pd.DataFrame({
+            "measured_seconds": seconds,
+            "fitted_seconds": predicted,
+            "residual_seconds": predicted - seconds,
+            "relative_error": (predicted - seconds) / seconds,
+        }, index=measurements.index)
+        return model, residuals
+
+
+def alpha8400() -> CostModel:
+    """The study's AlphaServer 8400 at 300 MHz.
+
+    Cycle counts are first guesses scaled to the study's slow tracer (about
+    500 cycles per intersection test all told); refit them with
+    :meth:`CostModel.calibrate` against DESIGN.md §2's sequential times.
+    """
+    return CostModel(name="alpha8400")
+
+
+def modern() -> CostModel:
+    """A current 3 GHz core running a tuned tracer (tens of cycles per test)."""
+    return CostModel(ray=80.0, node_visit=8.0, index_read=2.0, test_sphere=25.0, test_triangle=30.0,
+                     test_polygon=45.0, test_patch=55.0, test_cone=50.0, shading=200.0, clock_hz=3e9,
+                     name="modern")
+
+
+COST_MODELS = {"alpha8400": alpha8400, "modern": modern}
+
+
+def get_cost_model(name_or_model) -> CostModel:
+    """A preset by name (``alpha8400``, ``modern``) or a CostModel."""
+    if isinstance(name_or_model, CostModel):
+        return name_or_model
+    try:
+        return COST_MODELS[str(name_or_model)]()
+    except KeyError:
+        raise ValueError(f"unknown cost model {name_or_model!r}: use one of {', '.join(COST_MODELS)}") from None
+

@@ -1,0 +1,308 @@
+"""Where scene records live in memory: from (kind, index) records to byte addresses.
+
+A :class:`MemoryLayout` gives each record kind of an access trace a size, an
+alignment and, for polygons and patches, a size per vertex. Placing it for a
+scene (:meth:`MemoryLayout.place`) lays the kinds out one after another from
+``base``, each region starting on a ``region_align`` boundary, records packed
+in index order at their aligned sizes. A record read touches every cache line
+its bytes span, so a 96-byte triangle read costs three or four 32-byte lines.
+
+Presets (sizes in bytes, alignment in brackets):
+
+==========  =====================================  =========================================
+kind        ``compact`` (float32, today's tracer)  ``alpha1997`` (double-precision C structs)
+==========  =====================================  =========================================
+kd node     8 [8]: split float + child/axis word   24 [8]: double split, int axis, pad, pointer
+index       4 [4]: int32 primitive number         8 [8]: 64-bit object pointer
+sphere      16 [16]: centre, radius               64 [8]: 16 B header (type, material
+                                                  pointer), centre, radius, radius squared
+triangle    36 [4]: three vertices                96 [8]: header, three vertices, plane offset
+polygon     4 + 12 n [4]: count, n vertices       64 + 24 n [8]: header, normal, offset,
+                                                  count, pointer; then n vertices
+patch       4 + 24 n [4]: count, vertices,        64 + 48 n [8]: as polygon, with a normal
+            normals                               per vertex
+cone        32 [16]: base, radii, apex            152 [8]: header, base, apex, radii, frame
+material    32 [16]: colour, kd, ks, shine, t,    64 [8]: doubles
+            ior
+light       24 [8]: position, colour              48 [8]: doubles
+==========  =====================================  =========================================
+
+The 1997 sizes are a plausible layout of a C tracer of the time on the 64-bit
+Alpha, not the study's code (which is not public).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from tracer.trace import INDEX_MASK, KIND_SHIFT, RecordKind
+
+N_KINDS = len(RecordKind)
+_VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
+
+
+@dataclass(frozen=True)
+class RecordLayout:
+    """Size of one record kind.
+
+    Parameters
+    ----------
+    size : int
+        Bytes of a record (of the fixed part, for polygons and patches).
+    align : int
+        Records start on multiples of this (a power of two).
+    per_vertex : int
+        Extra bytes per vertex (polygons and patches only).
+    """
+
+    size: int
+    align: int = 8
+    per_vertex: int = 0
+
+    def __post_init__(self):
+        for name in ("size", "align", "per_vertex"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"RecordLayout.{name} must be a non-negative integer, got {value!r}")
+        if self.size + self.per_vertex < 1:
+            raise ValueError("RecordLayout.size must be >= 1 byte")
+        if self.align < 1 or self.align & (self.align - 1):
+            raise ValueError(f"RecordLayout.align must be a power of two, got {self.align}")
+
+
+@dataclass(frozen=True)
+class MemoryLayout:
+    """Record sizes per kind and where the regions start.
+
+    Parameters
+    ----------
+    records : dict of str to RecordLayout
+        One entry per :class:`tracer.trace.RecordKind` name (lower case:
+        ``kd_node``, ``index_entry``, ``sphere``, ``triangle``, ``polygon``,
+        ``patch``, ``cone``, ``material``, ``light``).
+    base : int
+        Address of the first region.
+    region_align : int
+        Each kind's region starts on a multiple of this (a power of two).
+    name : str
+    """
+
+    records: dict = field(default_factory=dict)
+    base: int = 0x10000000
+    region_align: int = 4096
+    name: str = "custom"
+
+    def __post_init__(self):
+        expected = {kind.name.lower() for kind in RecordKind}
+        given = set(self.records)
+        if given != expected:
+            missing = sorted(expected - given)
+            unknown = sorted(given - expected)
+            raise ValueError(f"MemoryLayout.records must name every record kind; missing {missing}, "
+                             f"unknown {unknown}")
+        for name, record in self.records.items():
+            if not isinstance(record, RecordLayout):
+                raise ValueError(f"MemoryLayout.records[{name!r}] must be a RecordLayout")
+            if record.per_vertex and RecordKind[name.upper()] not in _VARIABLE:
+                raise ValueError(f"MemoryLayout.records[{name!r}].per_vertex is only for polygons and patches")
+        if not isinstance(self.base, (int, np.integer)) or not 0 <= self.base < 2**48:
+            raise ValueError(f"MemoryLayout.base must be an integer in [0, 2**48), got {self.base!r}")
+        if self.region_align < 1 or self.region_align & (self.region_align - 1):
+            raise ValueError(f"MemoryLayout.region_align must be a power of two, got {self.region_align}")
+
+    def record(self, kind: RecordKind | str) -> RecordLayout:
+        key = kind.name.lower() if isinstance(kind, RecordKind) else str(kind).lower()
+        return self.records[key]
+
+    def place(self, record_counts, vertex_counts=None) -> "PlacedLayout":
+        """Addresses of every record of a scene.
+
+        Parameters
+        ----------
+        record_counts : dict of RecordKind or str to int
+            Number of records of each kind (kinds left out have none).
+        vertex_counts : dict of RecordKind or str to array of int, optional
+            Vertices of each polygon / patch, shape (count,); without it every
+            polygon and patch is taken to have 4 vertices.
+
+        Returns
+        -------
+        PlacedLayout
+        """
+        counts = _by_kind(record_counts, "record_counts")
+        vertices = _by_kind(vertex_counts or {}, "vertex_counts")
+        kind_first = np.zeros(N_KINDS + 1, dtype=np.int64)
+        starts, sizes = [], []
+        address = _round_up(int(self.base), self.region_align)
+        for kind in RecordKind:
+            count = int(counts.get(kind, 0))
+            if count < 0:
+                raise ValueError(f"record_counts[{kind.name.lower()}] must be >= 0, got {count}")
+            record = self.record(kind)
+            if kind in vertices:
+                n_vertices = np.asarray(vertices[kind], dtype=np.int64)
+                if n_vertices.shape != (count,) or (count and n_vertices.min() < 3):
+                    raise ValueError(f"vertex_counts[{kind.name.lower()}] must hold {count} counts >= 3")
+            else:
+                n_vertices = np.full(count, 4, dtype=np.int64)
+            size = np.full(count, record.size, dtype=np.int64) + record.per_vertex * n_vertices
+            stride = (size + record.align - 1) // record.align * record.align
+            start = address + np.concatenate(([0], np.cumsum(stride)[:-1])).astype(np.int64) if count else \
+                np.zeros(0, dtype=np.int64)
+            starts.append(start)
+            sizes.append(size)
+            kind_first[kind + 1] = kind_first[kind] + count
+            address = _round_up(address + int(stride.sum()), self.region_align)
+        return PlacedLayout(self, np.concatenate(starts), np.concatenate(sizes), kind_first, address)
+
+
+@dataclass(frozen=True)
+class PlacedLayout:
+    """A layout placed for one scene.
+
+    Attributes
+    ----------
+    layout : MemoryLayout
+    record_start, record_size : ndarray of int64, shape (R,)
+        Address and size of every record, kinds one after another.
+    kind_first : ndarray of int64, shape (K + 1,)
+        Records of kind ``k`` are rows ``kind_first[k]:kind_first[k + 1]``.
+    end : int
+        First address after the last region.
+    """
+
+    layout: MemoryLayout
+    record_start: np.ndarray
+    record_size: np.ndarray
+    kind_first: np.ndarray
+    end: int
+
+    @property
+    def scene_bytes(self) -> int:
+        """Bytes of all records (without padding between regions)."""
+        return int(self.record_size.sum())
+
+    def region_bytes(self) -> dict:
+        """Bytes per kind (records only), by lower-case kind name."""
+        return {kind.name.lower(): int(self.record_size[self.kind_first[kind]:self.kind_first[kind + 1]].sum())
+                for kind in RecordKind}
+
+    def check_records(self, records: np.ndarray) -> None:
+        """Raise ValueError if a record names a kind or index outside this layout."""
+        records = np.asarray(records, dtype=np.uint32)
+        if records.size == 0:
+            return
+        kinds = records >> np.uint32(KIND_SHIFT)
+        indices = (records & np.uint32(INDEX_MASK)).astype(np.int64)
+        if kinds.max() >= N_KINDS:
+            raise ValueError(f"record kind {int(kinds.max())} is not a RecordKind")
+        limit = np.diff(self.kind_first)[kinds]
+        bad = np.flatnonzero(indices >= limit)
+        if bad.size:
+            first = bad[0]
+            raise ValueError(f"record {first} is {RecordKind(int(kinds[first])).name.lower()} "
+                             f"{int(indices[first])}, but the layout holds only {int(limit[first])} of that kind")
+
+    def addresses(self, records, line_size: int) -> np.ndarray:
+        """Byte addresses (uint64, (M,)) of the ``line_size`` lines each record touches, in order."""
+        records = np.ascontiguousarray(records, dtype=np.uint32)
+        if line_size < 1 or line_size & (line_size - 1):
+            raise ValueError(f"line_size must be a power of two, got {line_size}")
+        self.check_records(records)
+        shift = line_size.bit_length() - 1
+        n_lines = _lines_touched(records, self.record_start, self.record_size, self.kind_first, shift)
+        out = np.empty(int(n_lines.sum()), dtype=np.uint64)
+        _fill_addresses(records, self.record_start, self.record_size, self.kind_first, shift, out)
+        return out
+
+
+def record_counts_of(trace) -> dict:
+    """Records of each kind a trace's scene holds: from its metadata
+    (``record_counts``) when the tracer stored it, else the largest index read
+    plus one (regions of records never read then shrink, which moves later
+    regions' addresses but not which lines conflict within a region)."""
+    stored = trace.metadata.get("record_counts") if hasattr(trace, "metadata") else None
+    if stored:
+        return {RecordKind[key.upper()]: int(value) for key, value in stored.items()}
+    return _max_index_plus_one(np.asarray(trace.records))
+
+
+def _max_index_plus_one(records: np.ndarray) -> dict:
+    counts = np.zeros(N_KINDS, dtype=np.int64)
+    chunk = 1 << 24
+    for start in range(0, records.size, chunk):
+        part = np.asarray(records[start:start + chunk])
+        kinds = (part >> np.uint32(KIND_SHIFT)).astype(np.int64)
+        indices = (part & np.uint32(INDEX_MASK)).astype(np.int64) + 1
+        np.maximum.at(counts, kinds, indices)
+    return {kind: int(counts[kind]) for kind in RecordKind}
+
+
+def _by_kind(mapping, what: str) -> dict:
+    result = {}
+    for key, value in mapping.items():
+        try:
+            kind = key if isinstance(key, RecordKind) else RecordKind[str(key).upper()]
+        except KeyError:
+            raise ValueError(f"{what}: unknown record kind {key!r}") from None
+        result[kind] = value
+    return result
+
+
+def _round_up(value: int, align: int) -> int:
+    return (value + align - 1) // align * align
+
+
+@njit(cache=True)
+def _lines_touched(records, record_start, record_size, kind_first, shift):
+    out = np.empty(records.shape[0], dtype=np.int64)
+    for i in range(records.shape[0]):
+        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        start = record_start[row]
+        out[i] = ((start + record_size[row] - 1) >> shift) - (start >> shift) + 1
+    return out
+
+
+@njit(cache=True)
+def _fill_addresses(records, record_start, record_size, kind_first, shift, out):
+    k = 0
+    for i in range(records.shape[0]):
+        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        start = record_start[row]
+        for line in range(start >> shift, ((start + record_size[row] - 1) >> shift) + 1):
+            out[k] = np.uint64(line << shift)
+            k += 1
+    return k
+
+
+def _compact() -> MemoryLayout:
+    return MemoryLayout(name="compact", records={
+        "kd_node": RecordLayout(8, 8), "index_entry": RecordLayout(4, 4),
+        "sphere": RecordLayout(16, 16), "triangle": RecordLayout(36, 4),
+        "polygon": RecordLayout(4, 4, 12), "patch": RecordLayout(4, 4, 24),
+        "cone": RecordLayout(32, 16), "material": RecordLayout(32, 16), "light": RecordLayout(24, 8),
+    })
+
+
+def _alpha1997() -> MemoryLayout:
+    return MemoryLayout(name="alpha1997", records={
+        "kd_node": RecordLayout(24, 8), "index_entry": RecordLayout(8, 8),
+        "sphere": RecordLayout(64, 8), "triangle": RecordLayout(96, 8),
+        "polygon": RecordLayout(64, 8, 24), "patch": RecordLayout(64, 8, 48),
+        "cone": RecordLayout(152, 8), "material": RecordLayout(64, 8), "light": RecordLayout(48, 8),
+    })
+
+
+LAYOUTS = {"compact": _compact, "alpha1997": _alpha1997}
+
+
+def get_layout(name_or_layout) -> MemoryLayout:
+    """A preset by name (``compact``, ``alpha1997``) or a MemoryLayout."""
+    if isinstance(name_or_layout, MemoryLayout):
+        return name_or_layout
+    try:
+        return LAYOUTS[str(name_or_layout)]()
+    except KeyError:
+        raise ValueError(f"unknown memory layout {name_or_layout!r}: use one of {', '.join(LAYOUTS)}") from None
