@@ -105,11 +105,15 @@ def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = Fals
     right /= np.linalg.norm(right)
     up = np.cross(right, fwd)
     span = 2.0 * math.tan(math.radians(cam.angle) / 2.0)
-    # angle = the centres of the outermost rows; aspect 1 (square pixels)
-    pitch = span / (height - 1) if height > 1 else span
+    # angle = between the outermost sample rows; aspect 1 (square pixels).
+    # With corner rays the (H + 1) corner rows are the samples, which is the
+    # convention SPD's published counts use (tetra's 49,950 primary hits
+    # come out exactly only this way).
     if corner_rays:
+        pitch = span / height
         cx, cy, sx = width / 2.0, height / 2.0, width + 1
     else:
+        pitch = span / (height - 1) if height > 1 else span
         cx, cy, sx = (width - 1) / 2.0, (height - 1) / 2.0, width
     return np.concatenate([eye, fwd, right, up, [pitch, cx, cy, sx]]).astype(np.float64)
 
@@ -286,32 +290,36 @@ def _render_kernel(p0, p1, cam, hither, eps, max_depth,
     write = mode == 2
     sx = np.int64(cam[15])
     base = offsets[p0] if write else 0
-    for p in prange(p0, p1):
-        i = p % sx
-        j = p // sx
-        u = (i - cam[13]) * cam[12]
-        v = (cam[14] - j) * cam[12]
-        dx = cam[3] + u * cam[6] + v * cam[9]
-        dy = cam[4] + u * cam[7] + v * cam[10]
-        dz = cam[5] + u * cam[8] + v * cam[11]
-        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    n_chunks = (p1 - p0 + 63) // 64
+    for c in prange(n_chunks):
+        # scratch buffers once per chunk of 64 samples, not per sample
         cnt = np.zeros(counters.shape[1], np.int64)
         st_node = np.empty(64, np.int64)
         st_t0 = np.empty(64)
         st_t1 = np.empty(64)
         rays = np.empty((2 * max_depth + 2, 11))
-        start = offsets[p] - base if write else 0
-        r, g, b, end = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
-                                     hither, eps, max_depth,
-                                     nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                                     mats, lights, ambient, background,
-                                     rec, start, write, cnt, st_node, st_t0, st_t1, rays)
-        image[p, 0] = r
-        image[p, 1] = g
-        image[p, 2] = b
-        counters[p, :] = cnt
-        if mode == 1:
-            counts[p] = end - start
+        for p in range(p0 + 64 * c, min(p1, p0 + 64 * c + 64)):
+            i = p % sx
+            j = p // sx
+            u = (i - cam[13]) * cam[12]
+            v = (cam[14] - j) * cam[12]
+            dx = cam[3] + u * cam[6] + v * cam[9]
+            dy = cam[4] + u * cam[7] + v * cam[10]
+            dz = cam[5] + u * cam[8] + v * cam[11]
+            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+            cnt[:] = 0
+            start = offsets[p] - base if write else 0
+            r, g, b, end = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
+                                         hither, eps, max_depth,
+                                         nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                                         mats, lights, ambient, background,
+                                         rec, start, write, cnt, st_node, st_t0, st_t1, rays)
+            image[p, 0] = r
+            image[p, 1] = g
+            image[p, 2] = b
+            counters[p, :] = cnt
+            if mode == 1:
+                counts[p] = end - start
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
