@@ -1,0 +1,373 @@
+"""Replaying a pixel-access trace under a work distribution on a simulated machine.
+
+One compiled event loop serves every mapping:
+
+- Each process renders tasks (ordered pixel lists). A static distribution
+  gives every process its own tasks; a dynamic one (DB) hands the next task
+  of a global queue to whichever process asks first, each hand-out costing
+  ``dispatch_cycles`` of waiting (unless a take-ahead task is already held).
+- Processes are placed on CPUs (:class:`Machine`); each CPU has its own
+  cache hierarchy state, shared by the processes placed on it, which run
+  round robin in time slices of ``quantum_cycles``.
+- A pixel's reads become byte addresses through the placed memory layout
+  (every smallest-level line a record spans), run through its CPU's caches;
+  its time is its compute cycles (cost model) plus the latency of the level
+  that served each access (memory latency for the last level's misses).
+- The CPU whose clock is lowest always moves next, so dynamic hand-outs
+  happen in time order.
+
+Real (wall) time with other users' load follows processor sharing: with
+``k`` of our processes still running and ``B`` always-runnable background
+processes on ``C`` CPUs, each of ours progresses at ``min(1, C / (k + B))``
+of a CPU (the OS gives every process, not every user, a share). Background
+processes are not simulated in the caches.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numba import njit
+
+from cachesim import CacheState, Hierarchy
+from cachesim import _kernels as K
+from coherence.cost import CostModel
+from coherence.layout import PlacedLayout
+from coherence.mappings import Distribution
+
+PLACEMENTS = ("round-robin", "neighbours")
+
+
+@dataclass(frozen=True)
+class Machine:
+    """The simulated multiprocessor.
+
+    Parameters
+    ----------
+    n_cpus : int
+        CPUs, each with a private cache hierarchy.
+    quantum_cycles : float
+        Time slice when several processes share a CPU; ``0`` runs each to
+        completion before the next starts.
+    placement : {"round-robin", "neighbours"}
+        Process ``p`` goes to CPU ``p % n_cpus`` (round robin) or processes
+        ``p`` and ``p + 1`` share a CPU (``p // ceil(n / n_cpus)``).
+    background_load : int
+        Always-runnable processes of other users (for real time only).
+    switch_cycles : float
+        Cost of a context switch between two of our processes on a CPU.
+    """
+
+    n_cpus: int = 8
+    quantum_cycles: float = 3e6
+    placement: str = "round-robin"
+    background_load: int = 0
+    switch_cycles: float = 0.0
+
+    def __post_init__(self):
+        if isinstance(self.n_cpus, bool) or not isinstance(self.n_cpus, (int, np.integer)) or self.n_cpus < 1:
+            raise ValueError(f"Machine.n_cpus must be an integer >= 1, got {self.n_cpus!r}")
+        for name in ("quantum_cycles", "switch_cycles"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float, np.number)) or not value >= 0 or not np.isfinite(value):
+                raise ValueError(f"Machine.{name} must be a finite number >= 0, got {value!r}")
+        if self.placement not in PLACEMENTS:
+            raise ValueError(f"Machine.placement must be one of {PLACEMENTS}, got {self.placement!r}")
+        if isinstance(self.background_load, bool) or not isinstance(self.background_load, (int, np.integer)) \
+                or self.background_load < 0:
+            raise ValueError(f"Machine.background_load must be an integer >= 0, got {self.background_load!r}")
+
+    def cpu_of(self, n_processes: int) -> np.ndarray:
+        """CPU of each process, int64 (n_processes,)."""
+        processes = np.arange(n_processes, dtype=np.int64)
+        if self.placement == "round-robin":
+            return processes % self.n_cpus
+        per_cpu = -(-n_processes // self.n_cpus)
+        return processes // per_cpu
+
+
+@dataclass(frozen=True)
+class Run:
+    """Result of one simulated run.
+
+    Attributes
+    ----------
+    processes : DataFrame
+        One row per process (see :func:`simulate_run`).
+    task_owner : ndarray of int64, shape (T,)
+        Process that rendered each task.
+    real_cycles : float
+        Wall time of the run under the machine's background load.
+    """
+
+    processes: pd.DataFrame
+    task_owner: np.ndarray
+    real_cycles: float
+
+
+def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed: PlacedLayout,
+                 cost: CostModel, machine: Machine = Machine(), *, counter_names=None,
+                 compute: np.ndarray | None = None) -> Run:
+    """Simulate one distribution of a trace on a machine.
+
+    Parameters
+    ----------
+    trace : tracer.trace.AccessTrace
+        Per-pixel access logs (``pixel_offsets`` (P + 1,), ``records`` (N,),
+        ``counters`` (P, K)).
+    distribution : Distribution
+        Tasks and their assignment for ``trace.width`` x ``trace.height``.
+    hierarchy : Hierarchy
+        Cache hierarchy of every CPU (latencies included).
+    placed : PlacedLayout
+        Record addresses (see :meth:`MemoryLayout.place`).
+    cost : CostModel
+    machine : Machine
+    counter_names : sequence of str, optional
+        Names of the trace's counter columns (default: the tracer's).
+    compute : ndarray of float64, shape (P,), optional
+        Precomputed compute cycles per pixel (saves time over many runs).
+
+    Returns
+    -------
+    Run
+        ``processes`` columns: process, cpu, tasks, pixels, the trace's
+        counters summed, ``<level>_accesses``/``_hits``/``_misses`` per level,
+        memory_accesses, compute_cycles, memory_cycles, dispatch_cycles,
+        user_cycles, user_seconds, finish_cycles.
+    """
+    if counter_names is None:
+        from tracer.trace import COUNTER_NAMES as counter_names
+    n_pixels = trace.width * trace.height
+    if (distribution.width, distribution.height) != (trace.width, trace.height):
+        raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
+                         f"the trace for {trace.width}x{trace.height}")
+    counters = np.asarray(trace.counters)
+    if compute is None:
+        compute = cost.compute_cycles(counters, counter_names)
+    compute = np.ascontiguousarray(compute, dtype=np.float64)
+    if compute.shape != (n_pixels,):
+        raise ValueError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+
+    n_processes = distribution.n_processes
+    cpu_of = machine.cpu_of(n_processes)
+    n_cpus = int(min(machine.n_cpus, n_processes))
+    order = np.argsort(cpu_of, kind="stable")
+    cpu_offsets = np.searchsorted(cpu_of[order], np.arange(n_cpus + 1)).astype(np.int64)
+
+    if distribution.dynamic:
+        own_offsets = np.zeros(n_processes + 1, dtype=np.int64)
+        own_tasks = np.zeros(0, dtype=np.int64)
+    else:
+        owner = np.asarray(distribution.task_process, dtype=np.int64)
+        own_tasks = np.argsort(owner, kind="stable").astype(np.int64)
+        own_offsets = np.searchsorted(owner[own_tasks], np.arange(n_processes + 1)).astype(np.int64)
+
+    state = CacheState(hierarchy)
+    geometry = state._geometry
+    n_levels = len(hierarchy.levels)
+    tags = np.tile(state.tags, (n_cpus, 1))
+    stamps = np.tile(state.stamps, (n_cpus, 1))
+    counts = np.zeros((n_processes, n_levels, K.N_COUNTERS), dtype=np.int64)
+    latency = np.array([level.latency for level in hierarchy.levels] + [hierarchy.memory_latency],
+                       dtype=np.float64)
+    line_shift = min(level.line_size for level in hierarchy.levels).bit_length() - 1
+
+    out_cycles = np.zeros((n_processes, 4), dtype=np.float64)  # compute, memory, dispatch, finish
+    task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
+    _run(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
+         placed.record_start, placed.record_size, placed.kind_first, line_shift,
+         *geometry.args(), geometry.seeds, tags, stamps, counts, compute, latency,
+         distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
+         order, cpu_offsets, distribution.dynamic, float(distribution.dispatch_cycles),
+         int(distribution.take_ahead), float(machine.quantum_cycles), float(machine.switch_cycles),
+         out_cycles, task_owner)
+
+    pixel_owner = np.empty(n_pixels, dtype=np.int64)
+    task_sizes = np.diff(distribution.task_offsets)
+    pixel_owner[distribution.task_pixels] = np.repeat(task_owner, task_sizes)
+    frame = {
+        "process": np.arange(n_processes, dtype=np.int64),
+        "cpu": cpu_of,
+        "tasks": np.bincount(task_owner, minlength=n_processes).astype(np.int64),
+        "pixels": np.bincount(pixel_owner, minlength=n_processes).astype(np.int64),
+    }
+    for column, name in enumerate(counter_names):
+        frame[name] = np.bincount(pixel_owner, weights=counters[:, column],
+                                  minlength=n_processes).round().astype(np.int64)
+    for index, level in enumerate(hierarchy.levels):
+        frame[f"{level.name}_accesses"] = counts[:, index, K.ACCESSES]
+        frame[f"{level.name}_hits"] = counts[:, index, K.HITS]
+        frame[f"{level.name}_misses"] = counts[:, index, K.MISSES]
+    frame["memory_accesses"] = counts[:, -1, K.MISSES]
+    frame["compute_cycles"] = out_cycles[:, 0]
+    frame["memory_cycles"] = out_cycles[:, 1]
+    frame["dispatch_cycles"] = out_cycles[:, 2]
+    frame["user_cycles"] = out_cycles[:, 0] + out_cycles[:, 1] + out_cycles[:, 2]
+    frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
+    frame["finish_cycles"] = out_cycles[:, 3]
+    processes = pd.DataFrame(frame)
+    real = processor_sharing_time(processes["user_cycles"].to_numpy(), machine.n_cpus, machine.background_load)
+    return Run(processes, task_owner, real)
+
+
+def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> float:
+    """Wall time of jobs of the given CPU times under processor sharing.
+
+    With ``k`` jobs left and ``background_load`` endless jobs on ``n_cpus``
+    CPUs, each job runs at ``min(1, n_cpus / (k + background_load))``.
+    """
+    remaining = np.sort(np.asarray(user_cycles, dtype=np.float64))
+    wall = 0.0
+    done = 0.0
+    for index, finish in enumerate(remaining):
+        active = remaining.size - index
+        rate = min(1.0, n_cpus / (active + background_load))
+        wall += (finish - done) / rate
+        done = finish
+    return wall
+
+
+@njit(cache=True)
+def _pixel_addresses(records, start, stop, record_start, record_size, kind_first, shift, buffer):
+    """Line addresses of records[start:stop] into ``buffer`` (grown if needed)."""
+    k = 0
+    for i in range(start, stop):
+        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        first = record_start[row]
+        last = first + record_size[row] - 1
+        for line in range(first >> shift, (last >> shift) + 1):
+            if k == buffer.shape[0]:
+                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
+                grown[:k] = buffer
+                buffer = grown
+            buffer[k] = np.uint64(line << shift)
+            k += 1
+    return buffer, k
+
+
+@njit(cache=True, nogil=True)
+def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shift,
+         shift0, rel_shift, n_sets, set_mask, ways, policy, offset, inclusion, seeds,
+         tags, stamps, counts, compute, latency,
+         task_offsets, task_pixels, own_offsets, own_tasks, cpu_processes, cpu_offsets,
+         dynamic, dispatch_cycles, take_ahead, quantum, switch_cycles, out_cycles, task_owner):
+    """The event loop (see the module docstring). Updates ``tags``/``stamps``
+    (C, W), ``counts`` (n, L, 5), ``out_cycles`` (n, 4) and ``task_owner``."""
+    n_processes = counts.shape[0]
+    n_cpus = cpu_offsets.shape[0] - 1
+    n_levels = counts.shape[1]
+    n_tasks = task_offsets.shape[0] - 1
+    cpu_clock = np.zeros(n_cpus)
+    cache_clock = np.zeros(n_cpus, dtype=np.int64)
+    cpu_current = cpu_offsets[:n_cpus].copy()  # index into cpu_processes
+    slice_used = np.zeros(n_cpus)
+    cpu_live = cpu_offsets[1:] - cpu_offsets[:-1]
+    done = np.zeros(n_processes, dtype=np.bool_)
+    own_next = own_offsets[:n_processes].copy()
+    # The task each process renders (-1: none) and where it is in it.
+    current_task = np.full(n_processes, -1, dtype=np.int64)
+    position = np.zeros(n_processes, dtype=np.int64)
+    # Dynamic take-ahead: tasks held, a small ring per process.
+    held = np.full((n_processes, max(take_ahead, 1)), -1, dtype=np.int64)
+    held_count = np.zeros(n_processes, dtype=np.int64)
+    next_task = 0
+    buffer = np.empty(4096, dtype=np.uint64)
+    work_lines = np.empty(K.CHUNK, dtype=np.int64)
+    work_clocks = np.empty(K.CHUNK, dtype=np.int64)
+    served = np.zeros(0, dtype=np.uint8)
+    hits_before = np.zeros(n_levels, dtype=np.int64)
+    while True:
+        cpu = -1
+        for c in range(n_cpus):
+            if cpu_live[c] > 0 and (cpu < 0 or cpu_clock[c] < cpu_clock[cpu]):
+                cpu = c
+        if cpu < 0:
+            break
+        clock = cpu_clock[cpu]
+        first = cpu_offsets[cpu]
+        count = cpu_offsets[cpu + 1] - first
+        slot = cpu_current[cpu]
+        process = cpu_processes[slot]
+        if done[process] or (quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1):
+            # Round robin to the next live process on this CPU.
+            for step in range(1, count + 1):
+                candidate = first + (slot - first + step) % count
+                if not done[cpu_processes[candidate]]:
+                    break
+            if cpu_processes[candidate] != process:
+                clock += switch_cycles
+            slot = candidate
+            process = cpu_processes[slot]
+            cpu_current[cpu] = slot
+            slice_used[cpu] = 0.0
+        tables = tags[cpu]
+        ages = stamps[cpu]
+        process_counts = counts[process]
+        while True:
+            task = current_task[process]
+            if task < 0 or position[process] == task_offsets[task + 1]:
+                if task >= 0 and dynamic:
+                    current_task[process] = -1
+                    break  # back to the event loop: the next hand-out in time order
+                # Take the next task.
+                task = -1
+                if dynamic:
+                    if held_count[process] > 0:
+                        task = held[process, 0]
+                        for h in range(held_count[process] - 1):
+                            held[process, h] = held[process, h + 1]
+                        held_count[process] -= 1
+                    elif next_task < n_tasks:
+                        task = next_task
+                        next_task += 1
+                        clock += dispatch_cycles
+                        out_cycles[process, 2] += dispatch_cycles
+                        slice_used[cpu] += dispatch_cycles
+                    while task >= 0 and held_count[process] < take_ahead and next_task < n_tasks:
+                        held[process, held_count[process]] = next_task
+                        task_owner[next_task] = process
+                        held_count[process] += 1
+                        next_task += 1
+                elif own_next[process] < own_offsets[process + 1]:
+                    task = own_tasks[own_next[process]]
+                    own_next[process] += 1
+                if task < 0:
+                    done[process] = True
+                    cpu_live[cpu] -= 1
+                    out_cycles[process, 3] = clock
+                    break
+                task_owner[task] = process
+                current_task[process] = task
+                position[process] = task_offsets[task]
+            pixel = task_pixels[position[process]]
+            position[process] += 1
+            buffer, n_addresses = _pixel_addresses(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
+                                                   record_start, record_size, kind_first, line_shift, buffer)
+            for level in range(n_levels):
+                hits_before[level] = process_counts[level, K.HITS]
+            misses_before = process_counts[n_levels - 1, K.MISSES]
+            cache_clock[cpu] = K.simulate_into(
+                buffer[:n_addresses], shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
+                inclusion, tables, ages, seeds, process_counts, cache_clock[cpu], served, False,
+                work_lines, work_clocks)
+            memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
+            for level in range(n_levels):
+                memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
+            cycles = compute[pixel] + memory
+            out_cycles[process, 0] += compute[pixel]
+            out_cycles[process, 1] += memory
+            clock += cycles
+            slice_used[cpu] += cycles
+            if (not dynamic and position[process] == task_offsets[task + 1]
+                    and own_next[process] == own_offsets[process + 1]):
+                # A static process is done with its last pixel, not when it
+                # next gets the CPU.
+                done[process] = True
+                cpu_live[cpu] -= 1
+                out_cycles[process, 3] = clock
+                break
+            if quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1:
+                break
+        cpu_clock[cpu] = clock

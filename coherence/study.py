@@ -1,0 +1,146 @@
+"""One call for a whole study: mappings x process counts on one trace.
+
+>>> from coherence import study                                   # doctest: +SKIP
+>>> result = study(trace, ["S", "P", "R", "B", "DB"], [1, 2, 4, 8, 16])
+>>> result.runs[["mapping", "n_processes", "speedup_user", "load_balance", "coherence_factor"]]
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pandas as pd
+
+from cachesim import Hierarchy, get_hierarchy
+from coherence.cost import CostModel, get_cost_model
+from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_counts_of
+from coherence.mappings import get_mapping
+from coherence.metrics import add_speedups, run_summary
+from coherence.simulation import Machine, simulate_run
+from tracer.trace import COUNTER_NAMES, RecordKind
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """Tables of a study.
+
+    Attributes
+    ----------
+    runs : DataFrame
+        One row per (mapping, n_processes): times, speed-ups, efficiency and
+        its factors, hit rates and misses per ray per level.
+    processes : DataFrame
+        One row per process of every run (see :func:`simulate_run`), with
+        ``mapping`` and ``n_processes`` columns.
+    parameters : dict
+        Hierarchy, layout, cost model and machine, as plain data.
+    """
+
+    runs: pd.DataFrame
+    processes: pd.DataFrame
+    parameters: dict
+
+
+def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
+    """Place ``layout`` for a trace's scene.
+
+    Record counts come from the trace (its metadata, or the records read);
+    with ``scene``, polygons and patches get their true vertex counts (else
+    4 each).
+    """
+    counts = record_counts_of(trace)
+    vertices = {}
+    if scene is not None:
+        for kind, offsets in ((RecordKind.POLYGON, scene.polygon_offsets), (RecordKind.PATCH, scene.patch_offsets)):
+            sizes = np.diff(np.asarray(offsets, dtype=np.int64))
+            if sizes.size < counts.get(kind, 0):
+                raise ValueError(f"the trace reads {kind.name.lower()} records the scene does not have: "
+                                 "is it the trace of this scene?")
+            counts[kind] = sizes.size
+            vertices[kind] = sizes
+    return layout.place(counts, vertices)
+
+
+def study(trace, mappings=("S", "P", "R", "B", "DB"), n_processes=(1, 2, 4, 8, 16), *,
+          hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
+          cost: CostModel | str = "alpha8400", machine: Machine | None = None, scene=None,
+          progress: bool = True, n_jobs: int | None = None) -> StudyResult:
+    """Simulate every mapping at every process count on one trace.
+
+    Parameters
+    ----------
+    trace : tracer.trace.AccessTrace
+    mappings : sequence of str or Mapping
+        Names (``S``, ``P``, ``R``, ``B``, ``DB``, ``hilbert``, ...) or
+        mapping objects.
+    n_processes : sequence of int
+        Process counts; 1 is always added (speed-ups need it).
+    hierarchy, layout, cost : object or preset name
+    machine : Machine, optional
+        CPUs, time slice, placement and background load (default: 8 CPUs).
+    scene : tracer.scene.Scene, optional
+        For exact polygon sizes in the layout.
+    progress : bool
+        Show a progress bar on stderr.
+    n_jobs : int, optional
+        Runs simulated at once (threads; default: the number of CPUs).
+
+    Returns
+    -------
+    StudyResult
+    """
+    hierarchy = get_hierarchy(hierarchy)
+    layout = get_layout(layout)
+    cost = get_cost_model(cost)
+    machine = machine or Machine()
+    mapping_objects = [get_mapping(mapping) for mapping in mappings]
+    names = [mapping.name for mapping in mapping_objects]
+    if len(set(names)) != len(names):
+        raise ValueError(f"mappings must have distinct names, got {names}")
+    counts = sorted({1, *(_positive_int(n) for n in n_processes)})
+    placed = place_layout(layout, trace, scene)
+    compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
+    jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
+
+    def one(job):
+        mapping, n = job
+        distribution = mapping.build(trace.width, trace.height, n)
+        run = simulate_run(trace, distribution, hierarchy, placed, cost, machine, compute=compute)
+        row = {"mapping": mapping.name, **run_summary(run.processes, hierarchy.level_names, cost.clock_hz,
+                                                        run.real_cycles)}
+        row["n_cpus"] = machine.n_cpus
+        processes = run.processes.assign(mapping=mapping.name, n_processes=n)
+        return row, processes
+
+    workers = n_jobs or os.cpu_count() or 1
+    results = []
+    bar = _progress(len(jobs), progress)
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for result in pool.map(one, jobs):
+            results.append(result)
+            bar.update(1)
+    bar.close()
+    runs = add_speedups(pd.DataFrame([row for row, _ in results]))
+    front = ["mapping", "n_processes", "n_cpus"]
+    runs = runs[front + [c for c in runs.columns if c not in front]]
+    processes = pd.concat([frame for _, frame in results], ignore_index=True)
+    processes = processes[["mapping", "n_processes"] + [c for c in processes.columns
+                                                        if c not in ("mapping", "n_processes")]]
+    parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
+                  "machine": asdict(machine), "mappings": names, "n_processes": counts}
+    return StudyResult(runs, processes, parameters)
+
+
+def _positive_int(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"n_processes must be integers >= 1, got {value!r}")
+    return int(value)
+
+
+def _progress(total: int, enabled: bool):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="simulating runs", unit="run", disable=not enabled, leave=False)
+

@@ -1,0 +1,149 @@
+"""The schedule simulation against plain replays through cachesim.simulate."""
+import numpy as np
+import pytest
+
+from cachesim import CacheLevel, CacheState, Hierarchy, alpha21164, simulate
+from coherence.cost import CostModel
+from coherence.layout import get_layout
+from coherence.mappings import Distribution
+from coherence.simulation import Machine, processor_sharing_time, simulate_run
+from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
+
+SMALL = Hierarchy((CacheLevel("L1", 512, 32, 1, latency=2), CacheLevel("L2", 3072, 64, 3, latency=9)),
+                  memory_latency=50)
+
+
+def random_trace(width=8, height=6, seed=0):
+    rng = np.random.default_rng(seed)
+    lengths = rng.integers(0, 40, width * height)
+    kinds = rng.choice([RecordKind.KD_NODE, RecordKind.INDEX_ENTRY, RecordKind.SPHERE, RecordKind.TRIANGLE,
+                        RecordKind.MATERIAL, RecordKind.LIGHT], lengths.sum())
+    records = pack(kinds, rng.integers(0, 60, kinds.size))
+    counters = rng.integers(0, 50, (width * height, len(COUNTER_NAMES)))
+    offsets = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
+    return AccessTrace(offsets, records, counters.astype(np.int64), width, height, {})
+
+
+def placed_for(trace):
+    return get_layout("alpha1997").place({kind: 60 for kind in RecordKind})
+
+
+def distribution(trace, owner_of_task, tasks, n, dynamic=False, dispatch=0.0):
+    offsets = np.concatenate(([0], np.cumsum([len(t) for t in tasks]))).astype(np.int64)
+    return Distribution("test", trace.width, trace.height, n, offsets,
+                        np.concatenate(tasks).astype(np.int64),
+                        None if dynamic else np.asarray(owner_of_task, dtype=np.int64), dispatch)
+
+
+def replay(trace, placed, pixels, state, hierarchy, cost):
+    """Reference: one pixel at a time through cachesim.simulate on ``state``."""
+    compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
+    line = min(level.line_size for level in hierarchy.levels)
+    latency = [level.latency for level in hierarchy.levels]
+    total_compute = total_memory = 0.0
+    for pixel in pixels:
+        records = trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]
+        result = simulate(placed.addresses(records, line), state)
+        total_memory += float(np.dot(result.hits, latency) + result.misses[-1] * hierarchy.memory_latency)
+        total_compute += compute[pixel]
+    return total_compute, total_memory
+
+
+@pytest.mark.parametrize("hierarchy", [SMALL, alpha21164(),
+                                       Hierarchy(SMALL.levels, memory_latency=50, inclusion="inclusive")])
+def test_static_run_equals_per_process_replay(hierarchy):
+    trace = random_trace()
+    placed = placed_for(trace)
+    cost = CostModel(ray=3, node_visit=1, test_sphere=5, shading=11)
+    rng = np.random.default_rng(1)
+    pixels = rng.permutation(trace.width * trace.height)
+    tasks = np.array_split(pixels, 7)
+    owner = [0, 1, 2, 0, 1, 2, 2]
+    run = simulate_run(trace, distribution(trace, owner, tasks, 3), hierarchy, placed, cost, Machine(n_cpus=4))
+    for process in range(3):
+        mine = np.concatenate([task for task, who in zip(tasks, owner) if who == process])
+        state = CacheState(hierarchy)
+        compute, memory = replay(trace, placed, mine, state, hierarchy, cost)
+        row = run.processes.iloc[process]
+        assert row["pixels"] == mine.size
+        assert row["compute_cycles"] == pytest.approx(compute)
+        assert row["memory_cycles"] == pytest.approx(memory)
+        totals = state.totals()
+        for index, level in enumerate(hierarchy.levels):
+            assert row[f"{level.name}_hits"] == totals.hits[index]
+            assert row[f"{level.name}_misses"] == totals.misses[index]
+        assert row["user_cycles"] == pytest.approx(compute + memory)
+        assert row["tests_sphere"] == trace.counters[mine, COUNTER_NAMES.index("tests_sphere")].sum()
+    assert run.task_owner.tolist() == owner
+
+
+def test_infinite_quantum_runs_processes_one_after_another():
+    trace = random_trace(seed=2)
+    placed = placed_for(trace)
+    cost = CostModel()
+    halves = np.array_split(np.arange(trace.width * trace.height), 2)
+    run = simulate_run(trace, distribution(trace, [0, 1], halves, 2), SMALL, placed, cost,
+                       Machine(n_cpus=1, quantum_cycles=0))
+    state = CacheState(SMALL)
+    first = sum(replay(trace, placed, halves[0], state, SMALL, cost))
+    second = sum(replay(trace, placed, halves[1], state, SMALL, cost))
+    assert run.processes["user_cycles"].tolist() == pytest.approx([first, second])
+    assert run.processes["finish_cycles"].tolist() == pytest.approx([first, first + second])
+
+
+def test_time_slices_alternate_on_a_shared_cpu():
+    trace = random_trace(seed=3)
+    placed = placed_for(trace)
+    cost = CostModel()
+    halves = np.array_split(np.arange(trace.width * trace.height), 2)
+    quantum = 5000.0
+    run = simulate_run(trace, distribution(trace, [0, 1], halves, 2), SMALL, placed, cost,
+                       Machine(n_cpus=1, quantum_cycles=quantum))
+    # Reference: run pixels of the current process until its slice reaches
+    # the quantum, then switch; one cache state for the CPU.
+    state = CacheState(SMALL)
+    queues = [list(halves[0]), list(halves[1])]
+    user = [0.0, 0.0]
+    current, used = 0, 0.0
+    while queues[0] or queues[1]:
+        if not queues[current] or (used >= quantum and queues[1 - current]):
+            current, used = 1 - current, 0.0
+        pixel = queues[current].pop(0)
+        cycles = sum(replay(trace, placed, [pixel], state, SMALL, cost))
+        user[current] += cycles
+        used += cycles
+    assert run.processes["user_cycles"].tolist() == pytest.approx(user)
+
+
+def test_forced_dynamic_order_equals_the_static_assignment():
+    trace = random_trace(width=12, height=8, seed=4)
+    placed = placed_for(trace)
+    cost = CostModel()
+    tasks = np.array_split(np.arange(trace.width * trace.height), 12)
+    dynamic = simulate_run(trace, distribution(trace, None, tasks, 3, dynamic=True, dispatch=100.0),
+                           SMALL, placed, cost, Machine(n_cpus=3))
+    assert sorted(set(dynamic.task_owner.tolist())) == [0, 1, 2]
+    static = simulate_run(trace, distribution(trace, dynamic.task_owner, tasks, 3), SMALL, placed, cost,
+                          Machine(n_cpus=3))
+    columns = ["pixels", "tasks", "compute_cycles", "memory_cycles", "L1_hits", "L2_misses"]
+    assert dynamic.processes[columns].equals(static.processes[columns])
+    assert dynamic.processes["dispatch_cycles"].tolist() == (100.0 * dynamic.processes["tasks"]).tolist()
+    # The next free process takes the next task: the first three go to 0, 1, 2.
+    assert dynamic.task_owner[:3].tolist() == [0, 1, 2]
+
+
+def test_processor_sharing():
+    assert processor_sharing_time([10, 10], 8, 0) == 10
+    assert processor_sharing_time([10, 10, 10, 10], 2, 0) == 20
+    # One job with 3 background jobs on 2 CPUs: it gets half a CPU.
+    assert processor_sharing_time([10], 2, 3) == 20
+    assert processor_sharing_time([], 2, 3) == 0
+
+
+def test_machine_validation_and_placement():
+    assert Machine(n_cpus=4).cpu_of(8).tolist() == [0, 1, 2, 3, 0, 1, 2, 3]
+    assert Machine(n_cpus=4, placement="neighbours").cpu_of(8).tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
+    with pytest.raises(ValueError, match="Machine.n_cpus"):
+        Machine(n_cpus=0)
+    with pytest.raises(ValueError, match="Machine.placement"):
+        Machine(placement="random")

@@ -1,0 +1,67 @@
+"""study(): speed-ups, the efficiency decomposition and invariants over mappings."""
+import numpy as np
+import pytest
+
+from coherence.simulation import Machine
+from coherence.study import study
+from test_simulation import SMALL, random_trace
+from tracer.trace import COUNTER_NAMES
+
+
+@pytest.fixture(scope="module")
+def result():
+    trace = random_trace(width=32, height=16, seed=5)
+    return trace, study(trace, ["S", "P", "R", "B", "DB"], [2, 4, 8], hierarchy=SMALL,
+                        machine=Machine(n_cpus=4, quantum_cycles=20000), progress=False)
+
+
+def test_one_process_strip_pixel_row_share_one_stream(result):
+    _, outcome = result
+    one = outcome.runs[outcome.runs["n_processes"] == 1].set_index("mapping")
+    for column in ("user_cycles_max", "L1_accesses", "memory_accesses"):
+        assert one.loc["S", column] == one.loc["P", column] == one.loc["R", column]
+    assert (one["speedup_user"] == 1).all()
+
+
+def test_factors_multiply_to_efficiency(result):
+    _, outcome = result
+    runs = outcome.runs
+    product = runs["load_balance"] * runs["coherence_factor"] * runs["dispatch_factor"]
+    np.testing.assert_allclose(product, runs["efficiency"], rtol=1e-12)
+    assert (runs.loc[runs["mapping"] != "DB", "dispatch_factor"] == 1).all()
+    db = runs[runs["mapping"] == "DB"].set_index("n_processes")
+    assert db.loc[1, "dispatch_factor"] == pytest.approx(1) and db.loc[1, "coherence_factor"] == pytest.approx(1)
+    assert (db["dispatch_share"] > 0).all()
+    one = runs[runs["n_processes"] == 1].set_index("mapping")
+    assert one.loc["DB", "speedup_user_vs_best"] < 1
+
+
+def test_per_process_sums_equal_trace_totals(result):
+    trace, outcome = result
+    totals = np.asarray(trace.counters).sum(axis=0)
+    for (mapping, n), group in outcome.processes.groupby(["mapping", "n_processes"]):
+        assert len(group) == n
+        assert group["pixels"].sum() == trace.width * trace.height
+        for column, name in enumerate(COUNTER_NAMES):
+            assert group[name].sum() == totals[column], (mapping, n, name)
+        # Every access is counted at L1.
+        assert group["L1_accesses"].sum() == outcome.runs.query(
+            "mapping == @mapping and n_processes == @n")["L1_accesses"].item()
+
+
+def test_more_processes_than_cpus_share_caches(result):
+    _, outcome = result
+    eight = outcome.processes.query("n_processes == 8")
+    assert sorted(eight["cpu"].unique()) == [0, 1, 2, 3]
+    runs = outcome.runs.set_index(["mapping", "n_processes"])
+    # Real time on 4 CPUs cannot beat the total work spread over 4 CPUs.
+    assert (runs.xs(8, level="n_processes")["real_cycles"]
+            >= runs.xs(8, level="n_processes")["work_cycles"] / 4 - 1e-6).all()
+
+
+def test_bad_arguments(result):
+    trace, _ = result
+    with pytest.raises(ValueError, match="n_processes"):
+        study(trace, ["S"], [0], progress=False)
+    with pytest.raises(ValueError, match="distinct names"):
+        study(trace, ["S", "S"], [2], progress=False)
