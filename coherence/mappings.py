@@ -586,9 +586,11 @@ class Block(Mapping):
        a partial first and last row.
 
     So blocks are rectangles up to one partial row and one partial column,
-    near square, and exact rectangles whenever the counts divide evenly (e.g.
-    64 x 64 fields with n = 1, 2, 4, 8*, 16, 64; n = 2 cuts a field into top
-    and bottom halves).
+    near square (on 64 x 64 fields the bounding boxes of all blocks for
+    n <= 64 have aspect ratios <= 2.91, the worst being n = 3), and exact
+    rectangles whenever the counts divide evenly (on 64 x 64: n = 1, 2, 4,
+    8, 16, 64; n = 2 cuts a field into top and bottom halves, n = 8 into
+    2 x 4 blocks of 32 x 16).
     """
 
     field: int = 64
