@@ -1,0 +1,96 @@
+"""``coherence simulate``: replay a saved trace under mappings on a simulated machine."""
+from __future__ import annotations
+
+import argparse
+
+HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
+
+EPILOG = """\
+TRACE is a folder written by 'coherence render SCENE --trace TRACE'. Every
+mapping is also run by one process, the reference of its speed-up.
+
+mappings: S (strips), P (pixels), R (rows), B (64x64 fields cut in n blocks),
+DB (32x32 blocks handed out on demand), hilbert, morton, serpentine,
+hilbert-tiles.
+
+columns: speedup_user = T1 / worst process user time (the study's
+definition); efficiency = speedup / n = load_balance x coherence_factor x
+dispatch_factor; hit rates and misses per ray per cache level.
+
+examples:
+  coherence render balls --size 128 --trace balls128
+  coherence simulate balls128 --mapping S --mapping R --processes 8
+  coherence simulate balls128 --mapping DB --processes 2 4 8 16 --cpus 8 --background 4
+  coherence simulate balls128 --hierarchy modern --layout alpha1997 --json
+"""
+
+COLUMNS = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", "load_balance",
+           "coherence_factor", "dispatch_factor"]
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("simulate", help=HELP, description=HELP[0].upper() + HELP[1:] + ".",
+                                   epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("trace", metavar="TRACE", help="trace folder saved by 'coherence render --trace'")
+    parser.add_argument("--mapping", action="append", metavar="NAME",
+                        help="mapping to simulate (repeatable; default: S P R B DB)")
+    parser.add_argument("--processes", type=int, nargs="+", default=[8], metavar="N",
+                        help="process counts (default: 8)")
+    parser.add_argument("--cpus", type=int, default=8, help="CPUs of the machine (default: 8)")
+    parser.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE",
+                        help="cache hierarchy preset or .toml/.json file (default: alpha21164)")
+    parser.add_argument("--layout", default="compact", choices=["compact", "alpha1997"],
+                        help="memory layout of scene records (default: compact)")
+    parser.add_argument("--cost", default="alpha8400", choices=["alpha8400", "modern"],
+                        help="cycles per operation and clock rate (default: alpha8400)")
+    parser.add_argument("--quantum", type=float, default=3e6, metavar="CYCLES",
+                        help="time slice of processes sharing a CPU; 0 runs them one after another "
+                             "(default: 3e6, 10 ms at 300 MHz)")
+    parser.add_argument("--placement", default="round-robin", choices=["round-robin", "neighbours"],
+                        help="how processes are placed on CPUs when there are more of them")
+    parser.add_argument("--background", type=int, default=0, metavar="B",
+                        help="always-runnable processes of other users, for real time (default: 0)")
+    parser.add_argument("--json", action="store_true", help="print JSON (runs and parameters) instead of a table")
+    parser.add_argument("--csv", metavar="PATH", help="write the full per-run table to CSV (+ .meta.json)")
+    parser.add_argument("--processes-csv", metavar="PATH", help="write the per-process table to CSV")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+    from pathlib import Path
+
+    from cachesim import get_hierarchy
+    from coherence.mappings import get_mapping
+    from coherence.provenance import provenance, write_csv_atomic
+    from coherence.simulation import Machine
+    from coherence.study import study
+    from tracer.trace import AccessTrace
+
+    hierarchy = get_hierarchy(args.hierarchy)
+    mappings = [get_mapping(name) for name in (args.mapping or ["S", "P", "R", "B", "DB"])]
+    machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, placement=args.placement,
+                      background_load=args.background)
+    for option in (args.csv, args.processes_csv):
+        if option and not Path(option).parent.is_dir():
+            raise FileNotFoundError(f"{option}: folder {Path(option).parent} does not exist")
+    trace = AccessTrace.load(args.trace)
+    result = study(trace, mappings, args.processes, hierarchy=hierarchy, layout=args.layout, cost=args.cost,
+                   machine=machine, progress=sys.stderr.isatty())
+    meta = provenance(trace=str(args.trace), scene=trace.metadata.get("scene"), **result.parameters)
+    if args.csv:
+        write_csv_atomic(result.runs, args.csv, meta)
+    if args.processes_csv:
+        write_csv_atomic(result.processes, args.processes_csv, meta)
+    if args.json:
+        runs = json.loads(result.runs.to_json(orient="records"))
+        print(json.dumps({**meta, "runs": runs}, indent=2))
+        return 0
+    levels = hierarchy.level_names
+    columns = COLUMNS + [f"{name}_hit_rate" for name in levels] + [f"{levels[-1]}_misses_per_ray"]
+    print(f"{args.trace}: {trace.width}x{trace.height} pixels, {trace.n_records:,} records; "
+          f"{hierarchy.name or 'hierarchy'} caches, {args.layout} layout, {args.cost} costs, "
+          f"{machine.n_cpus} CPUs")
+    print(result.runs[columns].to_string(index=False, float_format=lambda value: f"{value:.3f}"))
+    return 0

@@ -1,0 +1,47 @@
+"""``coherence simulate`` on a saved trace."""
+import json
+
+import pandas as pd
+import pytest
+
+from coherence.cli import main
+from coherence.simulation import Machine
+from coherence.study import study
+from test_simulation import random_trace
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    trace = random_trace(width=16, height=8, seed=9)
+    folder = tmp_path_factory.mktemp("traces") / "t"
+    trace.save(folder)
+    return trace, folder
+
+
+def test_table_json_and_csv_agree_with_study(saved, tmp_path, capsys):
+    trace, folder = saved
+    csv = tmp_path / "runs.csv"
+    assert main(["simulate", str(folder), "--mapping", "R", "--mapping", "DB", "--processes", "2", "4",
+                 "--cpus", "2", "--csv", str(csv), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    expected = study(trace, ["R", "DB"], [2, 4], machine=Machine(n_cpus=2), progress=False).runs
+    table = pd.read_csv(csv)
+    assert [run["speedup_user"] for run in report["runs"]] == pytest.approx(expected["speedup_user"].tolist())
+    assert table["L1_hit_rate"].tolist() == pytest.approx(expected["L1_hit_rate"].tolist())
+    assert report["parameters"]["machine"]["n_cpus"] == 2
+    assert (tmp_path / "runs.csv.meta.json").is_file()
+    assert main(["simulate", str(folder), "--mapping", "S", "--processes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "speedup_user" in out and "16x8 pixels" in out
+
+
+def test_errors_are_clear(saved, tmp_path, capsys):
+    _, folder = saved
+    assert main(["simulate", str(tmp_path / "missing")]) == 2
+    assert "no such trace directory" in capsys.readouterr().err
+    assert main(["simulate", str(folder), "--mapping", "Q"]) == 2
+    assert "unknown mapping 'Q'" in capsys.readouterr().err
+    assert main(["simulate", str(folder), "--cpus", "0"]) == 2
+    assert "Machine.n_cpus" in capsys.readouterr().err
+    assert main(["simulate", str(folder), "--csv", str(tmp_path / "no" / "r.csv")]) == 2
+    assert "does not exist" in capsys.readouterr().err
