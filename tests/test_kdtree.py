@@ -120,6 +120,7 @@ def test_sah_tree_is_cheaper_than_median_by_its_own_measure():
 @pytest.mark.parametrize("field,value", [
     ("builder", "bvh"), ("max_depth", 0), ("max_depth", 61), ("leaf_size", 0),
     ("traversal_cost", 0.0), ("intersection_cost", float("nan")), ("empty_bonus", 1.0),
+    ("force_split", -1),
 ])
 def test_config_validation_names_field(field, value):
     with pytest.raises(ValueError, match=field):

@@ -69,6 +69,13 @@ class KdTreeConfig:
         with an empty side.
     clip : bool
         Clip primitives to the node (see module docstring).
+    force_split : int
+        SAH only: a node holding more than this many primitives is split at
+        its best plane even when the one-level cost estimate says a leaf is
+        cheaper (like pbrt's "bad refines"), down to ``max_depth``. Heavily
+        overlapping primitives (SPD shells: about 90 spheres cover every
+        point) only separate after several levels, which a greedy estimate
+        cannot see. ``0`` disables it.
     """
 
     builder: str = "sah"
@@ -78,6 +85,7 @@ class KdTreeConfig:
     intersection_cost: float = 1.5
     empty_bonus: float = 0.5
     clip: bool = True
+    force_split: int = 0
 
     def __post_init__(self):
         if self.builder not in BUILDERS:
@@ -99,6 +107,9 @@ class KdTreeConfig:
             raise ValueError(f"KdTreeConfig.empty_bonus must be in [0, 1), got {self.empty_bonus!r}")
         object.__setattr__(self, "empty_bonus", eb)
         object.__setattr__(self, "clip", bool(self.clip))
+        if int(self.force_split) != self.force_split or self.force_split < 0:
+            raise ValueError(f"KdTreeConfig.force_split must be an int >= 0, got {self.force_split!r}")
+        object.__setattr__(self, "force_split", int(self.force_split) if self.force_split else 2**62)
 
     def to_dict(self) -> dict:
         """The configuration as plain Python values."""
@@ -343,8 +354,44 @@ def _sah_split(clo, chi, m, lo, hi, ct, ci, eb):
 
 
 @njit(cache=True)
+def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
+                axis, split, ct, ci, eb, tlo, thi, clo_buf, chi_buf):
+    # SAH cost of a split with primitives clipped to each child, which the
+    # event sweep (node-clipped boxes only) cannot see: a sphere enclosing a
+    # child is dropped from it.
+    d0 = hi[0] - lo[0]
+    d1 = hi[1] - lo[1]
+    d2 = hi[2] - lo[2]
+    area = _area(d0, d1, d2)
+    if area <= 0.0 or not (split > lo[axis] and split < hi[axis]):
+        return np.inf
+    clo_buf[:] = lo
+    chi_buf[:] = hi
+    chi_buf[axis] = split
+    nl = 0
+    for j in range(m):
+        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
+                           clo_buf, chi_buf, True, tlo, thi):
+            nl += 1
+    al = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    clo_buf[:] = lo
+    chi_buf[:] = hi
+    clo_buf[axis] = split
+    nr = 0
+    for j in range(m):
+        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
+                           clo_buf, chi_buf, True, tlo, thi):
+            nr += 1
+    ar = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    c = (al * nl + ar * nr) / area
+    if nl == 0 or nr == 0:
+        c *= 1.0 - eb
+    return ct + ci * c
+
+
+@njit(cache=True)
 def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
-           median, max_depth, leaf_size, ct, ci, eb, clip):
+           median, max_depth, leaf_size, ct, ci, eb, clip, force):
     n = prim_lo.shape[0]
     nodes = np.zeros((max(16, 2 * n + 1), 2), np.uint32)
     n_nodes = 0
@@ -379,6 +426,8 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     hi = np.empty(3)
     tlo = np.empty(3)
     thi = np.empty(3)
+    blo = np.empty(3)
+    bhi = np.empty(3)
     clo = np.empty((max(n, 1), 3))
     chi = np.empty((max(n, 1), 3))
     split32 = np.empty(1, np.float32)
@@ -420,7 +469,25 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
                 pos = 0.5 * (lo[axis] + hi[axis])
             else:
                 cost, axis, pos, planar_left = _sah_split(clo, chi, m, lo, hi, ct, ci, eb)
-                if not cost < ci * m:
+                if clip and m >= 8 and not cost < ci * m:
+                    # the sweep sees node-clipped boxes only; where it gives
+                    # up on many primitives, judge the midplanes (and its own
+                    # best plane) with primitives clipped to the children
+                    best = np.inf
+                    if axis >= 0:
+                        best = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                                           lo, hi, axis, pos, ct, ci, eb, tlo, thi, blo, bhi)
+                    for a in range(3):
+                        mid = np.float64(np.float32(0.5 * (lo[a] + hi[a])))
+                        c = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                                        lo, hi, a, mid, ct, ci, eb, tlo, thi, blo, bhi)
+                        if c < best:
+                            best = c
+                            axis = a
+                            pos = mid
+                            planar_left = True
+                    cost = best
+                if not cost < ci * m and not (m > force and cost < np.inf):
                     axis = -1
         split = 0.0
         nl = 0
@@ -543,7 +610,8 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
     nodes, pidx, leaves, empty, deepest, cost = _build(
         lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
         config.builder == "median", max_depth, config.leaf_size,
-        config.traversal_cost, config.intersection_cost, config.empty_bonus, config.clip)
+        config.traversal_cost, config.intersection_cost, config.empty_bonus, config.clip,
+        config.force_split)
     seconds = time.perf_counter() - start
     filled = leaves - empty
     stats = {

@@ -1,0 +1,76 @@
+"""SPD reference counts (Havran 1999) with corner rays and SPD rules (depth 5).
+
+Reference: ``/work/shared/reference/spd/README.md``. Counts are deterministic,
+so these tests pin them.
+"""
+from pathlib import Path
+
+import pytest
+
+from tracer.nff import read_nff
+from tracer.render import render
+from tracer.scenes import load
+
+SPD = Path(__file__).resolve().parents[2] / "shared" / "reference" / "spd"
+if not SPD.is_dir():
+    SPD = Path("/work/shared/reference/spd")
+
+needs_reference = pytest.mark.skipif(not (SPD / "tetra.nff").is_file(), reason="SPD reference files not found")
+
+
+@pytest.fixture(scope="module")
+def tetra_counts():
+    return render(read_nff(SPD / "tetra.nff", max_depth=5), corner_rays=True, log=False).totals()
+
+
+@pytest.fixture(scope="module")
+def balls_counts():
+    return render(read_nff(SPD / "balls.nff", max_depth=5), corner_rays=True, log=False).totals()
+
+
+@needs_reference
+def test_tetra_primary_hits_exact(tetra_counts):
+    assert tetra_counts["primary_rays"] == 513 * 513
+    assert tetra_counts["primary_hits"] == 49_950
+    assert tetra_counts["reflection_rays"] == tetra_counts["refraction_rays"] == 0
+
+
+@needs_reference
+def test_tetra_shadow_rays_within_one(tetra_counts):
+    # float64 arithmetic gives 46,261; see the xfail below
+    assert abs(tetra_counts["shadow_rays"] - 46_262) <= 1
+    assert abs(tetra_counts["shadow_blocked"] - 5_538) / 5_538 < 0.01
+
+
+@needs_reference
+@pytest.mark.xfail(reason="one shadow ray short (46,261) in float64; a float32 tracer reportedly "
+                          "gets 46,262, no tie between primary hits explains it", strict=False)
+def test_tetra_shadow_rays_exact(tetra_counts):
+    assert tetra_counts["shadow_rays"] == 46_262
+
+
+@needs_reference
+def test_balls_primary_and_shadow_within_two_percent(balls_counts):
+    assert balls_counts["primary_hits"] == 263_169
+    assert abs(balls_counts["shadow_rays"] / 959_244 - 1) < 0.02
+    assert abs(balls_counts["shadow_blocked"] / 285_178 - 1) < 0.02
+
+
+@needs_reference
+@pytest.mark.xfail(reason="reflection rays -2.2% and hits -5.7% of the published counts: the "
+                          "reference's reflection rays hit more often than ours; depth 5 vs 6 "
+                          "brackets the counts, no rule in the SPD notes explains the gap", strict=False)
+def test_balls_secondary_within_two_percent(balls_counts):
+    assert abs(balls_counts["reflection_rays"] / 179_884 - 1) < 0.02
+    assert abs(balls_counts["reflection_hits"] / 134_368 - 1) < 0.02
+
+
+def test_shell_tree_does_not_degenerate():
+    # ~90 nearly coincident sphere surfaces pass near every point of the
+    # shell, so a few hundred tests per ray are inherent (the study counted
+    # 212e6 tests); clipping spheres that enclose a node keeps it there
+    scene = load("shell")
+    res = render(scene, size=32, log=False)
+    t = res.totals()
+    assert t["intersection_tests"] / t["rays"] < 350
+    assert t["primary_hits"] > 0.2 * t["primary_rays"]
