@@ -16,6 +16,7 @@ import sys
 COMMAND_MODULES = (
     "coherence.commands.cachesim",
     "coherence.commands.scene",
+    "coherence.commands.render",
     "coherence.commands.simulate",
 )
 
