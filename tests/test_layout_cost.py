@@ -129,3 +129,18 @@ def test_calibrate_with_fixed_costs_and_errors():
     assert get_cost_model("alpha8400") == alpha8400() and modern().clock_hz == 3e9
     with pytest.raises(ValueError, match="unknown cost model"):
         get_cost_model("cray")
+
+
+
+def test_render_metadata_counts_every_record_kind():
+    from scene_factory import random_scene
+    from tracer.render import render
+
+    scene = random_scene(n=40, seed=3)
+    trace = render(scene, size=(12, 12)).trace
+    counts = record_counts_of(trace)
+    assert counts[RecordKind.SPHERE] == scene.sphere_radius.size
+    assert counts[RecordKind.POLYGON] == scene.polygon_offsets.size - 1
+    assert counts[RecordKind.LIGHT] == scene.light_position.shape[0]
+    read = record_counts_of(type("T", (), {"records": trace.records, "metadata": {}})())
+    assert all(read[kind] <= counts[kind] for kind in RecordKind)

@@ -542,6 +542,15 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
             "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
             "packages": package_versions(),
             "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
+            # How many records of each kind exist, read or not, so that a
+            # memory layout can place them all (coherence.layout).
+            "record_counts": {
+                "kd_node": int(tree.nodes.shape[0]), "index_entry": int(tree.primitive_indices.size),
+                "sphere": int(scene.sphere_radius.size), "triangle": int(scene.triangle_vertices.shape[0]),
+                "polygon": int(scene.polygon_offsets.size - 1), "patch": int(scene.patch_offsets.size - 1),
+                "cone": int(scene.cone_base_radius.size), "material": int(scene.material_kd.size),
+                "light": int(scene.light_position.shape[0]),
+            },
         }
         meta.update(metadata or {})
         scratch_image = np.empty_like(image)
