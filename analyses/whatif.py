@@ -1,0 +1,372 @@
+"""What-if studies: where would coherence start to matter more than balance?
+
+A study is a base configuration (scene, image size, mappings, process count,
+hierarchy, layout, cost model, machine) and a grid of parameters to vary.
+Every grid point is an independent task: the trace is rendered once (or
+taken from the trace cache) and each task replays it under the point's
+configuration. Tasks run in a local process pool, or on a Dask cluster with
+the same results.
+
+Grid parameters (names as in flags and TOML files):
+
+=====================  ========================================================
+``memory_latency``     cycles of a memory access
+``<level>.size``       bytes of a cache level (``L1.size``; ``96KB``, ``4MB``)
+``<level>.line_size``  line size of one level; ``line_size`` sets every level
+``<level>.assoc``      ways (or ``full``); ``<level>.latency`` hit cycles
+``hierarchy``          a preset (``alpha21164``, ``modern``) or a file
+``compute_scale``      factor on every cost model cycle count
+``cost``               a cost preset (``alpha8400``, ``modern``)
+``layout``             a memory layout preset (``compact``, ``alpha1997``)
+``scene_size``         SPD size factor of the scene (balls, tetra, shell only)
+``n_processes``        processes; ``n_cpus``, ``background`` the machine
+=====================  ========================================================
+
+Each row of the result says, for one point, mapping and process count, how
+much efficiency was lost to imbalance and to coherence and which was larger
+(``verdict``: ``"balance"`` or ``"coherence"``).
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import re
+import sys
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cachesim import Hierarchy, get_hierarchy
+
+LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
+SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "scene_size", "n_processes",
+          "n_cpus", "background", "line_size")
+METRICS = ("speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
+           "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
+_UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
+
+
+@dataclass(frozen=True)
+class WhatIf:
+    """A what-if study: a base configuration and a grid over parameters.
+
+    Parameters
+    ----------
+    name : str
+    scene : str
+        Scene name or NFF/OBJ path.
+    size : int
+        Image width and height.
+    mappings : tuple of str
+    n_processes : int
+        Processes of every run (unless the grid varies ``n_processes``).
+    hierarchy, cost, layout : str
+        Base presets (or a hierarchy file).
+    n_cpus, background : int
+        The machine.
+    grid : dict of str to list
+        Values per parameter; the study runs every combination.
+    """
+
+    name: str = "custom"
+    scene: str = "balls"
+    size: int = 128
+    mappings: tuple = ("S", "P", "R", "B", "DB")
+    n_processes: int = 8
+    hierarchy: str = "alpha21164"
+    cost: str = "alpha8400"
+    layout: str = "compact"
+    n_cpus: int = 8
+    background: int = 0
+    grid: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not self.grid:
+            raise ValueError("WhatIf.grid must vary at least one parameter")
+        for key, values in self.grid.items():
+            _check_parameter(key)
+            if not isinstance(values, (list, tuple)) or not values:
+                raise ValueError(f"grid[{key!r}] must be a non-empty list of values")
+        if isinstance(self.size, bool) or not isinstance(self.size, int) or self.size < 1:
+            raise ValueError(f"WhatIf.size must be a positive integer, got {self.size!r}")
+        object.__setattr__(self, "mappings", tuple(self.mappings))
+        base = self.base_hierarchy()
+        for point in self.points():  # every point must make a valid configuration
+            configure(self, point, base)
+
+    def base_hierarchy(self) -> Hierarchy:
+        return get_hierarchy(self.hierarchy)
+
+    def points(self) -> list[dict]:
+        """Every combination of the grid's values, in grid order."""
+        keys = list(self.grid)
+        return [dict(zip(keys, values)) for values in itertools.product(*(self.grid[k] for k in keys))]
+
+
+def _check_parameter(key: str) -> None:
+    if key in SIMPLE:
+        return
+    level, _, attribute = key.partition(".")
+    if attribute in LEVEL_FIELDS and level:
+        return
+    raise ValueError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE)} or "
+                     f"<level>.{{{','.join(LEVEL_FIELDS)}}}")
+
+
+def parse_value(text: str):
+    """A grid value from text: ``4MB`` -> 4194304, ``full``, ``0.5``, ``alpha21164``."""
+    text = text.strip()
+    match = re.fullmatch(r"([0-9]+(?:\.[0-9]+)?)\s*([KMG]?B?)", text, re.IGNORECASE)
+    if match:
+        number, unit = match.groups()
+        value = float(number) * _UNITS[unit.upper()]
+        return int(value) if value.is_integer() else value
+    return text
+
+
+def parse_grid_flag(flag: str) -> tuple[str, list]:
+    """``"L3.size=1MB,4MB"`` -> ``("L3.size", [1048576, 4194304])``."""
+    key, sep, values = flag.partition("=")
+    if not sep or not values.strip():
+        raise ValueError(f"--grid {flag!r}: expected NAME=VALUE[,VALUE...], e.g. L3.size=1MB,4MB")
+    key = key.strip()
+    _check_parameter(key)
+    return key, [parse_value(value) for value in values.split(",")]
+
+
+def load_study_file(path) -> WhatIf:
+    """A study from a TOML file: top-level base keys and a ``[grid]`` table."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such what-if file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML: {error}") from None
+    grid = data.pop("grid", None)
+    if not isinstance(grid, dict):
+        raise ValueError(f"{path}: needs a [grid] table of parameter = [values]")
+    grid = {key: [parse_value(v) if isinstance(v, str) else v for v in values] if isinstance(values, list)
+            else values for key, values in grid.items()}
+    known = set(WhatIf.__dataclass_fields__) - {"grid"}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(known)} and [grid]")
+    try:
+        return WhatIf(grid=grid, **data)
+    except (ValueError, TypeError) as error:
+        raise ValueError(f"{path}: {error}") from None
+
+
+def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
+    """The (hierarchy, layout, cost, machine, n_processes) of one grid point."""
+    from coherence.cost import get_cost_model
+    from coherence.layout import get_layout
+    from coherence.simulation import Machine
+
+    hierarchy = get_hierarchy(point.get("hierarchy", study.hierarchy)) if "hierarchy" in point \
+        else (base or study.base_hierarchy())
+    levels = {level.name: level for level in hierarchy.levels}
+    updates: dict[str, dict] = {}
+    for key, value in point.items():
+        if key == "line_size":
+            for name in levels:
+                updates.setdefault(name, {})["line_size"] = value
+        elif "." in key:
+            name, attribute = key.split(".", 1)
+            if name not in levels:
+                raise ValueError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
+            updates.setdefault(name, {})[attribute] = value
+    try:
+        if updates:
+            hierarchy = replace(hierarchy, levels=tuple(replace(level, **updates.get(level.name, {}))
+                                                        for level in hierarchy.levels))
+        if "memory_latency" in point:
+            hierarchy = replace(hierarchy, memory_latency=point["memory_latency"])
+    except ValueError as error:
+        raise ValueError(f"what-if point {point}: {error}") from None
+    cost = get_cost_model(point.get("cost", study.cost))
+    scale = point.get("compute_scale", 1.0)
+    if not isinstance(scale, (int, float)) or scale <= 0:
+        raise ValueError(f"compute_scale must be a number > 0, got {scale!r}")
+    if scale != 1.0:
+        from coherence.cost import OPERATIONS
+
+        cost = replace(cost, **{name: getattr(cost, name) * scale for name in OPERATIONS})
+    layout = get_layout(point.get("layout", study.layout))
+    machine = Machine(n_cpus=int(point.get("n_cpus", study.n_cpus)),
+                      background_load=int(point.get("background", study.background)))
+    n_processes = int(point.get("n_processes", study.n_processes))
+    return hierarchy, layout, cost, machine, n_processes
+
+
+def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:
+    """Simulate one grid point on a stored trace; one row per mapping at the point's n."""
+    from coherence.study import study as run_study
+    from tracer.scenes import load
+    from tracer.trace import AccessTrace
+
+    hierarchy, layout, cost, machine, n_processes = configure(study, point)
+    trace = AccessTrace.load(Path(trace_folder))
+    # The scene gives polygons their true sizes in the layout; SPD scenes at
+    # other size factors have none.
+    scene = load(study.scene) if "scene_size" not in point else None
+    result = run_study(trace, study.mappings, [n_processes], hierarchy=hierarchy, layout=layout, cost=cost,
+                       machine=machine, scene=scene, progress=False, n_jobs=1)
+    runs = result.runs[result.runs["n_processes"] == n_processes]
+    level_columns = [c for c in runs.columns if c.endswith(("_hit_rate", "_misses_per_ray"))]
+    table = runs[["mapping", "n_processes", *METRICS, *level_columns]].copy()
+    for key, value in reversed(list(point.items())):
+        table.insert(0, key, value if not isinstance(value, (list, dict)) else str(value))
+    table["verdict"] = np.where(table["coherence_loss"] > table["imbalance_loss"], "coherence", "balance")
+    return table.reset_index(drop=True)
+
+
+def run_whatif(study: WhatIf, *, cache_dir=None, dask: str | None = None, n_jobs: int | None = None,
+               progress: bool = True) -> pd.DataFrame:
+    """Run every grid point; a wide table, one row per (point, mapping).
+
+    Parameters
+    ----------
+    study : WhatIf
+    cache_dir : path, optional
+        Trace cache folder (see :func:`analyses.traces.cached_trace`).
+    dask : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``) or a
+        ``distributed.Client``; default a local process pool.
+    n_jobs : int, optional
+        Local worker processes (default: CPUs).
+    """
+    from tqdm.auto import tqdm
+
+    points = study.points()
+    folders = _traces_for(study, points, cache_dir, progress)
+    tasks = [(study, point, folders[_scene_key(point)]) for point in points]
+    if dask is not None:
+        frames = _run_dask(tasks, dask, progress)
+    else:
+        workers = n_jobs or os.cpu_count() or 1
+        if workers == 1 or len(tasks) == 1:
+            frames = [evaluate_point(*task) for task in tqdm(tasks, desc=study.name, disable=not progress,
+                                                               leave=False, file=sys.stderr)]
+        else:
+            from concurrent.futures import ProcessPoolExecutor
+            import multiprocessing
+
+            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                futures = [pool.submit(evaluate_point, *task) for task in tasks]
+                frames = [future.result() for future in tqdm(futures, desc=study.name, disable=not progress,
+                                                             leave=False, file=sys.stderr)]
+    return pd.concat(frames, ignore_index=True)
+
+
+def long_form(table: pd.DataFrame, study: WhatIf) -> pd.DataFrame:
+    """One row per (point, mapping, n_processes, metric): the tidy CSV form."""
+    keys = [*study.grid, "mapping", "n_processes"]
+    keys = list(dict.fromkeys(keys))
+    values = [column for column in table.columns if column not in keys and column != "verdict"]
+    long = table.melt(id_vars=keys, value_vars=values, var_name="metric", value_name="value")
+    return long.sort_values(keys + ["metric"], kind="stable").reset_index(drop=True)
+
+
+def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]:
+    """Write ``whatif-<name>.csv`` (long form, with .meta.json) and a figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from analyses.maps import plot_loss_lines, plot_loss_map
+    from coherence.provenance import provenance, write_csv_atomic
+
+    folder = Path(folder)
+    csv = write_csv_atomic(long_form(table, study), folder / f"whatif-{study.name}.csv",
+                           provenance(study=study.name, scene=study.scene, size=study.size,
+                                      mappings=list(study.mappings), n_processes=study.n_processes,
+                                      hierarchy=study.hierarchy, cost=study.cost, layout=study.layout,
+                                      n_cpus=study.n_cpus, background=study.background,
+                                      grid={key: [str(v) for v in values] for key, values in study.grid.items()}))
+    keys = list(study.grid)
+    if len(keys) >= 2:
+        mappings = list(dict.fromkeys(table["mapping"]))
+        figure, axes = plt.subplots(1, len(mappings), figsize=(5.5 * len(mappings), 4.5), squeeze=False)
+        rest = keys[2:]
+        rows = table if not rest else table[(table[rest] == table[rest].iloc[0]).all(axis=1)]
+        for ax, mapping in zip(axes[0], mappings):
+            plot_loss_map(rows, keys[0], keys[1], mapping, ax=ax)
+    else:
+        figure, ax = plt.subplots(figsize=(7, 4.5))
+        plot_loss_lines(table, keys[0], ax=ax)
+    png = folder / f"whatif-{study.name}.png"
+    temporary = folder / f".whatif-{study.name}.png.tmp"
+    figure.savefig(temporary, format="png", dpi=100, bbox_inches="tight", metadata={"Software": None})
+    plt.close(figure)
+    os.replace(temporary, png)
+    return csv, png
+
+
+def _run_dask(tasks, address, progress):
+    from distributed import Client
+
+    client = address if isinstance(address, Client) else Client(address)
+    try:
+        futures = [client.submit(evaluate_point, *task, pure=False) for task in tasks]
+        return client.gather(futures)
+    finally:
+        if client is not address:
+            client.close()
+
+
+def _scene_key(point: dict):
+    return point.get("scene_size")
+
+
+def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
+    """Trace folder per distinct scene of the grid (rendered once each)."""
+    from analyses.traces import cached_trace
+
+    folders = {}
+    for key in dict.fromkeys(_scene_key(point) for point in points):
+        scene = study.scene if key is None else _sized_scene_file(study.scene, key, cache_dir)
+        _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, progress=progress)
+        folders[key] = str(Path(info["path"]) / "trace")
+    return folders
+
+
+def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
+    """An NFF file of an SPD scene at another size factor (in the cache folder)."""
+    from analyses.traces import default_cache_dir
+    from tracer import spd
+    from tracer.nff import write_nff
+    from tracer.scenes import PAPER_DEPTH
+
+    generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells, "shells": spd.shells}
+    if name not in generators:
+        raise ValueError(f"scene_size applies to the SPD scenes {sorted(set(generators) - {'shells'})}, "
+                         f"not {name!r}")
+    if isinstance(size_factor, bool) or not isinstance(size_factor, int) or size_factor < 1:
+        raise ValueError(f"scene_size must be a positive integer SPD size factor, got {size_factor!r}")
+    scene = generators[name](size_factor)
+    scene.max_depth = PAPER_DEPTH["shell" if name == "shells" else name]
+    folder = Path(cache_dir) if cache_dir else default_cache_dir().parent / "scenes"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}-size{size_factor}.nff"
+    if not path.exists():
+        write_nff(scene, path)
+    return str(path)
+
+
+# Built-in studies at a small image size: each answers one question.
+BUILTIN = {
+    "latency": WhatIf(name="latency", grid={"memory_latency": [40, 80, 160, 320, 640, 1280],
+                                            "compute_scale": [0.03125, 0.125, 0.5, 1.0]}),
+    "caches": WhatIf(name="caches", grid={"L3.size": [262144, 1048576, 4194304, 16777216],
+                                          "L2.size": [24576, 98304, 393216]}),
+    "lines": WhatIf(name="lines", grid={"line_size": [16, 32, 64, 128]}, hierarchy="alpha21164"),
+    "assoc": WhatIf(name="assoc", grid={"L1.assoc": [1, 2, 4, 8, "full"]}),
+    "scene-size": WhatIf(name="scene-size", grid={"scene_size": [2, 3, 4], "L3.size": [262144, 1048576, 4194304]}),
+    "modern": WhatIf(name="modern", grid={"hierarchy": ["alpha21164", "modern"], "cost": ["alpha8400", "modern"]}),
+}

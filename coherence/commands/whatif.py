@@ -1,0 +1,111 @@
+"""``coherence whatif``: sweep cache, latency, cost and scene parameters."""
+from __future__ import annotations
+
+import argparse
+
+HELP = "what-if studies: where would coherence matter more than load balance?"
+
+EPILOG = """\
+built-in studies (STUDY):
+  latency     memory latency x compute cycles per operation (a map)
+  caches      L3 size x L2 size
+  lines       line size of every level
+  assoc       L1 associativity (1, 2, 4, 8, full)
+  scene-size  SPD size factor of the scene x L3 size
+  modern      alpha21164 vs modern caches x alpha8400 vs modern costs
+
+your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
+
+  scene = "balls"            # base configuration (all optional)
+  size = 128
+  mappings = ["S", "R", "DB"]
+  n_processes = 8
+  [grid]
+  memory_latency = [80, 320]
+  "L3.size" = ["1MB", "4MB"]
+
+parameters: memory_latency, <level>.size|line_size|assoc|latency|policy,
+line_size, hierarchy, compute_scale, cost, layout, scene_size,
+n_processes, n_cpus, background. Sizes take KB/MB suffixes.
+
+outputs in --out DIR: whatif-<name>.csv (long form: the grid's columns,
+mapping, n_processes, metric, value) with .meta.json, and whatif-<name>.png
+(a map for two-parameter grids, loss lines for one).
+
+examples:
+  coherence whatif latency --size 64
+  coherence whatif --grid L1.size=4KB,8KB,32KB --grid memory_latency=80,300 --scene tetra
+  coherence whatif caches --dask tcp://scheduler:8786
+"""
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("whatif", help=HELP, description=HELP[0].upper() + HELP[1:],
+                                   epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("study", nargs="?", metavar="STUDY", help="a built-in study (see below)")
+    parser.add_argument("--grid", action="append", metavar="NAME=V1,V2", help="vary a parameter (repeatable)")
+    parser.add_argument("--file", metavar="TOML", help="a study file with a [grid] table")
+    parser.add_argument("--scene", help="scene name or NFF/OBJ path (default: the study's, balls)")
+    parser.add_argument("--size", type=int, help="image width and height (default: the study's, 128)")
+    parser.add_argument("--mappings", nargs="+", metavar="NAME", help="mappings (default: S P R B DB)")
+    parser.add_argument("--processes", type=int, metavar="N", help="processes per run (default: 8)")
+    parser.add_argument("--out", default="whatif", metavar="DIR", help="output folder (default: ./whatif)")
+    parser.add_argument("--cache", metavar="DIR", help="trace cache folder (default: ~/.cache/raytrace-coherence)")
+    parser.add_argument("--dask", metavar="ADDRESS", help="run the grid points on a Dask scheduler")
+    parser.add_argument("--jobs", type=int, metavar="N", help="local worker processes (default: CPUs)")
+    parser.add_argument("--list", action="store_true", help="list the built-in studies' grids and exit")
+    parser.set_defaults(func=run)
+
+
+def build_study(args):
+    from dataclasses import replace
+
+    from analyses.whatif import BUILTIN, WhatIf, load_study_file, parse_grid_flag
+
+    sources = sum(bool(source) for source in (args.study, args.grid, args.file))
+    if sources != 1:
+        raise ValueError("give exactly one of: a built-in STUDY, --grid flags, or --file TOML")
+    if args.study:
+        if args.study not in BUILTIN:
+            raise ValueError(f"unknown study {args.study!r}: choose one of {', '.join(BUILTIN)}")
+        study = BUILTIN[args.study]
+    elif args.file:
+        study = load_study_file(args.file)
+    else:
+        study = WhatIf(name="grid", grid=dict(parse_grid_flag(flag) for flag in args.grid))
+    overrides = {key: value for key, value in (("scene", args.scene), ("size", args.size),
+                                               ("n_processes", args.processes)) if value is not None}
+    if args.mappings:
+        overrides["mappings"] = tuple(args.mappings)
+    return replace(study, **overrides) if overrides else study
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+    from pathlib import Path
+
+    if args.list:
+        from analyses.whatif import BUILTIN
+
+        for name, study in BUILTIN.items():
+            print(f"{name:<11} " + "; ".join(f"{key} = {values}" for key, values in study.grid.items()))
+        return 0
+    study = build_study(args)
+    from coherence.mappings import get_mapping
+
+    for name in study.mappings:
+        get_mapping(name)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+
+    from analyses.whatif import run_whatif, save_whatif
+
+    table = run_whatif(study, cache_dir=args.cache, dask=args.dask, n_jobs=args.jobs,
+                       progress=sys.stderr.isatty())
+    csv, png = save_whatif(table, study, out)
+    shown = [*study.grid, "mapping", "imbalance_loss", "coherence_loss", "verdict"]
+    print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
+    print(f"wrote {csv} and {png}")
+    return 0
