@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "coherence.commands.scene",
     "coherence.commands.render",
     "coherence.commands.simulate",
+    "coherence.commands.report",
     "coherence.commands.whatif",
 )
 

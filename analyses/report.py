@@ -1,0 +1,688 @@
+"""The per-scene coherence report: did coherence or load balance decide the speed-up?
+
+>>> from analyses.report import make_report                 # doctest: +SKIP
+>>> rep = make_report("balls", out="report-balls")           # doctest: +SKIP
+>>> print(rep.verdict.text)                                  # doctest: +SKIP
+
+:func:`build_report` renders the scene once (through the trace cache of
+:mod:`analyses.traces`), simulates every mapping at 1..``max_processes``
+processes (:func:`coherence.study`), computes miss-ratio curves from reuse
+distances, and returns a :class:`Report`; :func:`write_report` writes its
+three files into a folder:
+
+``index.html``
+    One self-contained page (figures embedded as base64 PNG, styles inline,
+    no external references).
+``results.csv``
+    Every number of the report in tidy long form, one row per
+    (section, mapping, n_processes, item, metric) with its ``value``; see
+    :data:`RESULT_COLUMNS` and :data:`SECTIONS`.
+``summary.json``
+    Parameters, package versions, scene summary, headline numbers per
+    mapping and the verdict.
+
+Outputs are deterministic: no timestamps or timings, floats rounded to six
+significant digits, figures saved without metadata; each file is written to
+a temporary name and renamed.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numba import njit
+
+__all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "RESULT_COLUMNS",
+           "SECTIONS", "DEFAULT_MAPPINGS"]
+
+DEFAULT_MAPPINGS = ("S", "P", "R", "B", "DB")
+
+#: Columns of ``results.csv``.
+RESULT_COLUMNS = ("section", "mapping", "n_processes", "item", "metric", "value")
+
+#: What each section of ``results.csv`` holds (``mapping``, ``n_processes``
+#: and ``item`` are empty where they do not apply).
+SECTIONS = {
+    "scene": "scene and render figures: element counts by kind, lights, depth, tree statistics "
+             "(item 'tree'), counter totals (item 'totals'), image width and height",
+    "scene_bytes": "item = record kind or 'total': metric 'bytes', and 'fraction_of_<level>' = bytes / cache size",
+    "cache": "item = cache level: size, line_size, ways, latency; item 'memory': latency",
+    "runs": "one group per (mapping, n_processes): every numeric column of coherence.study's run table "
+            "(speed-ups, efficiency and its factors and losses, hit rates, misses per ray, cycles), plus "
+            "speedup_real_idle (real-time speed-up without background load)",
+    "processes": "item = process index, at the verdict's and the largest process count: user, compute, memory "
+                 "and dispatch cycles and pixels",
+    "miss_ratio": "mapping = pixel order of the one-process stream, item = cache size in bytes: "
+                  "metric 'miss_ratio_<line>B' of a fully associative LRU cache with <line>-byte lines",
+    "cost_map": "compute cycles per pixel (cost model): min, mean, max, total",
+    "verdict": "every number the verdict prints, exactly as printed (percentages in percent)",
+}
+
+_PROCESS_COLUMNS = ("pixels", "user_cycles", "compute_cycles", "memory_cycles", "dispatch_cycles")
+_SIGNIFICANT = 6
+
+
+@dataclass
+class Report:
+    """Everything a coherence report shows.
+
+    Attributes
+    ----------
+    results : DataFrame
+        The long-form table written to ``results.csv`` (:data:`RESULT_COLUMNS`).
+    summary : dict
+        What ``summary.json`` holds.
+    html : str
+        The page ``index.html``.
+    runs, processes : DataFrame
+        The study's tables (``runs`` with ``speedup_real_idle`` added).
+    curves : DataFrame
+        Miss-ratio curves: order, line_size, size, capacity_lines, misses, miss_ratio.
+    scene_bytes : DataFrame
+        kind, bytes.
+    cost_map : ndarray, shape (H, W)
+        Compute cycles per pixel.
+    verdict : analyses.verdict.Verdict
+    render_info : dict
+        From :func:`analyses.traces.cached_trace` (``cached`` tells whether
+        the trace came from the cache).
+    """
+
+    results: pd.DataFrame
+    summary: dict
+    html: str
+    runs: pd.DataFrame
+    processes: pd.DataFrame
+    curves: pd.DataFrame
+    scene_bytes: pd.DataFrame
+    cost_map: np.ndarray
+    verdict: object
+    render_info: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------
+# validation (before any long work)
+
+
+def check_output_folder(out) -> Path:
+    """Raise unless ``out`` is, or can become, a writable folder; create nothing.
+
+    Raises
+    ------
+    ValueError
+        ``out`` is an existing file, or a parent on its path is a file.
+    PermissionError
+        ``out`` (or its nearest existing parent) is not writable.
+    """
+    path = Path(out).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"output folder {str(out)!r} exists and is not a folder")
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"output folder {str(out)!r}: {str(probe)!r} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise PermissionError(f"output folder {str(out)!r}: {str(probe)!r} is not writable")
+    return path
+
+
+def _process_counts(max_processes, n_processes) -> list[int]:
+    if n_processes is not None:
+        counts = []
+        for n in n_processes:
+            if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+                raise ValueError(f"process counts must be integers >= 1, got {n!r}")
+            counts.append(int(n))
+        return sorted({1, *counts})
+    if isinstance(max_processes, bool) or not isinstance(max_processes, (int, np.integer)) or max_processes < 1:
+        raise ValueError(f"max_processes must be an integer >= 1, got {max_processes!r}")
+    return list(range(1, int(max_processes) + 1))
+
+
+# --------------------------------------------------------------------------
+# building
+
+
+def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, max_processes: int = 16,
+                 n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
+                 layout="compact", cost="alpha8400", kd: str = "sah", max_depth: int | None = None,
+                 cache_dir=None, progress: bool = True) -> Report:
+    """Render (or load) a scene's trace, simulate the mappings and assemble the report.
+
+    Parameters
+    ----------
+    scene : str or os.PathLike
+        Built-in scene name or NFF/OBJ path.
+    size : int
+        Image width and height.
+    mappings : sequence of str or Mapping
+        Mappings to compare (default S, P, R, B, DB).
+    max_processes : int
+        Simulate 1..max_processes processes.
+    n_processes : sequence of int, optional
+        Explicit process counts instead (1 is always added).
+    background : int
+        Always-runnable processes of other users, for the real-time speed-up.
+    n_cpus : int
+        CPUs of the simulated machine.
+    hierarchy, layout, cost : preset name or object
+    kd : {"sah", "median"}
+    max_depth : int, optional
+    cache_dir : path, optional
+        Trace cache folder (see :func:`analyses.traces.cached_trace`).
+    progress : bool
+        Progress bars on stderr.
+
+    Returns
+    -------
+    Report
+    """
+    from cachesim import get_hierarchy
+    from coherence.cost import get_cost_model
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.simulation import Machine
+
+    from analyses.traces import cached_trace
+
+    # everything that can be wrong with the arguments fails here, before rendering
+    mapping_objects = [get_mapping(m) for m in mappings]
+    names = [m.name for m in mapping_objects]
+    if not names:
+        raise ValueError("give at least one mapping")
+    if len(set(names)) != len(names):
+        raise ValueError(f"mappings must be distinct, got {names}")
+    counts = _process_counts(max_processes, n_processes)
+    hierarchy = get_hierarchy(hierarchy)
+    layout = get_layout(layout)
+    cost = get_cost_model(cost)
+    machine = Machine(n_cpus=n_cpus, background_load=background)
+
+    scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
+                                          progress=progress)
+    return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
+                     size, kd, progress)
+
+
+def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress):
+    from coherence.simulation import processor_sharing_time
+    from coherence.study import place_layout, study
+    from tracer.trace import COUNTER_NAMES
+
+    from analyses.verdict import verdict as compute_verdict
+
+    names = [m.name for m in mapping_objects]
+    placed = place_layout(layout, trace, scene)
+    result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=cost,
+                   machine=machine, scene=scene, progress=progress)
+    runs = result.runs.copy()
+    processes = result.processes
+    runs["speedup_real_idle"] = _idle_speedups(runs, processes, machine.n_cpus, processor_sharing_time)
+
+    verdict_n = 8 if 8 in counts else max(counts)
+    top_n = max(counts)
+    verdict = compute_verdict(runs, verdict_n, order=names)
+
+    curves = _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress)
+    compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
+    cost_map = compute.reshape(trace.height, trace.width)
+    region = placed.region_bytes()
+    scene_bytes = pd.DataFrame({"kind": [k for k, v in region.items() if v > 0] + ["total"],
+                                "bytes": [v for v in region.values() if v > 0] + [placed.scene_bytes]})
+    caches = pd.DataFrame({"level": [lv.name for lv in hierarchy.levels], "size": [lv.size for lv in hierarchy.levels],
+                           "line_size": [lv.line_size for lv in hierarchy.levels],
+                           "ways": [lv.ways for lv in hierarchy.levels],
+                           "latency": [lv.latency for lv in hierarchy.levels]})
+
+    summary_scene = scene.summary()
+    tree = {k: v for k, v in info["tree"].items() if not k.endswith("_seconds")}
+    totals = dict(info["totals"])
+    results = _results_table(summary_scene, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes,
+                             curves, cost_map, verdict, verdict_n, top_n)
+    parameters = {
+        "scene": scene.name, "size": int(size), "kd": kd, "max_depth": int(scene.max_depth),
+        "mappings": names, "n_processes": counts, "verdict_n_processes": verdict_n,
+        "background_load": int(machine.background_load), "n_cpus": int(machine.n_cpus),
+        "machine": result.parameters["machine"], "hierarchy": hierarchy.to_dict(), "layout": layout.name,
+        "cost": cost.to_dict(), "trace_key": info["key"],
+    }
+    summary = _summary(parameters, summary_scene, tree, runs, verdict, verdict_n, top_n, names, scene_bytes)
+    page = _html(scene, info, parameters, summary_scene, tree, totals, runs, processes, curves, cost_map,
+                 scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress)
+    return Report(results=results, summary=summary, html=page, runs=runs, processes=processes, curves=curves,
+                  scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info)
+
+
+def _idle_speedups(runs, processes, n_cpus, sharing_time) -> np.ndarray:
+    """Real-time speed-up with no background load, from per-process user cycles."""
+    real = {}
+    for (mapping, n), frame in processes.groupby(["mapping", "n_processes"], sort=False):
+        real[(mapping, int(n))] = sharing_time(frame["user_cycles"].to_numpy(), n_cpus, 0)
+    out = []
+    for mapping, n in zip(runs["mapping"], runs["n_processes"]):
+        out.append(real[(mapping, 1)] / real[(mapping, int(n))])
+    return np.asarray(out, dtype=np.float64)
+
+
+@njit(cache=True)
+def _gather_records(pixel_offsets, records, order, out):
+    k = 0
+    for i in range(order.size):
+        p = order[i]
+        for j in range(pixel_offsets[p], pixel_offsets[p + 1]):
+            out[k] = records[j]
+            k += 1
+    return k
+
+
+def _one_process_orders(mapping_objects, width, height) -> list[tuple[str, np.ndarray]]:
+    """Distinct pixel orders of the mappings run by one process, labelled by the mappings sharing them."""
+    orders = []
+    for mapping in mapping_objects:
+        order = np.ascontiguousarray(mapping.build(width, height, 1).task_pixels, dtype=np.int64)
+        for entry in orders:
+            if np.array_equal(entry[1], order):
+                entry[2].append(mapping.name)
+                break
+        else:
+            orders.append([None, order, [mapping.name]])
+    scan = np.arange(width * height, dtype=np.int64)
+    labelled = []
+    for _, order, users in orders:
+        base = "scan" if np.array_equal(order, scan) else f"{users[0]} order"
+        labelled.append((f"{base} ({' '.join(users)})", order))
+    return labelled
+
+
+def _curve_sizes(line_size: int, hierarchy, top_bytes: int) -> np.ndarray:
+    top = max(top_bytes, max(level.size for level in hierarchy.levels)) * 2
+    powers = line_size * 2 ** np.arange(int(math.ceil(math.log2(max(top / line_size, 2)))) + 1)
+    return np.unique(np.concatenate([powers, [level.size for level in hierarchy.levels]]).astype(np.int64))
+
+
+def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> pd.DataFrame:
+    from tqdm.auto import tqdm
+
+    from cachesim import reuse_profile
+
+    orders = _one_process_orders(mapping_objects, trace.width, trace.height)
+    line_sizes = sorted({level.line_size for level in hierarchy.levels}, reverse=True)
+    frames = []
+    bar = tqdm(total=len(orders) * len(line_sizes), desc="reuse distances", unit="curve",
+               disable=not progress, leave=False, file=sys.stderr)
+    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
+    for label, order in orders:
+        records = np.empty(trace.n_records, dtype=np.uint32)
+        _gather_records(offsets, np.asarray(trace.records), order, records)
+        for line_size in line_sizes:
+            addresses = placed.addresses(records, line_size)
+            curve = reuse_profile(addresses, line_size).miss_ratio_curve(
+                _curve_sizes(line_size, hierarchy, placed.scene_bytes))
+            del addresses
+            frames.append(curve.assign(order=label, line_size=line_size))
+            bar.update(1)
+        del records
+    bar.close()
+    curves = pd.concat(frames, ignore_index=True)
+    return curves[["order", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]
+
+
+# --------------------------------------------------------------------------
+# result table and summary
+
+
+def _round(value):
+    """Ints stay ints; floats get six significant digits; NaN/inf become None."""
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    value = float(value)
+    if not math.isfinite(value):
+        return None
+    if value == int(value) and abs(value) < 2**53:
+        return int(value)
+    return float(f"{value:.{_SIGNIFICANT}g}")
+
+
+def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes, curves,
+                   cost_map, verdict, verdict_n, top_n) -> pd.DataFrame:
+    rows = []
+
+    def add(section, metric, value, mapping=None, n=None, item=None):
+        rows.append((section, mapping, n, item, metric, _round(value)))
+
+    add("scene", "elements", scene_summary["elements"])
+    for kind, count in scene_summary["counts"].items():
+        add("scene", kind, count, item="elements")
+    for key in ("materials", "lights", "max_depth"):
+        add("scene", key, scene_summary[key])
+    add("scene", "width", trace.width)
+    add("scene", "height", trace.height)
+    for key, value in tree.items():
+        if isinstance(value, (int, float, np.number)):
+            add("scene", key, value, item="tree")
+    for key, value in totals.items():
+        add("scene", key, value, item="totals")
+    for kind, size in zip(scene_bytes["kind"], scene_bytes["bytes"]):
+        add("scene_bytes", "bytes", size, item=kind)
+        for level, cache_size in zip(caches["level"], caches["size"]):
+            add("scene_bytes", f"fraction_of_{level}", size / cache_size, item=kind)
+    for _, cache in caches.iterrows():
+        for column in ("size", "line_size", "ways", "latency"):
+            add("cache", column, cache[column], item=cache["level"])
+    add("cache", "latency", hierarchy.memory_latency, item="memory")
+    skip = {"mapping", "n_processes"}
+    for _, run in runs.iterrows():
+        for column in runs.columns:
+            if column not in skip and isinstance(run[column], (int, float, np.number)):
+                add("runs", column, run[column], mapping=run["mapping"], n=int(run["n_processes"]))
+    for n in sorted({verdict_n, top_n}):
+        for _, process in processes[processes["n_processes"] == n].iterrows():
+            for column in _PROCESS_COLUMNS:
+                add("processes", column, process[column], mapping=process["mapping"], n=n,
+                    item=str(int(process["process"])))
+    for _, point in curves.iterrows():
+        add("miss_ratio", f"miss_ratio_{int(point['line_size'])}B", point["miss_ratio"], mapping=point["order"],
+            n=1, item=str(int(point["size"])))
+    add("cost_map", "min_cycles_per_pixel", cost_map.min())
+    add("cost_map", "mean_cycles_per_pixel", cost_map.mean())
+    add("cost_map", "max_cycles_per_pixel", cost_map.max())
+    add("cost_map", "total_cycles", cost_map.sum())
+    for _, number in verdict.numbers.iterrows():
+        add("verdict", number["metric"], number["value"], mapping=number["mapping"], n=int(number["n_processes"]))
+    columns = list(zip(*rows)) if rows else [()] * len(RESULT_COLUMNS)
+    table = pd.DataFrame({name: pd.Series(list(values), dtype=object) for name, values in zip(RESULT_COLUMNS, columns)})
+    table["n_processes"] = table["n_processes"].astype("Int64")
+    return table
+
+
+_HEADLINE_COLUMNS = ("speedup_user", "speedup_real", "speedup_real_idle", "efficiency", "load_balance",
+                     "coherence_factor", "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
+
+
+def _clean(value):
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (str, type(None))):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, float, np.number)):
+        return _round(value)
+    return str(value)
+
+
+def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, names, scene_bytes) -> dict:
+    from coherence.provenance import package_versions
+
+    headline = {}
+    for n in sorted({verdict_n, top_n}):
+        at_n = runs[runs["n_processes"] == n].set_index("mapping")
+        headline[str(n)] = {name: {column: at_n.loc[name, column] for column in _HEADLINE_COLUMNS}
+                            for name in names}
+    return _clean({
+        "report": "coherence report",
+        "parameters": parameters,
+        "versions": package_versions(),
+        "scene": scene_summary,
+        "tree": tree,
+        "scene_bytes": dict(zip(scene_bytes["kind"], scene_bytes["bytes"])),
+        "headline": headline,
+        "verdict": {"n_processes": verdict_n, "decided_by": verdict.decided_by, "headline": verdict.headline,
+                    "sentences": verdict.sentences, "text": verdict.text,
+                    "numbers": verdict.numbers.to_dict(orient="records")},
+        "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
+    })
+
+
+# --------------------------------------------------------------------------
+# the page
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}
+h1{font-size:1.6em}h2{font-size:1.25em;margin-top:2em;border-bottom:1px solid #ccc;padding-bottom:.2em}
+table{border-collapse:collapse;font-size:.85em;margin:.6em 0}th,td{border:1px solid #ddd;padding:.2em .5em;
+text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+img{max-width:100%;height:auto}.verdict{background:#f5f8ff;border-left:4px solid #36c;padding:.6em 1em}
+.note{color:#555;font-size:.9em}.row{display:flex;flex-wrap:wrap;gap:1em;align-items:flex-start}
+"""
+
+
+def _figure_png(fig) -> str:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=90, bbox_inches="tight", metadata={"Software": None})
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def _img(data: str, alt: str) -> str:
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _table_html(frame: pd.DataFrame, digits: int = 3) -> str:
+    def fmt(value):
+        if isinstance(value, (float, np.floating)):
+            if not math.isfinite(value):
+                return ""
+            return f"{value:,.{digits}f}" if abs(value) < 1e6 else f"{value:,.0f}"
+        if isinstance(value, (int, np.integer)):
+            return f"{int(value):,}"
+        return html.escape(str(value))
+
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
+    body = "".join("<tr>" + "".join(f"<td>{fmt(v)}</td>" for v in row) + "</tr>"
+                   for row in frame.itertuples(index=False))
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
+          caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress) -> str:
+    from matplotlib.figure import Figure
+    from tqdm.auto import tqdm
+
+    from analyses import plots
+
+    bar = tqdm(total=8, desc="figures", unit="figure", disable=not progress, leave=False, file=sys.stderr)
+    figures = {}
+
+    def draw(key, figsize, painter, ncols=1):
+        fig = Figure(figsize=figsize)
+        axes = fig.subplots(1, ncols, squeeze=False)[0]
+        painter(axes if ncols > 1 else axes[0])
+        figures[key] = _figure_png(fig)
+        bar.update(1)
+
+    image_b64 = base64.b64encode(Path(info["png"]).read_bytes()).decode("ascii")
+    draw("bytes", (6.5, 3.0), lambda ax: plots.plot_scene_bytes(scene_bytes, ax, caches=caches))
+
+    levels = []
+    for n in sorted({1, verdict_n}):
+        for _, run in runs[runs["n_processes"] == n].iterrows():
+            for level in hierarchy.level_names:
+                levels.append({"mapping": run["mapping"], "n_processes": n, "level": level,
+                               "hit_rate": run[f"{level}_hit_rate"], "miss_rate": 1.0 - run[f"{level}_hit_rate"],
+                               "misses_per_ray": run[f"{level}_misses_per_ray"]})
+    levels = pd.DataFrame(levels)
+
+    def two_level_plots(axes):
+        plots.plot_level_metric(levels, axes[0], metric="miss_rate", order=names)
+        plots.plot_level_metric(levels, axes[1], metric="misses_per_ray", order=names)
+        axes[0].set_title("miss rate per access at each level", fontsize=10)
+        axes[1].set_title("misses per ray at each level", fontsize=10)
+
+    draw("levels", (12, 3.8), two_level_plots, ncols=2)
+    draw("curves", (8, 4.5), lambda ax: plots.plot_miss_ratio_curves(curves, ax, caches=caches))
+    draw("cost", (5.2, 4.5), lambda ax: plots.plot_cost_map(cost_map, ax))
+
+    def pictures(axes):
+        for mapping, ax in zip(mapping_objects, axes):
+            mapping.picture(verdict_n, trace.width, trace.height, ax=ax)
+            ax.title.set_fontsize(8)
+
+    draw("pictures", (2.6 * len(mapping_objects), 2.9), pictures, ncols=len(mapping_objects))
+    at_verdict = processes[processes["n_processes"] == verdict_n]
+    draw("processes", (10, 3.8), lambda ax: plots.plot_process_times(at_verdict, ax, order=names))
+
+    background = parameters["background_load"]
+
+    def speedups(axes):
+        plots.plot_speedup(runs, axes[0], column="speedup_user", order=names, n_cpus=parameters["n_cpus"],
+                           title="from user time (worst process)")
+        plots.plot_speedup(runs, axes[1], column="speedup_real", order=names, n_cpus=parameters["n_cpus"],
+                           title=f"from real time, background load {background}")
+
+    draw("speedup", (11, 4.2), speedups, ncols=2)
+    bar.update(1)
+    bar.close()
+
+    decomposition_columns = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", "load_balance",
+                             "coherence_factor", "dispatch_factor", "imbalance_loss", "coherence_loss",
+                             "dispatch_loss"]
+    decomposition = runs[runs["n_processes"].isin(sorted({verdict_n, top_n}))][decomposition_columns]
+    decomposition = decomposition.sort_values(["n_processes"], kind="stable")
+    level_table = []
+    for n in sorted({1, verdict_n}):
+        for _, run in runs[runs["n_processes"] == n].iterrows():
+            row = {"mapping": run["mapping"], "n": n}
+            for level in hierarchy.level_names:
+                row[f"{level} hit rate"] = run[f"{level}_hit_rate"]
+            for level in hierarchy.level_names:
+                row[f"{level} misses/ray"] = run[f"{level}_misses_per_ray"]
+            level_table.append(row)
+    level_table = pd.DataFrame(level_table)
+    counts_table = pd.DataFrame({"kind": list(scene_summary["counts"]), "elements": list(scene_summary["counts"].values())})
+    counts_table = counts_table[counts_table["elements"] > 0]
+    tree_table = pd.DataFrame({"statistic": list(tree), "value": list(tree.values())})
+    totals_keys = ["rays", "primary_rays", "shadow_rays", "reflection_rays", "refraction_rays",
+                   "intersection_tests", "node_visits", "records"]
+    totals_table = pd.DataFrame({"counter": [k for k in totals_keys if k in totals],
+                                 "total": [totals[k] for k in totals_keys if k in totals]})
+    bytes_table = scene_bytes.copy()
+    for level, size in zip(caches["level"], caches["size"]):
+        bytes_table[f"/ {level} ({plots._bytes_text(size)})"] = bytes_table["bytes"] / size
+    curve_points = curves[curves["size"].isin(list(caches["size"]))].pivot_table(
+        index=["order", "line_size"], columns="size", values="miss_ratio", sort=False).reset_index()
+    curve_points.columns = [c if not isinstance(c, (int, np.integer)) else f"miss ratio @ {plots._bytes_text(c)}"
+                            for c in curve_points.columns]
+
+    p = parameters
+    e = html.escape
+    sentences = "".join(f"<li>{e(s)}</li>" for s in verdict.sentences)
+    counts_text = ", ".join(str(n) for n in p["n_processes"])
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>Coherence report: {e(scene.name)} {p['size']}x{p['size']}</title>
+<style>{_CSS}</style></head><body>
+<h1>Coherence report: {e(scene.name)}, {p['size']}&times;{p['size']} pixels</h1>
+<p class="note">Mappings {e(' '.join(names))}; {counts_text} processes on {p['n_cpus']} simulated CPUs;
+{e(hierarchy.name)} caches, {e(p['layout'])} memory layout, {e(p['cost']['name'])} cost model at
+{p['cost']['clock_hz'] / 1e6:g} MHz; kd-tree {e(p['kd'])}, ray depth {p['max_depth']}.
+Real time assumes a background load of {background} always-runnable processes of other users
+(the study's machine was shared). Trace cache key {e(p['trace_key'])}.</p>
+
+<h2>Verdict</h2>
+<div class="verdict"><p><strong>{e(verdict.headline)}</strong></p><ul>{sentences}</ul></div>
+<p class="note">Efficiency = load balance &times; coherence &times; dispatch; each loss is 1 &minus; its factor.
+A negative coherence loss (a gain) means processes sharing a CPU warmed each other's caches.</p>
+
+<h2>The scene</h2>
+<div class="row"><div>{_img(image_b64, 'rendered image')}</div>
+<div>{_table_html(counts_table)}<p>{scene_summary['lights']} lights, {scene_summary['materials']} materials,
+maximum depth {scene_summary['max_depth']}.</p>{_table_html(totals_table)}</div>
+<div>{_table_html(tree_table, 2)}</div></div>
+<h3>Bytes of scene data against each cache size</h3>
+<div class="row"><div>{_img(figures['bytes'], 'scene bytes per record kind')}</div>
+<div>{_table_html(bytes_table, 3)}</div></div>
+
+<h2>Hit rates and misses per ray, 1 and {verdict_n} processes</h2>
+{_img(figures['levels'], 'miss rates and misses per ray per level')}
+{_table_html(level_table, 4)}
+
+<h2>Miss-ratio curves</h2>
+<p class="note">From exact LRU reuse distances of the one-process stream in each mapping's pixel order
+(S, P and R share the scan order), for a fully associative LRU cache of each size; dotted lines mark the
+hierarchy's caches. Real caches with lower associativity miss more.</p>
+{_img(figures['curves'], 'miss-ratio curves')}
+{_table_html(curve_points, 5)}
+
+<h2>Cost per pixel</h2>
+<p class="note">Compute cycles per pixel from the cost model (memory stalls excluded): where the work is,
+which static mappings must split evenly to balance.</p>
+{_img(figures['cost'], 'compute cycles per pixel')}
+
+<h2>Mappings at {verdict_n} processes</h2>
+{_img(figures['pictures'], 'mapping pictures')}
+
+<h2>User time per process at {verdict_n} processes</h2>
+{_img(figures['processes'], 'per-process user time')}
+
+<h2>Speed-up against the number of processes</h2>
+<p class="note">User speed-up = T1 / worst process user time; real speed-up under a background load of
+{background} (processor sharing: every process, not every user, gets a share of the {p['n_cpus']} CPUs).
+The dotted line marks where processes start sharing CPUs.</p>
+{_img(figures['speedup'], 'speed-up curves')}
+
+<h2>Efficiency decomposition</h2>
+{_table_html(decomposition, 3)}
+
+<p class="note">All numbers are in results.csv (tidy long form) and summary.json beside this page.</p>
+</body></html>
+"""
+
+
+# --------------------------------------------------------------------------
+# writing
+
+
+def write_report(report: Report, out) -> Path:
+    """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out``, each atomically."""
+    path = check_output_folder(out)
+    path.mkdir(parents=True, exist_ok=True)
+    _write_atomic(path / "results.csv", report.results.to_csv(index=False, lineterminator="\n"))
+    _write_atomic(path / "summary.json", json.dumps(report.summary, indent=2, allow_nan=False) + "\n")
+    _write_atomic(path / "index.html", report.html)
+    return path
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write to a temporary file beside ``path`` and rename it; permissions follow the umask
+    (a report is meant to be shared, unlike ``mkstemp``'s private 0600)."""
+    import tempfile
+
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as stream:
+            stream.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temporary, 0o666 & ~umask)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def make_report(scene="balls", out=None, **options) -> Report:
+    """Build the report and write it to ``out`` (default ``report-<scene>``); see :func:`build_report`."""
+    if out is None:
+        out = f"report-{Path(os.fspath(scene)).stem.lower()}"
+    check_output_folder(out)
+    report = build_report(scene, **options)
+    write_report(report, out)
+    return report
