@@ -205,7 +205,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 
 def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:
     """Simulate one grid point on a stored trace; one row per mapping at the point's n."""
-    from coherence.study import study as run_study
+    from coherence.studies import study as run_study
     from tracer.scenes import load
     from tracer.trace import AccessTrace
 

@@ -1,7 +1,7 @@
 """Whole-study throughput: balls at 512x512, every built-in mapping, n = 1, 2, 4, 8, 16.
 
 Renders the trace once (not timed; kept in a cache folder between runs), then
-times ``coherence.study`` with the alpha21164 hierarchy on 8 CPUs (n = 16
+times ``coherence.study()`` with the alpha21164 hierarchy on 8 CPUs (n = 16
 time-slices two processes per CPU), and prints the time and the accesses
 simulated per second. As a peer, one run (R, 8 processes) is also simulated
 the obvious way: materialise each process's address stream and run
@@ -22,7 +22,7 @@ from cachesim import alpha21164, simulate_many
 from coherence.layout import get_layout
 from coherence.mappings import MAPPINGS, get_mapping
 from coherence.simulation import Machine, simulate_run
-from coherence.study import place_layout, study
+from coherence.studies import place_layout, study
 from tracer.render import render
 from tracer.scenes import load
 from tracer.trace import AccessTrace

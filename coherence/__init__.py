@@ -14,7 +14,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
 _EXPORTS = {
-    "study": "coherence.study", "StudyResult": "coherence.study", "place_layout": "coherence.study",
+    "study": "coherence.studies", "StudyResult": "coherence.studies", "place_layout": "coherence.studies",
     "Machine": "coherence.simulation", "simulate_run": "coherence.simulation", "Run": "coherence.simulation",
     "CostModel": "coherence.cost", "get_cost_model": "coherence.cost",
     "MemoryLayout": "coherence.layout", "RecordLayout": "coherence.layout", "get_layout": "coherence.layout",

@@ -6,7 +6,7 @@ import pytest
 
 from coherence.cli import main
 from coherence.simulation import Machine
-from coherence.study import study
+from coherence.studies import study
 from test_simulation import random_trace
 
 

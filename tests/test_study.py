@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from coherence.simulation import Machine
-from coherence.study import study
+from coherence.studies import study
 from test_simulation import SMALL, random_trace
 from tracer.trace import COUNTER_NAMES
 

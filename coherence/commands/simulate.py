@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from coherence.mappings import get_mapping
     from coherence.provenance import provenance, write_csv_atomic
     from coherence.simulation import Machine
-    from coherence.study import study
+    from coherence.studies import study
     from tracer.trace import AccessTrace
 
     hierarchy = get_hierarchy(args.hierarchy)
