@@ -218,7 +218,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
 
 def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress):
     from coherence.simulation import processor_sharing_time
-    from coherence.study import place_layout, study
+    from coherence.studies import place_layout, study
     from tracer.trace import COUNTER_NAMES
 
     from analyses.verdict import verdict as compute_verdict
