@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "coherence.commands.simulate",
     "coherence.commands.report",
     "coherence.commands.whatif",
+    "coherence.commands.paper",
 )
 
 
