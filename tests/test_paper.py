@@ -186,3 +186,14 @@ def test_api_validates_before_rendering(tmp_path):
     with pytest.raises(ValueError, match="process counts"):
         paper.reproduce(size=SIZE, n_processes=[2, -1], cache_dir=tmp_path)
     assert not list(tmp_path.iterdir())
+
+
+def test_relative_weighting_beats_absolute_on_relative_error(result, cache):
+    absolute = paper.reproduce(size=SIZE, n_processes=[1], scenes=["tetra", "balls", "room"], cache_dir=cache,
+                               progress=False, weighting="absolute")
+    relative = paper.reproduce(size=SIZE, n_processes=[1], scenes=["tetra", "balls", "room"], cache_dir=cache,
+                               progress=False)
+    assert relative.calibration["weighting"] == "relative"
+    assert relative.calibration["rms_relative_error"] <= absolute.calibration["rms_relative_error"] + 1e-9
+    with pytest.raises(ValueError, match="weighting"):
+        paper.reproduce(size=SIZE, scenes=["tetra"], cache_dir=cache, weighting="median")
