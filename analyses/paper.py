@@ -528,8 +528,9 @@ def speedup_figure(runs: pd.DataFrame, column: str = "speedup_real", *, n_cpus: 
     processes start sharing CPUs, and ``column`` against ``n_processes``.
     Returns a :class:`matplotlib.figure.Figure`.
     """
-    from matplotlib.figure import Figure
     import matplotlib
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     scenes = list(dict.fromkeys(runs["scene"]))
     names = list(dict.fromkeys(runs["mapping"]))
@@ -555,6 +556,8 @@ def speedup_figure(runs: pd.DataFrame, column: str = "speedup_real", *, n_cpus: 
         ax.set_xlabel("processes")
         ax.set_ylabel("speed-up")
         ax.set_xlim(0.5, top + 0.5)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylim(0, top + 0.5)
         ax.grid(True, color="0.92", linewidth=0.6)
     for ax in axes[len(scenes):]:
