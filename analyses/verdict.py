@@ -20,6 +20,9 @@ import pandas as pd
 
 __all__ = ["Verdict", "verdict", "format_percent"]
 
+#: A dispatch loss below this (as a fraction) is not worth a clause.
+DISPATCH_SHOWN = 5e-4
+
 LOSSES = (("imbalance_loss", "load balance", "imbalance"),
           ("coherence_loss", "coherence", "coherence"),
           ("dispatch_loss", "dispatch overhead", "dispatch"))
@@ -73,8 +76,8 @@ def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
     ----------
     runs : DataFrame
         Needs columns ``mapping``, ``n_processes``, ``speedup_user``,
-        ``imbalance_loss``, ``coherence_loss``, ``dispatch_loss`` (e.g.
-        :attr:`coherence.StudyResult.runs`).
+        ``imbalance_loss``, ``coherence_loss``, ``dispatch_loss`` and
+        optionally ``dispatch_share`` (e.g. :attr:`coherence.StudyResult.runs`).
     n_processes : int
         Process count to judge.
     order : sequence of str, optional
@@ -107,16 +110,19 @@ def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
         for column, _, short in LOSSES:
             value = float(row[column])
             text = format_percent(abs(value))
-            if column == "dispatch_loss" and text == "0":
-                continue  # static mappings hand nothing out
+            if column == "dispatch_loss" and abs(value) < DISPATCH_SHOWN:
+                continue  # static mappings hand nothing out; DB's one-process run pays the same share
             if value < 0:
                 shown[(name, column)] = quote(name, f"{short}_gain_pct", text)
                 parts.append(f"gains {text}% from {short}")
             else:
                 shown[(name, column)] = quote(name, f"{short}_loss_pct", text)
                 parts.append(f"loses {text}% to {short}")
-        sentences.append(f"At {n_processes} processes {name} reaches a user speed-up of {speedup} and "
-                         + _join(parts) + ".")
+        sentence = f"At {n_processes} processes {name} reaches a user speed-up of {speedup} and " + _join(parts)
+        share = float(row["dispatch_share"]) if "dispatch_share" in row.index else 0.0
+        if share > 0:
+            sentence += f"; hand-outs take {quote(name, 'dispatch_share_pct', format_percent(share))}% of its work"
+        sentences.append(sentence + ".")
 
     worst = {}
     for column, label, short in LOSSES:

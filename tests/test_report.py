@@ -1,0 +1,198 @@
+"""`coherence report`: files, self-containment, determinism, verdict provenance, trace cache, user errors."""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import tracer.render
+from analyses import traces
+from analyses.report import RESULT_COLUMNS, SECTIONS
+from analyses.verdict import format_percent, verdict
+from coherence.cli import main
+
+SIZE = "32"
+ARGS = ["--size", SIZE, "--processes", "2", "8", "--mappings", "S", "P", "B", "DB"]
+
+
+def _no_render(*args, **kwargs):
+    raise AssertionError("render() was called although the trace should come from the cache")
+
+
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory):
+    """The same report written twice; the second run must not render."""
+    root = tmp_path_factory.mktemp("report")
+    cache = root / "cache"
+    first, second = root / "first", root / "second"
+    assert main(["report", "balls", *ARGS, "--out", str(first), "--cache", str(cache)]) == 0
+    patch = pytest.MonkeyPatch()
+    patch.setattr(tracer.render, "render", _no_render)
+    try:
+        assert main(["report", "balls", *ARGS, "--out", str(second), "--cache", str(cache)]) == 0
+    finally:
+        patch.undo()
+    return first, second
+
+
+def test_writes_three_files(reports):
+    first, _ = reports
+    for name in ("index.html", "results.csv", "summary.json"):
+        assert (first / name).is_file() and (first / name).stat().st_size > 0
+    assert not [p for p in first.iterdir() if p.name.startswith(".")], "temporary files left behind"
+
+
+def test_html_is_self_contained(reports):
+    page = (reports[0] / "index.html").read_text()
+    assert page.startswith("<!DOCTYPE html>")
+    for forbidden in ("http://", "https://", 'src="file', "<link", "<script"):
+        assert forbidden not in page
+    sources = re.findall(r'src="([^"]*)"', page)
+    assert len(sources) >= 8 and all(s.startswith("data:image/png;base64,") for s in sources)
+    for heading in ("Verdict", "The scene", "Miss-ratio curves", "Cost per pixel", "Efficiency decomposition"):
+        assert heading in page
+
+
+def test_outputs_are_deterministic(reports):
+    first, second = reports
+    for name in ("results.csv", "summary.json", "index.html"):
+        assert (first / name).read_bytes() == (second / name).read_bytes(), name
+
+
+def test_results_table_is_tidy_and_complete(reports):
+    table = pd.read_csv(reports[0] / "results.csv")
+    assert tuple(table.columns) == RESULT_COLUMNS
+    assert set(table["section"]) == set(SECTIONS)
+    runs = table[table["section"] == "runs"]
+    assert set(runs["mapping"]) == {"S", "P", "B", "DB"}
+    assert set(runs["n_processes"]) == {1, 2, 8}
+    assert not table.duplicated(["section", "mapping", "n_processes", "item", "metric"]).any()
+    one = runs[(runs["n_processes"] == 1) & (runs["metric"] == "speedup_user")]
+    assert np.allclose(one["value"], 1.0)
+    for level in ("L1", "L2", "L3"):
+        assert (runs["metric"] == f"{level}_hit_rate").any()
+    processes = table[(table["section"] == "processes") & (table["n_processes"] == 8)]
+    assert set(processes["item"].astype(int)) == set(range(8))
+    curves = table[table["section"] == "miss_ratio"]
+    assert {"miss_ratio_32B", "miss_ratio_64B"} <= set(curves["metric"])
+    assert curves["value"].between(0, 1).all()
+
+
+def test_every_verdict_number_is_in_the_table(reports):
+    first, _ = reports
+    summary = json.loads((first / "summary.json").read_text())
+    table = pd.read_csv(first / "results.csv")
+    text = summary["verdict"]["text"]
+    assert summary["verdict"]["headline"] in text
+    quoted = table[table["section"] == "verdict"]
+    values = set(quoted["value"].astype(float)) | set(table["n_processes"].dropna().astype(float))
+    numbers = re.findall(r"\d+(?:\.\d+)?", text)
+    assert len(numbers) >= 10
+    for number in numbers:
+        assert float(number) in values, f"{number} of the verdict is not in results.csv"
+    # and each quoted number is the rounding of the run it comes from
+    runs = table[table["section"] == "runs"].set_index(["mapping", "n_processes", "metric"])["value"]
+    for row in quoted.itertuples():
+        if row.metric == "speedup_user":
+            source = f"{runs[(row.mapping, row.n_processes, 'speedup_user')]:.2f}"
+        else:
+            column = {"imbalance_loss_pct": "imbalance_loss", "coherence_loss_pct": "coherence_loss",
+                      "coherence_gain_pct": "coherence_loss", "dispatch_loss_pct": "dispatch_loss",
+                      "dispatch_gain_pct": "dispatch_loss", "dispatch_share_pct": "dispatch_share"}[row.metric]
+            source = format_percent(abs(runs[(row.mapping, row.n_processes, column)]))
+        assert float(source) == pytest.approx(row.value, rel=1e-9)
+
+
+def test_summary_records_parameters_versions_and_headline(reports):
+    summary = json.loads((reports[0] / "summary.json").read_text())
+    parameters = summary["parameters"]
+    assert parameters["scene"] == "balls" and parameters["size"] == int(SIZE)
+    assert parameters["background_load"] == 4 and parameters["n_processes"] == [1, 2, 8]
+    assert "numpy" in summary["versions"] and "raytrace-coherence" in summary["versions"]
+    assert set(summary["headline"]["8"]) == {"S", "P", "B", "DB"}
+    assert summary["verdict"]["decided_by"] in ("load balance", "coherence", "dispatch overhead")
+
+
+def test_trace_cache_hit_and_key(tmp_path, monkeypatch):
+    monkeypatch.setenv(traces.CACHE_ENV, str(tmp_path / "env"))
+    assert traces.default_cache_dir() == tmp_path / "env" / "traces"
+    scene, trace, info = traces.cached_trace("tetra", 8, progress=False)
+    assert not info["cached"] and info["path"].startswith(str(tmp_path / "env"))
+    monkeypatch.setattr(tracer.render, "render", _no_render)
+    _, again, info2 = traces.cached_trace("tetra", 8, progress=False)
+    assert info2["cached"] and info2["key"] == info["key"]
+    assert isinstance(again.records, np.memmap)
+    assert np.array_equal(np.asarray(again.records), np.asarray(trace.records))
+    assert info2["tree"] == info["tree"]
+    keys = {traces.trace_key("tetra", 8, max_depth=2), traces.trace_key("tetra", 16, max_depth=2),
+            traces.trace_key("tetra", 8, kd="median", max_depth=2), traces.trace_key("tetra", 8, max_depth=3),
+            traces.trace_key("balls", 8, max_depth=2)}
+    assert len(keys) == 5
+
+
+def test_trace_key_follows_file_content(tmp_path):
+    path = tmp_path / "one.nff"
+    path.write_text("b 0 0 0\nv\nfrom 0 0 -5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\n"
+                    "l 0 5 -5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n")
+    before = traces.trace_key(path, 8, max_depth=2)
+    path.write_text(path.read_text().replace("s 0 0 0 1", "s 0 0 0 1.5"))
+    assert traces.trace_key(path, 8, max_depth=2) != before
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["report", "nosuchscene"], "nosuchscene"),
+    (["report", "balls", "--mappings", "S", "XX"], "XX"),
+    (["report", "balls", "--hierarchy", "nosuch"], "nosuch"),
+    (["report", "balls", "--max-processes", "0"], "--max-processes"),
+])
+def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(tracer.render, "render", _no_render)
+    assert main([*argv, "--size", "8", "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "c")]) == 2
+    error = capsys.readouterr().err
+    assert "coherence report: error:" in error and message in error
+    assert not (tmp_path / "out").exists()
+
+
+def test_output_path_that_is_a_file(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(tracer.render, "render", _no_render)
+    target = tmp_path / "taken"
+    target.write_text("not a folder")
+    assert main(["report", "balls", "--size", "8", "--out", str(target), "--cache", str(tmp_path / "c")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    nested = target / "below"
+    assert main(["report", "balls", "--size", "8", "--out", str(nested), "--cache", str(tmp_path / "c")]) == 2
+    assert "is a file" in capsys.readouterr().err
+
+
+def _runs(losses):
+    rows = []
+    for mapping, (imbalance, coherence, dispatch) in losses.items():
+        rows.append({"mapping": mapping, "n_processes": 8, "speedup_user": 8 * (1 - imbalance) * (1 - coherence),
+                     "imbalance_loss": imbalance, "coherence_loss": coherence, "dispatch_loss": dispatch,
+                     "dispatch_share": 0.0})
+    return pd.DataFrame(rows)
+
+
+def test_verdict_balance_or_coherence():
+    balance = verdict(_runs({"S": (0.41, 0.008, 0.0), "P": (0.01, 0.002, 0.0)}))
+    assert balance.decided_by == "load balance"
+    assert balance.headline.startswith("Load balance, not coherence, decided the speed-up at 8 processes")
+    assert "S reaches a user speed-up of 4.68 and loses 41.0% to imbalance and 0.8% to coherence" in balance.text
+    coherence = verdict(_runs({"S": (0.02, 0.30, 0.0), "P": (0.01, -0.004, 0.0)}))
+    assert coherence.decided_by == "coherence"
+    assert coherence.headline.startswith("Coherence, not load balance")
+    assert "gains 0.4% from coherence" in coherence.text
+    assert set(coherence.numbers["metric"]) >= {"coherence_gain_pct", "coherence_loss_pct", "imbalance_loss_pct"}
+    with pytest.raises(ValueError, match="n_processes == 16"):
+        verdict(_runs({"S": (0.1, 0.1, 0.0)}), 16)
+
+
+def test_format_percent():
+    assert format_percent(0.41234) == "41.2"
+    assert format_percent(0.008) == "0.8"
+    assert format_percent(0.00024) == "0.024"
+    assert format_percent(0.0) == "0"
+    assert format_percent(0.01) == "1.0"
