@@ -461,7 +461,7 @@ h1{font-size:1.6em}h2{font-size:1.25em;margin-top:2em;border-bottom:1px solid #c
 table{border-collapse:collapse;font-size:.85em;margin:.6em 0}th,td{border:1px solid #ddd;padding:.2em .5em;
 text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
 img{max-width:100%;height:auto}.verdict{background:#f5f8ff;border-left:4px solid #36c;padding:.6em 1em}
-.note{color:#555;font-size:.9em}.row{display:flex;flex-wrap:wrap;gap:1em;align-items:flex-start}
+.note{color:#555;font-size:.9em}.wide{overflow-x:auto}.row{display:flex;flex-wrap:wrap;gap:1em;align-items:flex-start}
 """
 
 
@@ -488,7 +488,7 @@ def _table_html(frame: pd.DataFrame, digits: int = 3) -> str:
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
     body = "".join("<tr>" + "".join(f"<td>{fmt(v)}</td>" for v in row) + "</tr>"
                    for row in frame.itertuples(index=False))
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f'<div class="wide"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
 
 
 def _html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
@@ -551,11 +551,14 @@ def _html(scene, info, parameters, scene_summary, tree, totals, runs, processes,
     bar.update(1)
     bar.close()
 
-    decomposition_columns = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", "load_balance",
-                             "coherence_factor", "dispatch_factor", "imbalance_loss", "coherence_loss",
-                             "dispatch_loss"]
-    decomposition = runs[runs["n_processes"].isin(sorted({verdict_n, top_n}))][decomposition_columns]
-    decomposition = decomposition.sort_values(["n_processes"], kind="stable")
+    chosen = runs[runs["n_processes"].isin(sorted({verdict_n, top_n}))].sort_values(["n_processes"], kind="stable")
+    decomposition = pd.DataFrame({
+        "mapping": chosen["mapping"], "n": chosen["n_processes"],
+        "speed-up (user)": chosen["speedup_user"], f"speed-up (real, B={parameters['background_load']})":
+            chosen["speedup_real"], "efficiency": chosen["efficiency"], "load balance": chosen["load_balance"],
+        "coherence": chosen["coherence_factor"], "dispatch": chosen["dispatch_factor"],
+        "imbalance loss %": 100 * chosen["imbalance_loss"], "coherence loss %": 100 * chosen["coherence_loss"],
+        "dispatch loss %": 100 * chosen["dispatch_loss"]})
     level_table = []
     for n in sorted({1, verdict_n}):
         for _, run in runs[runs["n_processes"] == n].iterrows():
@@ -568,7 +571,7 @@ def _html(scene, info, parameters, scene_summary, tree, totals, runs, processes,
     level_table = pd.DataFrame(level_table)
     counts_table = pd.DataFrame({"kind": list(scene_summary["counts"]), "elements": list(scene_summary["counts"].values())})
     counts_table = counts_table[counts_table["elements"] > 0]
-    tree_table = pd.DataFrame({"statistic": list(tree), "value": list(tree.values())})
+    tree_table = pd.DataFrame({"statistic": list(tree), "value": pd.Series(list(tree.values()), dtype=object)})
     totals_keys = ["rays", "primary_rays", "shadow_rays", "reflection_rays", "refraction_rays",
                    "intersection_tests", "node_visits", "records"]
     totals_table = pd.DataFrame({"counter": [k for k in totals_keys if k in totals],
@@ -635,10 +638,14 @@ which static mappings must split evenly to balance.</p>
 <h2>Speed-up against the number of processes</h2>
 <p class="note">User speed-up = T1 / worst process user time; real speed-up under a background load of
 {background} (processor sharing: every process, not every user, gets a share of the {p['n_cpus']} CPUs).
-The dotted line marks where processes start sharing CPUs.</p>
+The dotted line marks where processes start sharing CPUs. Beyond it, a dynamic mapping's processes alone on a CPU
+take more blocks than those sharing one, so its worst user time, and with it the user speed-up, stays near the
+number of CPUs until every CPU is shared.</p>
 {_img(figures['speedup'], 'speed-up curves')}
 
 <h2>Efficiency decomposition</h2>
+<p class="note">Efficiency = load balance &times; coherence &times; dispatch (factors), at {verdict_n}
+{'' if top_n == verdict_n else f'and {top_n} '}processes; losses are 1 &minus; factor, in percent.</p>
 {_table_html(decomposition, 3)}
 
 <p class="note">All numbers are in results.csv (tidy long form) and summary.json beside this page.</p>
