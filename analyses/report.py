@@ -41,7 +41,8 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
-__all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "RESULT_COLUMNS",
+__all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
+           "RESULT_COLUMNS",
            "SECTIONS", "DEFAULT_MAPPINGS"]
 
 DEFAULT_MAPPINGS = ("S", "P", "R", "B", "DB")
@@ -138,6 +139,29 @@ def check_output_folder(out) -> Path:
     return path
 
 
+def prepare_output_folder(out) -> Path:
+    """Check ``out`` (see :func:`check_output_folder`), create it and prove it writable with a probe file.
+
+    Raises
+    ------
+    ValueError, PermissionError
+        With the folder named, when it cannot be created or written.
+    """
+    import tempfile
+
+    path = check_output_folder(out)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        handle, probe = tempfile.mkstemp(dir=path, prefix=".probe.", suffix=".tmp")
+        os.close(handle)
+        os.unlink(probe)
+    except PermissionError as error:
+        raise PermissionError(f"output folder {str(out)!r} is not writable: {error.strerror}") from None
+    except OSError as error:
+        raise ValueError(f"cannot create output folder {str(out)!r}: {error.strerror}") from None
+    return path
+
+
 def _process_counts(max_processes, n_processes) -> list[int]:
     if n_processes is not None:
         counts = []
@@ -158,7 +182,7 @@ def _process_counts(max_processes, n_processes) -> list[int]:
 def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, max_processes: int = 16,
                  n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
                  layout="compact", cost="alpha8400", kd: str = "sah", max_depth: int | None = None,
-                 cache_dir=None, progress: bool = True) -> Report:
+                 cache_dir=None, out=None, progress: bool = True) -> Report:
     """Render (or load) a scene's trace, simulate the mappings and assemble the report.
 
     Parameters
@@ -182,6 +206,9 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     max_depth : int, optional
     cache_dir : path, optional
         Trace cache folder (see :func:`analyses.traces.cached_trace`).
+    out : path, optional
+        Output folder to create and check for writing once the arguments
+        are valid, before the long work (:func:`write_report` writes it).
     progress : bool
         Progress bars on stderr.
 
@@ -195,7 +222,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     from coherence.mappings import get_mapping
     from coherence.simulation import Machine
 
-    from analyses.traces import cached_trace
+    from analyses.traces import _scene_identity, cached_trace
 
     # everything that can be wrong with the arguments fails here, before rendering
     mapping_objects = [get_mapping(m) for m in mappings]
@@ -209,6 +236,9 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     layout = get_layout(layout)
     cost = get_cost_model(cost)
     machine = Machine(n_cpus=n_cpus, background_load=background)
+    _scene_identity(scene)  # unknown name or missing file
+    if out is not None:
+        prepare_output_folder(out)
 
     scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
                                           progress=progress)
@@ -659,8 +689,7 @@ number of CPUs until every CPU is shared.</p>
 
 def write_report(report: Report, out) -> Path:
     """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out``, each atomically."""
-    path = check_output_folder(out)
-    path.mkdir(parents=True, exist_ok=True)
+    path = prepare_output_folder(out)
     _write_atomic(path / "results.csv", report.results.to_csv(index=False, lineterminator="\n"))
     _write_atomic(path / "summary.json", json.dumps(report.summary, indent=2, allow_nan=False) + "\n")
     _write_atomic(path / "index.html", report.html)
@@ -689,7 +718,6 @@ def make_report(scene="balls", out=None, **options) -> Report:
     """Build the report and write it to ``out`` (default ``report-<scene>``); see :func:`build_report`."""
     if out is None:
         out = f"report-{Path(os.fspath(scene)).stem.lower()}"
-    check_output_folder(out)
-    report = build_report(scene, **options)
+    report = build_report(scene, out=out, **options)
     write_report(report, out)
     return report

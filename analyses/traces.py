@@ -78,7 +78,10 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
         return lowered, f"name:{lowered}"
     path = Path(text)
     if not path.is_file():
-        raise FileNotFoundError(f"no such scene file: {text!r} (built-in scenes: {', '.join(PAPER_SCENES)})")
+        if path.suffix.lower() not in (".nff", ".obj"):
+            raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(PAPER_SCENES)} "
+                             "or a path to a .nff or .obj file")
+        raise FileNotFoundError(f"no such scene file: {text!r}")
     content = hashlib.sha256(path.read_bytes()).hexdigest()
     label = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem)[:40] or "scene"
     return label, f"file:{content}"

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from analyses.report import build_report, check_output_folder, write_report
+    from analyses.report import build_report, write_report
 
     if args.size < 1:
         raise ValueError(f"--size must be >= 1, got {args.size}")
@@ -83,12 +83,11 @@ def run(args: argparse.Namespace) -> int:
     if args.background < 0:
         raise ValueError(f"--background must be >= 0, got {args.background}")
     out = args.out or f"report-{Path(args.scene).stem.lower()}"
-    check_output_folder(out)
     progress = sys.stderr.isatty()
     report = build_report(args.scene, args.size, mappings=args.mappings, max_processes=args.max_processes,
                           n_processes=args.processes, background=args.background, n_cpus=args.cpus,
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
-                          max_depth=args.max_depth, cache_dir=args.cache, progress=progress)
+                          max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress)
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
