@@ -46,7 +46,7 @@ def _grow(keys, values):
     return new_keys, new_values
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reuse_distances(addresses, shift, distances):
     n = addresses.shape[0]
     tree = np.zeros(n + 1, dtype=np.int64)  # Fenwick tree over 1-based times

@@ -95,3 +95,16 @@ def test_bad_files_name_file_and_field(tmp_path):
         get_hierarchy("alpha")
     with pytest.raises(ValueError, match=".toml or .json"):
         alpha21164().save(tmp_path / "h.yaml")
+
+
+def test_saved_files_get_ordinary_permissions(tmp_path):
+    import os
+    import stat
+
+    from cachesim import alpha21164
+
+    path = alpha21164().save(tmp_path / "a.toml")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask
+    assert not list(tmp_path.glob("*.tmp"))
