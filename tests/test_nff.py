@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from tracer.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
 from tracer.scene import ElementKind, Material, SceneBuilder, scenes_equal
 
-REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "spd"
+# Copies of ../shared/reference/spd (output of the original SPD generators).
+REFERENCE = Path(__file__).resolve().parent / "data" / "spd"
 needs_reference = pytest.mark.skipif(not REFERENCE.is_dir(), reason="reference SPD files absent")
 
 VIEW = """v

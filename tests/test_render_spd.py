@@ -1,6 +1,6 @@
 """SPD reference counts (Havran 1999) with corner rays and SPD rules (depth 5).
 
-Reference: ``/work/shared/reference/spd/README.md``. Counts are deterministic,
+Reference: ``tests/data/spd/README.md`` (a copy of ../shared/reference/spd). Counts are deterministic,
 so these tests pin them.
 """
 from pathlib import Path
@@ -11,9 +11,8 @@ from tracer.nff import read_nff
 from tracer.render import render
 from tracer.scenes import load
 
-SPD = Path(__file__).resolve().parents[2] / "shared" / "reference" / "spd"
-if not SPD.is_dir():
-    SPD = Path("/work/shared/reference/spd")
+# Copies of ../shared/reference/spd (output of the original SPD generators).
+SPD = Path(__file__).resolve().parent / "data" / "spd"
 
 needs_reference = pytest.mark.skipif(not (SPD / "tetra.nff").is_file(), reason="SPD reference files not found")
 

@@ -14,7 +14,8 @@ from tracer.scene import ARRAY_FIELDS, scenes_equal
 from tracer.scenes import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, load
 from tracer.standins import fluid, room
 
-REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "spd"
+# Copies of ../shared/reference/spd (output of the original SPD generators).
+REFERENCE = Path(__file__).resolve().parent / "data" / "spd"
 needs_reference = pytest.mark.skipif(not REFERENCE.is_dir(), reason="reference SPD files absent")
 
 
