@@ -68,6 +68,10 @@ def test_study_file_and_cli(tmp_path, capsys):
     assert {"coherence_loss", "imbalance_loss", "L1_hit_rate"} <= set(long["metric"])
     assert json.loads((out / "whatif-custom.csv.meta.json").read_text())["parameters"]["scene"] == "tetra"
     assert (out / "whatif-custom.png").stat().st_size > 1000
+    first = (out / "whatif-custom.csv").read_bytes()
+    assert main(["whatif", "--file", str(path), "--out", str(out), "--cache", str(tmp_path / "c"),
+                 "--jobs", "2"]) == 0
+    assert (out / "whatif-custom.csv").read_bytes() == first  # same inputs, same bytes
     bad = tmp_path / "bad.toml"
     bad.write_text('colour = "red"\n[grid]\nmemory_latency = [1]\n')
     assert main(["whatif", "--file", str(bad)]) == 2
