@@ -1,6 +1,8 @@
 """What-if studies: grids, configuration of points, local pool vs Dask, CLI."""
 import json
 
+import numpy as np
+
 import pandas as pd
 import pytest
 
@@ -68,6 +70,8 @@ def test_study_file_and_cli(tmp_path, capsys):
     assert {"coherence_loss", "imbalance_loss", "L1_hit_rate"} <= set(long["metric"])
     assert json.loads((out / "whatif-custom.csv.meta.json").read_text())["parameters"]["scene"] == "tetra"
     assert (out / "whatif-custom.png").stat().st_size > 1000
+    lru = pd.read_csv(out / "whatif-custom-lru.csv")
+    assert sorted(lru["size"].unique()) == [262144, 4194304] and (lru["misses"] <= lru["accesses"]).all()
     first = (out / "whatif-custom.csv").read_bytes()
     assert main(["whatif", "--file", str(path), "--out", str(out), "--cache", str(tmp_path / "c"),
                  "--jobs", "2"]) == 0
@@ -82,3 +86,29 @@ def test_study_file_and_cli(tmp_path, capsys):
     assert "unknown mapping 'XX'" in capsys.readouterr().err
     assert main(["whatif", "--list"]) == 0
     assert "scene-size" in capsys.readouterr().out
+
+
+def test_exact_lru_curves_equal_a_fully_associative_simulation(small):
+    from cachesim import CacheLevel, Hierarchy, simulate
+    from analyses.whatif import exact_lru_curves
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.studies import place_layout
+    from analyses.traces import cached_trace
+
+    study, cache = small
+    curves = exact_lru_curves(study, cache_dir=cache)
+    assert set(curves["size"]) == {4096, 8192} and set(curves["level"]) == {"L1"}
+    scene, trace, _ = cached_trace("tetra", 24, cache_dir=cache, progress=False)
+    placed = place_layout(get_layout("compact"), trace, scene)
+    distribution = get_mapping("R").build(24, 24, 4)
+    for size in (4096, 8192):
+        misses = 0
+        for process in range(4):
+            pixels = distribution.process_pixels(process)
+            records = np.concatenate([trace.records[trace.pixel_offsets[p]:trace.pixel_offsets[p + 1]]
+                                      for p in pixels])
+            full = Hierarchy((CacheLevel("L1", size, 32, "full", "lru"),))
+            misses += int(simulate(placed.addresses(records, 32), full).misses[0])
+        row = curves.query("mapping == 'R' and size == @size")
+        assert row["misses"].item() == misses

@@ -30,7 +30,10 @@ n_processes, n_cpus, background. Sizes take KB/MB suffixes.
 
 outputs in --out DIR: whatif-<name>.csv (long form: the grid's columns,
 mapping, n_processes, metric, value) with .meta.json, and whatif-<name>.png
-(a map for two-parameter grids, loss lines for one).
+(a map for two-parameter grids, loss lines for one). Grids over level
+sizes also get whatif-<name>-lru.csv: the exact misses of fully
+associative LRU caches of those sizes, from one reuse-distance pass per
+process stream (the full simulation answers for the real caches).
 
 examples:
   coherence whatif latency --size 64
@@ -100,11 +103,20 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {out} is a file, not a folder")
     out.mkdir(parents=True, exist_ok=True)
 
-    from analyses.whatif import run_whatif, save_whatif
+    from analyses.whatif import exact_lru_curves, run_whatif, save_whatif
 
     table = run_whatif(study, cache_dir=args.cache, dask=args.dask, n_jobs=args.jobs,
                        progress=sys.stderr.isatty())
     csv, png = save_whatif(table, study, out)
+    curves = exact_lru_curves(study, cache_dir=args.cache)
+    if curves is not None:
+        from coherence.provenance import provenance, write_csv_atomic
+
+        lru = write_csv_atomic(curves, out / f"whatif-{study.name}-lru.csv",
+                               provenance(study=study.name, scene=study.scene, size=study.size,
+                                          layout=study.layout, n_processes=study.n_processes,
+                                          note="fully associative LRU, exact from reuse distances"))
+        print(f"exact fully associative LRU misses at the grid's sizes: {lru}")
     shown = [*study.grid, "mapping", "imbalance_loss", "coherence_loss", "verdict"]
     print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
     print(f"wrote {csv} and {png}")
