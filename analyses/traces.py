@@ -40,6 +40,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from tracer.trace import json_default
+
 __all__ = ["cached_trace", "default_cache_dir", "trace_key", "CACHE_ENV"]
 
 #: Environment variable naming the cache folder (holding ``traces/``).
@@ -218,7 +220,7 @@ def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bo
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
         }
-        (tmp / _INFO).write_text(json.dumps(info, indent=1, default=_json_default) + "\n")
+        (tmp / _INFO).write_text(json.dumps(info, indent=1, default=json_default) + "\n")
         del result
         try:
             os.replace(tmp, entry)
@@ -229,12 +231,3 @@ def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bo
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
-
-def _json_default(value):
-    import numpy as np
-
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -251,10 +251,11 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
     meta = {"format_version": FORMAT_VERSION, "width": int(width), "height": int(height),
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata}
-    (tmp / "meta.json").write_text(json.dumps(meta, indent=1, default=_json_default))
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1, default=json_default))
 
 
-def _json_default(value):
+def json_default(value):
+    """``json.dumps`` fallback for numpy scalars and arrays."""
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
