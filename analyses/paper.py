@@ -45,12 +45,15 @@ import json
 import math
 import os
 import sys
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from analyses.html import table_html
+from analyses.verdict import format_percent
+from cachesim.config import write_bytes_atomic
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
            "PaperResult", "reproduce", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
@@ -419,18 +422,6 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
 # verdicts
 
 
-def _percent(fraction: float) -> str:
-    """A fraction as percent text: one decimal from 1% up, two significant digits below."""
-    value = 100.0 * float(fraction)
-    if not math.isfinite(value):
-        return "nan"
-    if value == 0.0:
-        return "0"
-    if abs(value) >= 1.0:
-        return f"{value:.1f}"
-    return np.format_float_positional(value, precision=2, unique=False, fractional=False, trim="-")
-
-
 def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per scene: which mapping is best at ``n_processes`` and which loss decided.
 
@@ -488,9 +479,9 @@ def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tupl
         parts = [
             f"{scene.capitalize()} at {n_processes} processes: {best} is best with a user speed-up of "
             f"{best_text} (best real-time speed-up: {best_real} {real_text}).",
-            f"Imbalance costs up to {quote(worst_imbalance, 'imbalance_loss_pct', _percent(imbalance))}% "
+            f"Imbalance costs up to {quote(worst_imbalance, 'imbalance_loss_pct', format_percent(imbalance))}% "
             f"({worst_imbalance}), coherence "
-            + (f"at most {quote(worst_coherence, 'coherence_loss_pct', _percent(coherence))}% ({worst_coherence})"
+            + (f"at most {quote(worst_coherence, 'coherence_loss_pct', format_percent(coherence))}% ({worst_coherence})"
                if coherence > 0 else "nothing (no mapping lost to it)")
             + f": {decided} decided.",
         ]
@@ -498,9 +489,9 @@ def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tupl
         for mapping in names:
             row = rows.loc[mapping]
             speed = quote(mapping, "speedup_user", f"{row['speedup_user']:.2f}")
-            lost = quote(mapping, "imbalance_loss_pct", _percent(row["imbalance_loss"]))
+            lost = quote(mapping, "imbalance_loss_pct", format_percent(row["imbalance_loss"]))
             value = float(row["coherence_loss"])
-            coh = quote(mapping, "coherence_gain_pct" if value < 0 else "coherence_loss_pct", _percent(abs(value)))
+            coh = quote(mapping, "coherence_gain_pct" if value < 0 else "coherence_loss_pct", format_percent(abs(value)))
             details.append(f"{mapping} {speed} (imbalance loss {lost}%, coherence {'gain' if value < 0 else 'loss'} "
                            f"{coh}%)")
         parts.append("Per mapping: " + "; ".join(details) + ".")
@@ -633,22 +624,6 @@ def paper_summary(result: PaperResult) -> dict:
     })
 
 
-def _table_html(frame: pd.DataFrame, digits: int = 3) -> str:
-    def fmt(value):
-        if isinstance(value, (float, np.floating)):
-            if not math.isfinite(value):
-                return ""
-            return f"{value:,.{digits}f}" if abs(value) < 1e6 else f"{value:,.0f}"
-        if isinstance(value, (int, np.integer)):
-            return f"{int(value):,}"
-        return html.escape(str(value))
-
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
-    body = "".join("<tr>" + "".join(f"<td>{fmt(v)}</td>" for v in row) + "</tr>"
-                   for row in frame.itertuples(index=False))
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
 h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
 table{border-collapse:collapse;font-size:.85em;margin:.6em 0}th,td{border:1px solid #ddd;padding:.2em .5em;
@@ -691,18 +666,18 @@ processes of other users: the study's machine was shared, and every process, not
 gain (negative loss) comes from processes sharing a CPU's caches or from smaller per-process working sets.</p>
 
 <h2>The scenes beside the study's table</h2>
-{_table_html(STUDY_TABLE, 1)}
+{table_html(STUDY_TABLE, 1)}
 <p class="note">Study: 512&times;512, BSP tree. Ours: intersection tests at {p['size']}&times;{p['size']} with an SAH
 kd-tree, which tests far fewer primitives per ray than the study's BSP; fitted seconds are the calibrated cost
 model's sequential S time, against the study's time scaled to our pixel count (target).</p>
-{_table_html(table, 3)}
+{table_html(table, 3)}
 
 <h2>Cost-model calibration</h2>
 <p class="note">Non-negative least squares ({e(cal['weighting'])} errors) of the study's sequential times (minus our
 simulated memory cycles) on our operation counters, {len(cal['fitted'])} fitted operations, the rest held at the alpha8400 defaults.
 RMS relative error {cal['rms_relative_error'] * 100:.1f}%. The cycles per test absorb our tree's smaller test
 counts: they are what the study's tracer would have paid to do our work.</p>
-{_table_html(model, 1)}{_table_html(residuals, 3)}{_table_html(fixed, 1)}
+{table_html(model, 1)}{table_html(residuals, 3)}{table_html(fixed, 1)}
 
 <h2>Speed-up from real time</h2>
 <img alt="speed-up from real time" src="data:image/png;base64,{images['speedup_real']}">
@@ -710,24 +685,10 @@ counts: they are what the study's tracer would have paid to do our work.</p>
 <img alt="speed-up from user time" src="data:image/png;base64,{images['speedup_user']}">
 
 <h2>Efficiency decomposition at {p['verdict_n_processes']} processes</h2>
-{_table_html(decomposition, 3)}
+{table_html(decomposition, 3)}
 <p class="note">Every run is in paper.csv; parameters, versions, calibration and verdicts in paper.json.</p>
 </body></html>
 """
-
-
-def _write_bytes_atomic(path: Path, data: bytes) -> None:
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def _csv(frame: pd.DataFrame) -> str:
@@ -748,10 +709,10 @@ def write_paper(result: PaperResult, out="paper") -> Path:
                                                   title="Speed-up from user time (worst process)")),
     }
     summary = paper_summary(result)
-    _write_bytes_atomic(path / "paper.csv", _csv(result.runs).encode())
-    _write_bytes_atomic(path / "scenes.csv", _csv(result.table).encode())
-    _write_bytes_atomic(path / "paper.json", (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
+    write_bytes_atomic(path / "paper.csv", _csv(result.runs).encode())
+    write_bytes_atomic(path / "scenes.csv", _csv(result.table).encode())
+    write_bytes_atomic(path / "paper.json", (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
     for name, data in pngs.items():
-        _write_bytes_atomic(path / f"{name}.png", data)
-    _write_bytes_atomic(path / "index.html", paper_html(result, pngs).encode("utf-8"))
+        write_bytes_atomic(path / f"{name}.png", data)
+    write_bytes_atomic(path / "index.html", paper_html(result, pngs).encode("utf-8"))
     return path

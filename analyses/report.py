@@ -39,6 +39,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from analyses.html import table_html
+from cachesim.config import write_text_atomic
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
@@ -505,22 +508,6 @@ def _img(data: str, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
 
 
-def _table_html(frame: pd.DataFrame, digits: int = 3) -> str:
-    def fmt(value):
-        if isinstance(value, (float, np.floating)):
-            if not math.isfinite(value):
-                return ""
-            return f"{value:,.{digits}f}" if abs(value) < 1e6 else f"{value:,.0f}"
-        if isinstance(value, (int, np.integer)):
-            return f"{int(value):,}"
-        return html.escape(str(value))
-
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
-    body = "".join("<tr>" + "".join(f"<td>{fmt(v)}</td>" for v in row) + "</tr>"
-                   for row in frame.itertuples(index=False))
-    return f'<div class="wide"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
-
-
 def _html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
           caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress) -> str:
     from matplotlib.figure import Figure
@@ -636,23 +623,23 @@ A negative coherence loss (a gain) means processes sharing a CPU warmed each oth
 
 <h2>The scene</h2>
 <div class="row"><div>{_img(image_b64, 'rendered image')}</div>
-<div>{_table_html(counts_table)}<p>{scene_summary['lights']} lights, {scene_summary['materials']} materials,
-maximum depth {scene_summary['max_depth']}.</p>{_table_html(totals_table)}</div>
-<div>{_table_html(tree_table, 2)}</div></div>
+<div>{table_html(counts_table)}<p>{scene_summary['lights']} lights, {scene_summary['materials']} materials,
+maximum depth {scene_summary['max_depth']}.</p>{table_html(totals_table)}</div>
+<div>{table_html(tree_table, 2)}</div></div>
 <h3>Bytes of scene data against each cache size</h3>
 <div class="row"><div>{_img(figures['bytes'], 'scene bytes per record kind')}</div>
-<div>{_table_html(bytes_table, 3)}</div></div>
+<div>{table_html(bytes_table, 3)}</div></div>
 
 <h2>Hit rates and misses per ray, 1 and {verdict_n} processes</h2>
 {_img(figures['levels'], 'miss rates and misses per ray per level')}
-{_table_html(level_table, 4)}
+{table_html(level_table, 4)}
 
 <h2>Miss-ratio curves</h2>
 <p class="note">From exact LRU reuse distances of the one-process stream in each mapping's pixel order
 (S, P and R share the scan order), for a fully associative LRU cache of each size; dotted lines mark the
 hierarchy's caches. Real caches with lower associativity miss more.</p>
 {_img(figures['curves'], 'miss-ratio curves')}
-{_table_html(curve_points, 5)}
+{table_html(curve_points, 5)}
 
 <h2>Cost per pixel</h2>
 <p class="note">Compute cycles per pixel from the cost model (memory stalls excluded): where the work is,
@@ -676,7 +663,7 @@ number of CPUs until every CPU is shared.</p>
 <h2>Efficiency decomposition</h2>
 <p class="note">Efficiency = load balance &times; coherence &times; dispatch (factors), at {verdict_n}
 {'' if top_n == verdict_n else f'and {top_n} '}processes; losses are 1 &minus; factor, in percent.</p>
-{_table_html(decomposition, 3)}
+{table_html(decomposition, 3)}
 
 <p class="note">All numbers are in results.csv (tidy long form) and summary.json beside this page.</p>
 </body></html>
@@ -690,28 +677,10 @@ number of CPUs until every CPU is shared.</p>
 def write_report(report: Report, out) -> Path:
     """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out``, each atomically."""
     path = prepare_output_folder(out)
-    _write_atomic(path / "results.csv", report.results.to_csv(index=False, lineterminator="\n"))
-    _write_atomic(path / "summary.json", json.dumps(report.summary, indent=2, allow_nan=False) + "\n")
-    _write_atomic(path / "index.html", report.html)
+    write_text_atomic(path / "results.csv", report.results.to_csv(index=False, lineterminator="\n"))
+    write_text_atomic(path / "summary.json", json.dumps(report.summary, indent=2, allow_nan=False) + "\n")
+    write_text_atomic(path / "index.html", report.html)
     return path
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write to a temporary file beside ``path`` and rename it; permissions follow the umask
-    (a report is meant to be shared, unlike ``mkstemp``'s private 0600)."""
-    import tempfile
-
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8", newline="\n") as stream:
-            stream.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def make_report(scene="balls", out=None, **options) -> Report:

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from analyses import paper
+from analyses.verdict import format_percent
 from coherence.cli import main
 
 SCENES = ["tetra", "balls"]
@@ -121,7 +122,7 @@ def test_verdict_numbers_come_from_the_run_table(result):
             column = "imbalance_loss" if row.metric.startswith("imbalance") else "coherence_loss"
             value = float(run[column])
             assert (value < 0) == row.metric.endswith("gain_pct")
-            assert row.value == float(paper._percent(abs(value)))
+            assert row.value == float(format_percent(abs(value)))
             assert row.value == pytest.approx(100 * abs(value), abs=0.051)
     for verdict in result.verdicts.itertuples():
         rows = runs[runs["scene"] == verdict.scene].set_index("mapping")
