@@ -112,7 +112,6 @@ def _table(rep: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-
     from tracer.kdtree import KdTreeConfig
     from tracer.render import render, save_png
 
