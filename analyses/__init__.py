@@ -9,7 +9,7 @@ from importlib import import_module
 
 _EXPORTS = {
     "make_report": "analyses.report", "build_report": "analyses.report", "write_report": "analyses.report",
-    "Report": "analyses.report", "check_output_folder": "analyses.report",
+    "Report": "analyses.report", "check_output_folder": "analyses.output",
     "cached_trace": "analyses.traces", "default_cache_dir": "analyses.traces", "trace_key": "analyses.traces",
     "Verdict": "analyses.verdict",
 }

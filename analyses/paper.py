@@ -43,7 +43,6 @@ import html
 import io
 import json
 import math
-import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +51,7 @@ import numpy as np
 import pandas as pd
 
 from analyses.html import table_html
+from analyses.output import check_output_folder
 from analyses.verdict import format_percent
 from cachesim.config import write_bytes_atomic
 
@@ -171,21 +171,6 @@ def check_process_counts(n_processes) -> list[int]:
             raise ValueError(f"process counts must be integers >= 1, got {n!r}")
         counts.append(int(n))
     return sorted({1, *counts})
-
-
-def check_output_folder(out) -> Path:
-    """Raise unless ``out`` is, or can become, a writable folder; create nothing."""
-    path = Path(out).expanduser()
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"output folder {str(out)!r} exists and is not a folder")
-    probe = path
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ValueError(f"output folder {str(out)!r}: {str(probe)!r} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise PermissionError(f"output folder {str(out)!r}: {str(probe)!r} is not writable")
-    return path
 
 
 def _check_size(size) -> int:

@@ -393,7 +393,8 @@ def room(scale: float = 1.0, seed: int = 1999) -> Scene:
             b.material(floor_shades[int(rng.integers(3))])
             b.polygon([(xa, ya, 0.0), (xb, ya, 0.0), (xb, yb, 0.0), (xa, yb, 0.0)])
     scene = b.build()
-    assert scene.n_elements == target  # construction invariant, not user input
+    if scene.n_elements != target:  # a construction invariant, not user input
+        raise RuntimeError(f"built {scene.n_elements} elements instead of {target}: a bug in this generator")
     return scene
 
 
@@ -514,5 +515,6 @@ def fluid(scale: float = 1.0, seed: int = 1999) -> Scene:
     for x, y, z in zip(r * np.cos(theta), r * np.sin(theta), surface_height(r)):
         b.sphere((x, y, z - 0.35 * spacing), 0.75 * spacing)
     scene = b.build()
-    assert scene.n_elements == target  # construction invariant, not user input
+    if scene.n_elements != target:  # a construction invariant, not user input
+        raise RuntimeError(f"built {scene.n_elements} elements instead of {target}: a bug in this generator")
     return scene

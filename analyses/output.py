@@ -1,0 +1,53 @@
+"""Output folders: checked before any long work starts, then created."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def check_output_folder(out) -> Path:
+    """Raise unless ``out`` is, or can become, a writable folder; create nothing.
+
+    Raises
+    ------
+    ValueError
+        ``out`` is an existing file, or a parent on its path is a file.
+    PermissionError
+        ``out`` (or its nearest existing parent) is not writable.
+    """
+    path = Path(out).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"output folder {str(out)!r} exists and is not a folder")
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"output folder {str(out)!r}: {str(probe)!r} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise PermissionError(f"output folder {str(out)!r}: {str(probe)!r} is not writable")
+    return path
+
+
+def prepare_output_folder(out) -> Path:
+    """Check ``out`` (see :func:`check_output_folder`), create it and prove it writable with a probe file.
+
+    Raises
+    ------
+    ValueError, PermissionError
+        With the folder named, when it cannot be created or written.
+    """
+    import tempfile
+
+    path = check_output_folder(out)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        handle, probe = tempfile.mkstemp(dir=path, prefix=".probe.", suffix=".tmp")
+        os.close(handle)
+        os.unlink(probe)
+    except PermissionError as error:
+        raise PermissionError(f"output folder {str(out)!r} is not writable: {error.strerror}") from None
+    except OSError as error:
+        raise ValueError(f"cannot create output folder {str(out)!r}: {error.strerror}") from None
+    return path
