@@ -35,7 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from tracer.geometry import element_normal, prepare_geometry
-from tracer.kdtree import KdTree, KdTreeConfig, brute_force, build_kdtree, traverse
+from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
+from tracer.traverse import brute_force, traverse
 from tracer.scene import Scene
 from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versions
 
