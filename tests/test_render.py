@@ -1,11 +1,13 @@
 """Renderer and access trace: logging is exact, complete and harmless."""
 import json
 
+import numba
 import numpy as np
 import pytest
 
 from scene_factory import KINDS, one_sphere, random_scene
 from tracer.kdtree import KdTreeConfig, build_kdtree
+import tracer.render as render_module
 from tracer.render import camera_rays, closest_hit, render, save_png
 from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, pack, unpack
 
@@ -147,6 +149,30 @@ def test_chunked_trace_equals_in_memory_trace(tmp_path, mixed):
     assert chunked.trace.totals() == full.totals()
     with pytest.raises(ValueError, match="memory_budget"):
         render(scene, tree, size=12, memory_budget=budget)
+
+
+def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):
+    # records are logged into a fixed slot per work item of CHUNK samples; an
+    # item that overflows its slot is traced again. Slots of the median item
+    # size make about half the items overflow, three items per batch give
+    # several batches, and one thread against all must not matter.
+    scene, tree = mixed
+    ref = render(scene, tree, size=24)
+    per_item = np.add.reduceat(np.diff(ref.trace.pixel_offsets),
+                               np.arange(0, ref.trace.n_pixels, render_module.CHUNK))
+    slot = int(np.median(per_item))
+    monkeypatch.setattr(render_module, "BATCH_CHUNKS", 3)
+    monkeypatch.setattr(render_module, "SLOT_BUFFER_BYTES", 4 * slot * 3)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        one = render(scene, tree, size=24)
+    finally:
+        numba.set_num_threads(threads)
+    assert 0 < np.sum(per_item > slot) < len(per_item)
+    assert np.array_equal(one.trace.records, ref.trace.records)
+    assert np.array_equal(one.trace.pixel_offsets, ref.trace.pixel_offsets)
+    assert np.array_equal(one.image, ref.image) and np.array_equal(one.counters, ref.counters)
 
 
 def test_trace_load_errors(tmp_path):

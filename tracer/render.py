@@ -20,9 +20,11 @@ Rules (SPD test procedure, see ``reference/spd/README.md``):
   depth (primary = 1) is below the scene's ``max_depth``;
 * any hit blocks a shadow ray (transparent objects cast full shadows).
 
-Logging is deterministic: a first pass counts each pixel's records, a prefix
-sum gives offsets, a second pass writes them, both parallel over pixels; the
-image does not depend on logging (same arithmetic, bit for bit).
+Logging takes one pass, parallel over work items of 64 samples handed out
+dynamically: each item logs into a slot of a reused buffer, and an item that
+outgrows its slot is traced again into a buffer of the size it reported.
+Records come out in sample order whatever the schedule, and the image does
+not depend on logging (same arithmetic, bit for bit).
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -42,7 +45,9 @@ from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versio
 
 N_COUNTERS = len(COUNTER_NAMES)
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
-STACK = 64
+CHUNK = 64  # samples per parallel work item
+BATCH_CHUNKS = 128  # work items per kernel call when logging
+SLOT_BUFFER_BYTES = 256 << 20  # most a logging batch's slots take
 
 
 @dataclass(eq=False)
@@ -59,8 +64,8 @@ class RenderResult:
         The access log (``log=True``), possibly memory-mapped from disk.
     tree : KdTree
     timings : dict
-        Seconds: ``build``, ``count`` (first pass), ``fill`` (second pass),
-        ``render`` (a pass without logging), ``total``.
+        Seconds: ``build``, ``trace`` (the logged pass) or ``render`` (the
+        pass without logging), ``total``.
     width, height : int
         Samples per row and rows (W + 1, H + 1 with corner rays).
     """
@@ -148,7 +153,7 @@ def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.
 def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
                   nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
                   mats, lights, ambient, background,
-                  rec, pos, write, cnt, st_node, st_t0, st_t1, rays):
+                  rec, pos, limit, cnt, st_node, st_t0, st_t1, rays):
     # Whitted ray tree, depth first with an explicit stack (rays: (S, 11) =
     # origin, direction, weight rgb, depth, type); pushing refraction before
     # reflection reproduces the recursive order (reflection subtree first).
@@ -180,7 +185,7 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
         cnt[ray_col] += 1
         t, e, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
                              rox, roy, roz, rdx, rdy, rdz, tmin, np.inf, False,
-                             rec, pos, write, cnt, st_node, st_t0, st_t1)
+                             rec, pos, limit, cnt, st_node, st_t0, st_t1)
         if e < 0:
             cr += wr * background[0]
             cg += wg * background[1]
@@ -191,7 +196,7 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
         k = np.int64(ekind[e])
         nx, ny, nz = element_normal(k, eidx[e], geo, hx, hy, hz)
         m = emat[e]
-        if write:
+        if pos < limit:
             rec[pos] = (7 << 28) | m
         pos += 1
         cnt[16] += 1
@@ -201,7 +206,7 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
         lg = ambient * kd * mg
         lb = ambient * kd * mb
         for li in range(n_lights):
-            if write:
+            if pos < limit:
                 rec[pos] = (8 << 28) | li
             pos += 1
             cnt[17] += 1
@@ -216,7 +221,7 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
             cnt[2] += 1
             ts, es, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
                                    hx, hy, hz, lx, ly, lz, eps, dist, True,
-                                   rec, pos, write, cnt, st_node, st_t0, st_t1)
+                                   rec, pos, limit, cnt, st_node, st_t0, st_t1)
             if es >= 0:
                 cnt[3] += 1
                 continue
@@ -281,46 +286,61 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
     return cr, cg, cb, pos
 
 
+@njit(cache=True, error_model="numpy")
+def _trace_chunk(p0, p1, pos, limit, cam, hither, eps, max_depth,
+                 nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                 mats, lights, ambient, background,
+                 rec, image, counters, counts):
+    # samples p0..p1 one after another, records from rec[pos] on (stored
+    # while below limit); returns the position after the last record.
+    # (A separate function: inside a prange body numba's copy propagation
+    # merged ``first = pos`` with the updated ``pos``.)
+    cnt = np.zeros(counters.shape[1], np.int64)
+    st_node = np.empty(64, np.int64)
+    st_t0 = np.empty(64)
+    st_t1 = np.empty(64)
+    rays = np.empty((2 * max_depth + 2, 11))
+    sx = np.int64(cam[15])
+    for p in range(p0, p1):
+        i = p % sx
+        j = p // sx
+        u = (i - cam[13]) * cam[12]
+        v = (cam[14] - j) * cam[12]
+        dx = cam[3] + u * cam[6] + v * cam[9]
+        dy = cam[4] + u * cam[7] + v * cam[10]
+        dz = cam[5] + u * cam[8] + v * cam[11]
+        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+        cnt[:] = 0
+        first = pos
+        r, g, b, pos = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
+                                     hither, eps, max_depth,
+                                     nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+                                     mats, lights, ambient, background,
+                                     rec, pos, limit, cnt, st_node, st_t0, st_t1, rays)
+        image[p, 0] = r
+        image[p, 1] = g
+        image[p, 2] = b
+        counters[p, :] = cnt
+        counts[p] = pos - first
+    return pos
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
-def _render_kernel(p0, p1, cam, hither, eps, max_depth,
+def _render_kernel(chunk_start, chunk_base, chunk_cap, n_samples, cam, hither, eps, max_depth,
                    nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
                    mats, lights, ambient, background,
-                   mode, offsets, rec, image, counters, counts):
-    # mode 0: image and counters; 1: also count records per pixel;
-    # 2: also write records of pixels p0..p1 into rec (rec[0] = offsets[p0])
-    write = mode == 2
-    sx = np.int64(cam[15])
-    base = offsets[p0] if write else 0
-    n_chunks = (p1 - p0 + 63) // 64
-    for c in prange(n_chunks):
-        # scratch buffers once per chunk of 64 samples, not per sample
-        cnt = np.zeros(counters.shape[1], np.int64)
-        st_node = np.empty(64, np.int64)
-        st_t0 = np.empty(64)
-        st_t1 = np.empty(64)
-        rays = np.empty((2 * max_depth + 2, 11))
-        for p in range(p0 + 64 * c, min(p1, p0 + 64 * c + 64)):
-            i = p % sx
-            j = p // sx
-            u = (i - cam[13]) * cam[12]
-            v = (cam[14] - j) * cam[12]
-            dx = cam[3] + u * cam[6] + v * cam[9]
-            dy = cam[4] + u * cam[7] + v * cam[10]
-            dz = cam[5] + u * cam[8] + v * cam[11]
-            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-            cnt[:] = 0
-            start = offsets[p] - base if write else 0
-            r, g, b, end = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
-                                         hither, eps, max_depth,
-                                         nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                                         mats, lights, ambient, background,
-                                         rec, start, write, cnt, st_node, st_t0, st_t1, rays)
-            image[p, 0] = r
-            image[p, 1] = g
-            image[p, 2] = b
-            counters[p, :] = cnt
-            if mode == 1:
-                counts[p] = end - start
+                   rec, image, counters, counts, chunk_used):
+    # Work item k covers samples chunk_start[k] .. + CHUNK (fewer at the end)
+    # and logs its records, sample after sample, into rec[chunk_base[k] :
+    # chunk_base[k] + chunk_cap[k]]; chunk_used[k] is how many it produced
+    # (more than chunk_cap[k]: the slot overflowed, nothing past it stored).
+    for k in prange(chunk_start.shape[0]):
+        p0 = chunk_start[k]
+        end = _trace_chunk(p0, min(n_samples, p0 + CHUNK), chunk_base[k], chunk_base[k] + chunk_cap[k],
+                           cam, hither, eps, max_depth, nodes, fnodes, pidx, blo, bhi,
+                           ekind, eidx, emat, geo, mats, lights, ambient, background,
+                           rec, image, counters, counts)
+        chunk_used[k] = end - chunk_base[k]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -334,7 +354,7 @@ def _closest_kernel(orig, dirs, tmin, tmax, nodes, fnodes, pidx, blo, bhi, ekind
         st_t1 = np.empty(64)
         t, e, _ = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
                            orig[r, 0], orig[r, 1], orig[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
-                           tmin[r], tmax[r], False, dummy, 0, False, cnt, st_node, st_t0, st_t1)
+                           tmin[r], tmax[r], False, dummy, 0, 0, cnt, st_node, st_t0, st_t1)
         out_t[r] = t
         out_e[r] = e
         out_nodes[r] = cnt[8]
@@ -456,6 +476,67 @@ def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.
     return out_t, out_e
 
 
+class _GrowingRecords:
+    """A uint32 array that grows in place (``realloc``) as records arrive."""
+
+    def __init__(self, memory_budget: int):
+        self.memory_budget = memory_budget
+        self.data = np.empty(1 << 20, np.uint32)
+        self.n = 0
+
+    def extend(self, pieces) -> None:
+        need = self.n + sum(len(piece) for piece in pieces)
+        if 4 * need > self.memory_budget:
+            raise ValueError(f"the trace needs more than memory_budget ({self.memory_budget} bytes); "
+                             f"pass trace_path to write it to disk in chunks")
+        if need > len(self.data):
+            self.data.resize(max(need, 2 * len(self.data)), refcheck=False)
+        for piece in pieces:
+            self.data[self.n:self.n + len(piece)] = piece
+            self.n += len(piece)
+
+    def finish(self) -> np.ndarray:
+        self.data.resize(self.n, refcheck=False)
+        return self.data
+
+
+def _log_samples(args, image, counters, counts, memory_budget, sink):
+    """Trace every sample once with logging, handing records to ``sink`` in sample order.
+
+    ``sink`` receives each batch as a list of arrays (views of a reused
+    buffer: copy them before the next batch).
+
+    Samples run in batches of ``BATCH_CHUNKS`` work items; each item logs
+    into its own slot of one reused buffer (memory is touched only where
+    records land, so generous slots cost address space, not RAM). An item
+    that overflows its slot is traced again into a buffer of the exact size
+    it reported. Output depends on neither the slot size nor the schedule.
+    """
+    n_pix = args[0]
+    chunks = np.arange(0, n_pix, CHUNK, dtype=np.int64)
+    # slots stay within the memory budget (and SLOT_BUFFER_BYTES) together
+    slot = max(1, min(memory_budget, SLOT_BUFFER_BYTES) // (4 * BATCH_CHUNKS))
+    buffer = np.empty(slot * min(BATCH_CHUNKS, len(chunks)), np.uint32)
+    for b0 in range(0, len(chunks), BATCH_CHUNKS):
+        start = chunks[b0:b0 + BATCH_CHUNKS]
+        k = len(start)
+        base = np.arange(k, dtype=np.int64) * slot
+        used = np.empty(k, np.int64)
+        with numba.parallel_chunksize(1):
+            _render_kernel(start, base, np.full(k, slot, np.int64), *args, buffer, image, counters, counts, used)
+        pieces = [buffer[base[j]:base[j] + used[j]] for j in range(k)]
+        over = np.flatnonzero(used > slot)
+        if len(over):
+            exact_base = np.concatenate([[0], np.cumsum(used[over])[:-1]]).astype(np.int64)
+            exact = np.empty(int(used[over].sum()), np.uint32)
+            with numba.parallel_chunksize(1):
+                _render_kernel(start[over], exact_base, used[over], *args, exact,
+                               image, counters, counts, np.empty(len(over), np.int64))
+            for j, b in zip(over, exact_base):
+                pieces[j] = exact[b:b + used[j]]
+        sink(pieces)
+
+
 def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: bool = False,
            log: bool = True, kd_config: KdTreeConfig | None = None, max_depth: int | None = None,
            trace_path=None, memory_budget: int = DEFAULT_MEMORY_BUDGET,
@@ -522,20 +603,18 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     counters = np.zeros((n_pix, N_COUNTERS), np.int64)
     counts = np.zeros(n_pix, np.int64)
     offsets = np.zeros(n_pix + 1, np.int64)
-    args = (cam, hither, eps, depth, nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
+    args = (n_pix, cam, hither, eps, depth, nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
             mats, lights, scale, background)
-    empty = np.empty(0, np.uint32)
     trace = None
     t0 = time.perf_counter()
     if not log:
-        _render_kernel(0, n_pix, *args, 0, offsets, empty, image, counters, counts)
+        chunks = np.arange(0, n_pix, CHUNK, dtype=np.int64)
+        zeros = np.zeros(len(chunks), np.int64)
+        with numba.parallel_chunksize(1):
+            _render_kernel(chunks, zeros, zeros, *args, np.empty(0, np.uint32), image, counters, counts,
+                           np.empty(len(chunks), np.int64))
         timings["render"] = time.perf_counter() - t0
     else:
-        _render_kernel(0, n_pix, *args, 1, offsets, empty, image, counters, counts)
-        timings["count"] = time.perf_counter() - t0
-        np.cumsum(counts, out=offsets[1:])
-        total = int(offsets[-1])
-        t1 = time.perf_counter()
         meta = {
             "scene": scene.name, "width": sx, "height": sy, "image_size": [width, height],
             "corner_rays": bool(corner_rays), "max_depth": depth, "hither": hither, "epsilon": eps,
@@ -554,33 +633,21 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
             },
         }
         meta.update(metadata or {})
-        scratch_image = np.empty_like(image)
-        scratch_counters = np.empty_like(counters)
-        if 4 * total <= memory_budget:
-            records = np.empty(total, np.uint32)
-            _render_kernel(0, n_pix, *args, 2, offsets, records, scratch_image, scratch_counters, counts)
-            trace = AccessTrace(offsets, records, counters, sx, sy, meta)
-            if trace_path is not None:
-                trace.save(trace_path)
+        if trace_path is None:
+            records = _GrowingRecords(memory_budget)
+            _log_samples(args, image, counters, counts, memory_budget, records.extend)
+            np.cumsum(counts, out=offsets[1:])
+            trace = AccessTrace(offsets, records.finish(), counters, sx, sy, meta)
         else:
-            if trace_path is None:
-                raise ValueError(f"the trace needs {4 * total} bytes, more than memory_budget "
-                                 f"({memory_budget}); pass trace_path to write it to disk in chunks")
-            per_chunk = max(1, memory_budget // 4)
-            with TraceWriter(trace_path, total) as writer:
-                p = 0
-                buf = np.empty(min(per_chunk, total), np.uint32)
-                while p < n_pix:
-                    # greedily take pixels while their records fit the buffer
-                    q = int(np.searchsorted(offsets, offsets[p] + per_chunk, side="right")) - 1
-                    q = min(max(q, p + 1), n_pix)
-                    need = int(offsets[q] - offsets[p])
-                    chunk = buf[:need] if need <= len(buf) else np.empty(need, np.uint32)
-                    _render_kernel(p, q, *args, 2, offsets, chunk, scratch_image, scratch_counters, counts)
-                    writer.records[offsets[p]:offsets[q]] = chunk
-                    p = q
-                trace = writer.finish(offsets, counters, sx, sy, meta)
-        timings["fill"] = time.perf_counter() - t1
+            with TraceWriter(trace_path) as writer:
+                _log_samples(args, image, counters, counts, memory_budget,
+                             lambda pieces: [writer.append(piece) for piece in pieces])
+                np.cumsum(counts, out=offsets[1:])
+                if 4 * int(offsets[-1]) <= memory_budget:
+                    trace = writer.finish(offsets, counters, sx, sy, meta, mmap=False)
+                else:
+                    trace = writer.finish(offsets, counters, sx, sy, meta)
+        timings["trace"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
                         timings=timings, width=sx, height=sy)

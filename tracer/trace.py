@@ -279,19 +279,20 @@ def _publish(tmp: Path, directory: Path) -> None:
 
 
 class TraceWriter:
-    """Writes a trace directly to disk (used when it exceeds a memory budget).
+    """Writes a trace's records straight to disk as they are produced.
 
-    The records file is created with its final size and filled in slices by
-    the renderer; :meth:`finish` adds the other files and publishes the
-    directory atomically. Use as a context manager: on error the temporary
-    directory is removed.
+    Records arrive in sample order through :meth:`append` (their total is
+    not known in advance); :meth:`finish` completes the ``records.npy``
+    header, adds the other files and publishes the directory atomically. Use
+    as a context manager: on error the temporary directory is removed.
     """
 
-    def __init__(self, directory, n_records: int):
+    def __init__(self, directory):
         self.directory = Path(directory)
         self.tmp = _temp_sibling(self.directory)
-        self.records = np.lib.format.open_memmap(self.tmp / "records.npy", mode="w+",
-                                                 dtype=np.uint32, shape=(int(n_records),))
+        self.n_records = 0
+        self._file = open(self.tmp / "records.npy", "wb")
+        self._file.write(_npy_header(0))  # rewritten with the final length
 
     def __enter__(self):
         return self
@@ -301,17 +302,34 @@ class TraceWriter:
             self.abort()
         return False
 
+    def append(self, records) -> None:
+        """Append records (uint32, in sample order)."""
+        records = np.ascontiguousarray(records, dtype=np.uint32)
+        self._file.write(memoryview(records).cast("B"))
+        self.n_records += len(records)
+
     def abort(self) -> None:
-        self.records = None
+        if not self._file.closed:
+            self._file.close()
         shutil.rmtree(self.tmp, ignore_errors=True)
 
-    def finish(self, pixel_offsets, counters, width, height, metadata) -> AccessTrace:
-        """Write the remaining files, publish, and return the trace memory-mapped."""
-        self.records.flush()
-        n = int(self.records.shape[0])
-        self.records = None
+    def finish(self, pixel_offsets, counters, width, height, metadata, *, mmap: bool = True) -> AccessTrace:
+        """Write the remaining files, publish, and return the trace (memory-mapped by default)."""
+        n = self.n_records
+        if int(pixel_offsets[-1]) != n:
+            raise ValueError(f"pixel_offsets end at {int(pixel_offsets[-1])} but {n} records were written")
+        self._file.seek(0)
+        self._file.write(_npy_header(n))
+        self._file.close()
         np.save(self.tmp / "pixel_offsets.npy", np.asarray(pixel_offsets, dtype=np.int64))
         np.save(self.tmp / "counters.npy", np.asarray(counters, dtype=np.int64))
         _write_meta(self.tmp, width, height, n, metadata)
         _publish(self.tmp, self.directory)
-        return AccessTrace.load(self.directory, mmap=True)
+        return AccessTrace.load(self.directory, mmap=mmap)
+
+
+def _npy_header(n_records: int) -> bytes:
+    """A fixed-length (128-byte) ``.npy`` v1.0 header for ``n_records`` uint32."""
+    text = "{'descr': '<u4', 'fortran_order': False, 'shape': (%d,), }" % n_records
+    text = text.ljust(128 - 10 - 1) + "\n"
+    return b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text.encode("latin1")

@@ -18,12 +18,13 @@ from tracer.geometry import hit_element
 @njit(cache=True, error_model="numpy")
 def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
              ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit,
-             rec, pos, write, cnt, st_node, st_t0, st_t1):
+             rec, pos, limit, cnt, st_node, st_t0, st_t1):
     """Closest (or any, with ``anyhit``) hit of a ray in ``(tmin, tmax)``.
 
-    Every node visit, leaf index-entry read and primitive test is appended to
-    ``rec`` at ``pos`` when ``write`` (packed ``kind << 28 | index``) and
-    counted in ``cnt``; ``pos`` advances either way.
+    Every node visit, leaf index-entry read and primitive test is counted in
+    ``cnt`` and advances ``pos``; its record (packed ``kind << 28 | index``)
+    is stored at ``rec[pos]`` while ``pos < limit`` (``limit = 0`` logs
+    nothing, and a caller whose slot overflows learns the size it needs).
 
     Returns
     -------
@@ -58,7 +59,7 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             t0 = max(t0, ta)
             t1 = min(t1, tb)
     if miss or t0 > t1:
-        if write:
+        if pos < limit:
             rec[pos] = 0
         pos += 1
         cnt[8] += 1
@@ -68,7 +69,7 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
     while True:
         if best_t < t0:
             break  # stacked nodes lie even farther along the ray
-        if write:
+        if pos < limit:
             rec[pos] = node
         pos += 1
         cnt[8] += 1
@@ -110,9 +111,11 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             e = pidx[j]
             k = np.int64(ekind[e])
             i = eidx[e]
-            if write:
+            if pos + 1 < limit:
                 rec[pos] = (1 << 28) | j
                 rec[pos + 1] = ((2 + k) << 28) | i
+            elif pos < limit:
+                rec[pos] = (1 << 28) | j
             pos += 2
             cnt[10] += 1
             cnt[11 + k] += 1
