@@ -554,7 +554,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         Trace (W+1) x (H+1) rays through the pixel corners (SPD counting)
         instead of W x H through the centres.
     log : bool
-        Produce the :class:`AccessTrace` (two passes) or only the image and
+        Produce the :class:`AccessTrace` (one logged pass) or only the image and
         counters (one pass).
     kd_config : KdTreeConfig, optional
     max_depth : int, optional
