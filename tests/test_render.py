@@ -36,6 +36,15 @@ def test_logging_does_not_change_image_or_counters(mixed):
     assert np.array_equal(plain.counters, logged.counters)
 
 
+def test_epsilon_applies_to_both_passes(mixed):
+    scene, tree = mixed
+    plain = render(scene, tree, size=(16, 12), log=False, epsilon=0.05)
+    logged = render(scene, tree, size=(16, 12), log=True, epsilon=0.05)
+    assert np.array_equal(plain.image, logged.image)
+    assert np.array_equal(plain.counters, logged.counters)
+    assert logged.trace.metadata["epsilon"] == 0.05
+
+
 def test_counters_equal_record_counts_per_pixel(mixed):
     scene, tree = mixed
     res = render(scene, tree, size=24)
@@ -204,6 +213,9 @@ def test_render_validation(mixed):
         render(scene, tree, size=4, max_depth=0)
     with pytest.raises(ValueError, match="scene"):
         render("balls")
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="epsilon"):
+            render(scene, tree, size=4, epsilon=bad)
 
 
 def test_save_png(tmp_path):

@@ -43,3 +43,15 @@ def test_render_help_has_examples(capsys):
     with pytest.raises(SystemExit):
         main(["render", "--help"])
     assert "examples:" in capsys.readouterr().out
+
+
+def test_render_epsilon_option(capsys):
+    from tracer.render import SPD_EPSILON
+    assert main(["render", "balls", "--size", "8", "--no-log", "--epsilon", "spd", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["epsilon"] == SPD_EPSILON
+    assert main(["render", "balls", "--size", "8", "--no-log", "--epsilon", "0.002", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["epsilon"] == 0.002
+    for bad in ("-1", "0", "inf", "tiny"):
+        with pytest.raises(SystemExit):
+            main(["render", "balls", "--size", "8", "--epsilon", bad])
+        assert "--epsilon" in capsys.readouterr().err
