@@ -18,7 +18,7 @@ _EXPORTS = {
     "Machine": "coherence.simulation", "simulate_run": "coherence.simulation", "Run": "coherence.simulation",
     "CostModel": "coherence.cost", "get_cost_model": "coherence.cost",
     "MemoryLayout": "coherence.layout", "RecordLayout": "coherence.layout", "get_layout": "coherence.layout",
-    "Distribution": "coherence.mappings", "Mapping": "coherence.mappings", "Strip": "coherence.mappings",
+    "Distribution": "coherence.distribution", "Mapping": "coherence.mappings", "Strip": "coherence.mappings",
     "Pixel": "coherence.mappings", "Row": "coherence.mappings", "Block": "coherence.mappings",
     "DynamicBlock": "coherence.mappings", "CurveSegments": "coherence.mappings",
     "CurveTiles": "coherence.mappings", "CustomMapping": "coherence.mappings",

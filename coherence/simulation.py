@@ -34,7 +34,7 @@ from cachesim import CacheState, Hierarchy
 from cachesim import _kernels as K
 from coherence.cost import CostModel
 from coherence.layout import PlacedLayout
-from coherence.mappings import Distribution
+from coherence.distribution import Distribution
 
 PLACEMENTS = ("round-robin", "neighbours")
 

@@ -5,7 +5,7 @@ import pytest
 from cachesim import CacheLevel, CacheState, Hierarchy, alpha21164, simulate
 from coherence.cost import CostModel
 from coherence.layout import get_layout
-from coherence.mappings import Distribution
+from coherence.distribution import Distribution
 from coherence.simulation import Machine, processor_sharing_time, simulate_run
 from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
 

@@ -1,0 +1,314 @@
+"""A concrete work distribution: which process renders which pixel, in what order.
+
+A :class:`Distribution` is what a :class:`~coherence.mappings.Mapping` builds
+for a ``width x height`` image and ``n_processes``:
+
+- *tasks*: ordered pixel-index arrays (pixel index ``y * width + x``), stored
+  as CSR (``task_offsets`` into ``task_pixels``); every pixel is in exactly one
+  task, and the order inside a task is the render order;
+- *assignment*: static (``task_process[t]`` owns task ``t``; a process renders
+  its tasks in task order) or dynamic (``task_process is None``: tasks are
+  handed out in task order to the next free process, each hand-out costing
+  ``dispatch_cycles``).
+
+The validation helpers here are shared with :mod:`coherence.mappings`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+__all__ = ["Distribution"]
+
+# --------------------------------------------------------------------------
+# validation helpers
+
+
+def _require_int(owner: str, name: str, value, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
+def _require_cycles(owner: str, name: str, value) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.integer, np.floating))
+        or not math.isfinite(value)
+        or value < 0
+    ):
+        raise ValueError(f"{owner}.{name} must be a finite number >= 0 (cycles), got {value!r}")
+    return float(value)
+
+
+def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iu":
+        if arr.size == 0 and arr.dtype.kind == "f":
+            arr = arr.astype(np.int64)  # np.array([]) is float64 by default
+        else:
+            raise ValueError(f"{owner}: {name} must hold integers, got dtype {arr.dtype}")
+    if arr.ndim != ndim:
+        raise ValueError(f"{owner}: {name} must be {ndim}-dimensional, got shape {arr.shape}")
+    # A private, read-only, contiguous int64 copy: a validated distribution
+    # must not change under its users (several simulations share one).
+    out = np.array(arr, dtype=np.int64, order="C", copy=True)
+    out.flags.writeable = False
+    return out
+
+
+def _pixel_text(pixel: int, width: int) -> str:
+    y, x = divmod(int(pixel), width)
+    return f"pixel {pixel} (x={x}, y={y})"
+
+
+def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> None:
+    """Raise ValueError unless ``pixels`` holds every pixel index exactly once."""
+    n_pixels = width * height
+    if pixels.size and (pixels.min() < 0 or pixels.max() >= n_pixels):
+        bad = pixels[(pixels < 0) | (pixels >= n_pixels)]
+        raise ValueError(
+            f"{owner}: {bad.size} pixel indices outside [0, {n_pixels}) for a "
+            f"{width}x{height} image (first: {int(bad[0])})"
+        )
+    counts = np.bincount(pixels, minlength=n_pixels)
+    missing = np.flatnonzero(counts == 0)
+    duplicated = np.flatnonzero(counts > 1)
+    if missing.size or duplicated.size:
+        parts = []
+        if missing.size:
+            parts.append(f"{missing.size} pixels missing (first: {_pixel_text(missing[0], width)})")
+        if duplicated.size:
+            parts.append(
+                f"{duplicated.size} pixels assigned more than once "
+                f"(first: {_pixel_text(duplicated[0], width)}, {int(counts[duplicated[0]])} times)"
+            )
+        raise ValueError(
+            f"{owner}: every pixel of the {width}x{height} image must be in exactly one task; "
+            + "; ".join(parts)
+        )
+
+
+def _validate_distribution(d: "Distribution") -> None:
+    if not isinstance(d.name, str) or not d.name:
+        raise ValueError(f"Distribution.name must be a non-empty string, got {d.name!r}")
+    owner = f"Distribution {d.name!r}"
+    width = _require_int(owner, "width", d.width, 1)
+    height = _require_int(owner, "height", d.height, 1)
+    n = _require_int(owner, "n_processes", d.n_processes, 1)
+    offsets = _int_array(owner, "task_offsets", d.task_offsets, 1)
+    pixels = _int_array(owner, "task_pixels", d.task_pixels, 1)
+    n_pixels = width * height
+    if offsets.size < 2:
+        raise ValueError(f"{owner}: task_offsets must have at least 2 entries (one task), got {offsets.size}")
+    if offsets[0] != 0 or offsets[-1] != pixels.size:
+        raise ValueError(
+            f"{owner}: task_offsets must start at 0 and end at len(task_pixels) = {pixels.size}, "
+            f"got {int(offsets[0])} .. {int(offsets[-1])}"
+        )
+    if np.any(np.diff(offsets) < 0):
+        t = int(np.flatnonzero(np.diff(offsets) < 0)[0])
+        raise ValueError(f"{owner}: task_offsets must be non-decreasing; task {t} has negative length")
+    if pixels.size != n_pixels:
+        raise ValueError(
+            f"{owner}: task_pixels must hold width*height = {n_pixels} pixels, got {pixels.size}"
+        )
+    _check_coverage(owner, pixels, width, height)
+    n_tasks = offsets.size - 1
+    if d.task_process is None:
+        process = None
+    else:
+        process = _int_array(owner, "task_process", d.task_process, 1)
+        if process.size != n_tasks:
+            raise ValueError(
+                f"{owner}: task_process must have one entry per task ({n_tasks}), got {process.size}"
+            )
+        bad = np.flatnonzero((process < 0) | (process >= n))
+        if bad.size:
+            raise ValueError(
+                f"{owner}: task_process must be in [0, {n}); task {int(bad[0])} "
+                f"has process {int(process[bad[0]])} ({bad.size} bad entries)"
+            )
+    dispatch = _require_cycles(owner, "dispatch_cycles", d.dispatch_cycles)
+    take_ahead = _require_int(owner, "take_ahead", d.take_ahead, 0)
+    if process is not None and (dispatch != 0.0 or take_ahead != 0):
+        raise ValueError(
+            f"{owner}: dispatch_cycles and take_ahead apply to dynamic distributions only "
+            f"(task_process=None); got {dispatch} and {take_ahead} for a static one"
+        )
+    for field, value in (
+        ("width", width), ("height", height), ("n_processes", n),
+        ("task_offsets", offsets), ("task_pixels", pixels), ("task_process", process),
+        ("dispatch_cycles", dispatch), ("take_ahead", take_ahead),
+    ):
+        object.__setattr__(d, field, value)
+
+
+# --------------------------------------------------------------------------
+# Distribution
+
+
+@dataclass(frozen=True, eq=False)
+class Distribution:
+    """Concrete work distribution of a ``width x height`` image among processes.
+
+    Parameters
+    ----------
+    name : str
+        Name of the mapping that built it (``"S"``, ``"DB"``, ...).
+    width, height, n_processes : int
+        Image size and number of processes, all >= 1.
+    task_offsets : numpy.ndarray
+        int64 ``(T + 1,)``: task ``t`` is ``task_pixels[task_offsets[t]:task_offsets[t + 1]]``.
+        Tasks may be empty (e.g. a process with no rows when
+        ``n_processes > height``).
+    task_pixels : numpy.ndarray
+        int64 ``(width * height,)``: pixel indices ``y * width + x``, every
+        pixel exactly once, in render order inside each task.
+    task_process : numpy.ndarray or None
+        int64 ``(T,)``, static owner of each task in ``[0, n_processes)``; a
+        process renders its tasks in increasing task index. ``None`` means
+        dynamic: tasks are handed out in order (task 0 first) to the next
+        free process.
+    dispatch_cycles : float
+        Cycles one hand-out costs (dynamic only; must be 0 for static).
+    take_ahead : int
+        Dynamic only: tasks a process may hold queued beyond the one it
+        renders (0 = none, the study's DB).
+
+    Notes
+    -----
+    The arrays are validated on construction and stored as private read-only
+    contiguous int64 copies, so one distribution can be shared safely.
+    """
+
+    name: str
+    width: int
+    height: int
+    n_processes: int
+    task_offsets: np.ndarray
+    task_pixels: np.ndarray
+    task_process: np.ndarray | None
+    dispatch_cycles: float = 0.0
+    take_ahead: int = 0
+
+    def __post_init__(self):
+        _validate_distribution(self)
+
+    def __repr__(self) -> str:
+        kind = "dynamic" if self.dynamic else "static"
+        return (
+            f"Distribution({self.name!r}, {self.width}x{self.height}, "
+            f"{self.n_processes} processes, {self.n_tasks} tasks, {kind})"
+        )
+
+    @property
+    def n_tasks(self) -> int:
+        """Number of tasks ``T``."""
+        return self.task_offsets.size - 1
+
+    @property
+    def n_pixels(self) -> int:
+        """``width * height``."""
+        return self.width * self.height
+
+    @property
+    def dynamic(self) -> bool:
+        """True when tasks are handed out on demand (``task_process is None``)."""
+        return self.task_process is None
+
+    @cached_property
+    def task_lengths(self) -> np.ndarray:
+        """int64 ``(T,)``: pixels per task."""
+        out = np.diff(self.task_offsets)
+        out.flags.writeable = False
+        return out
+
+    def task(self, t: int) -> np.ndarray:
+        """Pixel indices of task ``t`` in render order (a read-only view)."""
+        t = _require_int(f"Distribution {self.name!r}", "task", t, 0)
+        if t >= self.n_tasks:
+            raise ValueError(f"task must be < n_tasks = {self.n_tasks}, got {t}")
+        return self.task_pixels[self.task_offsets[t]:self.task_offsets[t + 1]]
+
+    @cached_property
+    def _position_task(self) -> np.ndarray:
+        # task index of each entry of task_pixels
+        return np.repeat(np.arange(self.n_tasks, dtype=np.int64), self.task_lengths)
+
+    def _require_static(self, what: str) -> np.ndarray:
+        if self.task_process is None:
+            raise ValueError(
+                f"{what} is defined for static distributions only; {self.name!r} is dynamic "
+                "(tasks are handed out at run time)"
+            )
+        return self.task_process
+
+    def _require_process(self, p) -> int:
+        p = _require_int(f"Distribution {self.name!r}", "process", p, 0)
+        if p >= self.n_processes:
+            raise ValueError(f"process must be < n_processes = {self.n_processes}, got {p}")
+        return p
+
+    def process_tasks(self, p: int) -> np.ndarray:
+        """Static only: task indices process ``p`` renders, in order."""
+        process = self._require_static("process_tasks")
+        return np.flatnonzero(process == self._require_process(p)).astype(np.int64)
+
+    def process_pixels(self, p: int) -> np.ndarray:
+        """Static only: pixels of process ``p`` in render order.
+
+        Returns
+        -------
+        numpy.ndarray
+            int64, the concatenation of ``p``'s tasks in task order.
+        """
+        process = self._require_static("process_pixels")
+        p = self._require_process(p)
+        return self.task_pixels[process[self._position_task] == p]
+
+    def process_pixel_counts(self) -> np.ndarray:
+        """Static only: int64 ``(n_processes,)`` pixels per process."""
+        process = self._require_static("process_pixel_counts")
+        return np.bincount(process, weights=self.task_lengths, minlength=self.n_processes).astype(np.int64)
+
+    def owner_image(self) -> np.ndarray:
+        """Who renders each pixel, as an image.
+
+        Returns
+        -------
+        numpy.ndarray
+            int64 ``(height, width)``: the process of each pixel (static) or
+            the index of the task holding it (dynamic).
+        """
+        per_position = self._position_task
+        if self.task_process is not None:
+            per_position = self.task_process[per_position]
+        out = np.empty(self.n_pixels, dtype=np.int64)
+        out[self.task_pixels] = per_position
+        return out.reshape(self.height, self.width)
+
+
+def _csr_from_labels(labels: np.ndarray, n_tasks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Tasks from a task label per pixel; scan order inside each task.
+
+    Parameters
+    ----------
+    labels : numpy.ndarray
+        int64 ``(width * height,)``, task of each pixel index, in ``[0, n_tasks)``.
+
+    Returns
+    -------
+    offsets, pixels : numpy.ndarray
+        int64 ``(n_tasks + 1,)`` and ``(width * height,)``.
+    """
+    offsets = np.zeros(n_tasks + 1, dtype=np.int64)
+    np.cumsum(np.bincount(labels, minlength=n_tasks), out=offsets[1:])
+    # a stable sort keeps pixel (scan) order inside each task
+    pixels = np.argsort(labels, kind="stable").astype(np.int64, copy=False)
+    return offsets, pixels
