@@ -262,7 +262,7 @@ def _idle_speedups(runs, processes, n_cpus, sharing_time) -> np.ndarray:
     return np.asarray(out, dtype=np.float64)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gather_records(pixel_offsets, records, order, out):
     k = 0
     for i in range(order.size):
@@ -299,19 +299,23 @@ def _curve_sizes(line_size: int, hierarchy, top_bytes: int) -> np.ndarray:
 
 
 def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> pd.DataFrame:
+    from concurrent.futures import ThreadPoolExecutor
+
     from tqdm.auto import tqdm
 
     from cachesim import reuse_profile
 
     orders = _one_process_orders(mapping_objects, trace.width, trace.height)
     line_sizes = sorted({level.line_size for level in hierarchy.levels}, reverse=True)
-    frames = []
+    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
     bar = tqdm(total=len(orders) * len(line_sizes), desc="reuse distances", unit="curve",
                disable=not progress, leave=False, file=sys.stderr)
-    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
-    for label, order in orders:
+
+    def curves_of(label, order):
+        # the compiled steps release the GIL, so orders run side by side
         records = np.empty(trace.n_records, dtype=np.uint32)
         _gather_records(offsets, np.asarray(trace.records), order, records)
+        frames = []
         for line_size in line_sizes:
             addresses = placed.addresses(records, line_size)
             curve = reuse_profile(addresses, line_size).miss_ratio_curve(
@@ -319,9 +323,14 @@ def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> p
             del addresses
             frames.append(curve.assign(order=label, line_size=line_size))
             bar.update(1)
-        del records
+        return frames
+
+    # two streams at a time: each holds its records, addresses and distances
+    workers = max(1, min(2, os.cpu_count() or 1, len(orders)))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(lambda item: curves_of(*item), orders))
     bar.close()
-    curves = pd.concat(frames, ignore_index=True)
+    curves = pd.concat([frame for frames in results for frame in frames], ignore_index=True)
     return curves[["order", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]
 
 

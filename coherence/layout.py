@@ -255,7 +255,7 @@ def _round_up(value: int, align: int) -> int:
     return (value + align - 1) // align * align
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lines_touched(records, record_start, record_size, kind_first, shift):
     out = np.empty(records.shape[0], dtype=np.int64)
     for i in range(records.shape[0]):
@@ -265,7 +265,7 @@ def _lines_touched(records, record_start, record_size, kind_first, shift):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_addresses(records, record_start, record_size, kind_first, shift, out):
     k = 0
     for i in range(records.shape[0]):
