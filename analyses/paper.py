@@ -252,7 +252,10 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     machine = Machine(n_cpus=n_cpus, background_load=background)
     base = alpha8400()
 
-    # 1-2: traces, and counters and memory cycles of the sequential S run
+    # 1-2: traces, and counters and memory cycles of the sequential S run. One trace at a time: a trace is
+    # memory-mapped and every page a run touched stays resident while it is mapped, so holding all five
+    # (about 4 GB at 512x512) set the peak memory. Only the scene and its render info are kept; the trace
+    # is memory-mapped again from the cache for step 4.
     loaded = {}
     measurements = []
     info_out = {}
@@ -261,10 +264,11 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     for name in bar:
         bar.set_postfix_str(name)
         scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress)
-        loaded[name] = (scene, trace, info)
+        loaded[name] = (scene, None, info)
         info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}
         sequential = study(trace, ["S"], [1], hierarchy=hierarchy, layout=layout, cost=base, machine=machine,
                            scene=scene, progress=False)
+        del trace
         run = sequential.runs.iloc[0]
         counters = sequential.processes[list(_COUNTERS)].sum()
         measurements.append({"scene": name, "memory_cycles": float(run["memory_cycles"]),
@@ -315,11 +319,15 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     # 4: every mapping at every count, per scene, with the calibrated model
     frames = []
     for name in scenes:
-        scene, trace, _ = loaded[name]
+        scene, _, info = loaded[name]
         if progress:
             print(f"simulating {name}", file=sys.stderr)
+        _, trace, again = cached_trace(name, size, cache_dir=cache_dir, progress=progress)
+        if again["key"] != info["key"]:
+            raise RuntimeError(f"{name}: trace cache key changed during the run ({info['key']} -> {again['key']})")
         result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
                        machine=machine, scene=scene, progress=progress)
+        del trace
         frames.append(result.runs.assign(scene=name))
     runs = pd.concat(frames, ignore_index=True)
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
@@ -349,7 +357,8 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
     Parameters
     ----------
     loaded : dict
-        Scene name -> (scene, trace, render info) from the trace cache.
+        Scene name -> (scene, trace, render info) from the trace cache (the
+        trace is not used and may be ``None``).
     runs : DataFrame
         The run table (for the calibrated sequential S time and rays).
     residuals : DataFrame
