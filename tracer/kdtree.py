@@ -15,14 +15,29 @@ the build used.
 
 Builders (``KdTreeConfig.builder``):
 
-* ``"sah"``: surface area heuristic with a sorted event sweep per node
-  (Wald & Havran 2006; events are sorted per node, which costs
-  O(N log^2 N) overall instead of the paper's merge-based O(N log N)).
+* ``"sah"``: surface area heuristic with an event sweep, built in
+  O(N log N) as in Wald & Havran 2006 ("On building fast kd-trees for ray
+  tracing, and on doing that in O(N log N)"). The events (box starts, ends,
+  and flat boxes) of all three axes are sorted once, at the root. Splitting a
+  node partitions its sorted event lists into the two children in order:
+  a primitive entirely on one side keeps its events; a primitive straddling
+  the plane is clipped to each child again, and only its new events are
+  sorted (few per node) and merged with the kept ones. Leaves list element
+  ids in ascending order.
   With ``clip`` on, each primitive's box is clipped to the node: polygons are
   clipped exactly (Sutherland-Hodgman), and a sphere is dropped from a node
   whose box lies entirely inside it (its surface cannot be hit there) or
   outside it. That keeps heavily overlapping spheres (SPD shells) from
-  filling every leaf.
+  filling every leaf. Where the sweep finds no plane worth it for 8 or more
+  primitives, the midplanes are also judged with the primitives clipped to
+  each child.
+  The trees are those of the earlier builder, which clipped every primitive
+  to every node and sorted events per node (O(N log^2 N)); it is kept as
+  the peer in tests and benchmarks. A one-sided primitive's box lies within
+  the child, so clipping it again would give it back in exact arithmetic; in
+  floating point, Sutherland-Hodgman against the child's faces can end a
+  last bit off, so a shape reaching the split face is clipped again and a
+  changed box (rare) gets new events like a straddler.
 * ``"median"``: the node's longest axis is halved, as a 1990s BSP did; a
   node stops at ``leaf_size`` primitives, at ``max_depth``, or when a split
   would not separate any primitive.
@@ -249,15 +264,6 @@ def _area(dx, dy, dz):
 
 
 @njit(cache=True)
-def _grow_i32(a, need):
-    if need <= a.shape[0]:
-        return a
-    b = np.empty(max(need, 2 * a.shape[0]), np.int32)
-    b[:a.shape[0]] = a
-    return b
-
-
-@njit(cache=True)
 def _grow_nodes(a, need):
     if need <= a.shape[0]:
         return a
@@ -267,10 +273,48 @@ def _grow_nodes(a, need):
 
 
 @njit(cache=True)
-def _sah_split(clo, chi, m, lo, hi, ct, ci, eb):
-    # Returns (cost, axis, position, planar_left) of the best split, cost inf
-    # when no valid plane exists. Events are ordered end < planar < start at
-    # equal positions (stable sort over an array laid out in that order).
+def _grow_1d(a, need):
+    if need <= a.shape[0]:
+        return a
+    b = np.empty(max(need, 2 * a.shape[0]), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _axis_events(box_lo, box_hi, ids, k, axis, pos, typ, prim):
+    # Events of the boxes of primitives ids[:k] (rows of box_lo/box_hi are
+    # primitive ids) on one axis, unsorted but laid out end, planar, start
+    # and by ids order within a type, so that a stable sort by position
+    # gives the sweep order (position, type, then ids order). Returns the count.
+    ne = 0
+    for t in range(3):
+        for j in range(k):
+            p = ids[j]
+            a = box_lo[p, axis]
+            b = box_hi[p, axis]
+            if t == 0 and a != b:
+                pos[ne] = b
+            elif t == 1 and a == b:
+                pos[ne] = a
+            elif t == 2 and a != b:
+                pos[ne] = a
+            else:
+                continue
+            typ[ne] = t
+            prim[ne] = p
+            ne += 1
+    return ne
+
+
+@njit(cache=True)
+def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, ct, ci, eb):
+    # Best split (cost, axis, position, planar_left) of a node holding m
+    # primitives, from its events: counts[a] events of axis a, the axes one
+    # after the other from e0, each sorted by position with end (type 0) <
+    # planar (1) < start (2) at equal positions. Cost inf when no valid plane
+    # exists; among equal costs the first in (axis, position, planar side)
+    # order wins.
     d0 = hi[0] - lo[0]
     d1 = hi[1] - lo[1]
     d2 = hi[2] - lo[2]
@@ -282,29 +326,13 @@ def _sah_split(clo, chi, m, lo, hi, ct, ci, eb):
     if area <= 0.0:
         return best, best_axis, best_pos, best_left
     inv_area = 1.0 / area
-    pos = np.empty(2 * m)
-    typ = np.empty(2 * m, np.int8)
+    base = e0
     for axis in range(3):
+        ne = counts[axis]
+        q0 = base
+        base += ne
         if hi[axis] <= lo[axis]:
             continue
-        ne = 0
-        for t in range(3):
-            for j in range(m):
-                a = clo[j, axis]
-                b = chi[j, axis]
-                if t == 0 and a != b:
-                    pos[ne] = b
-                    typ[ne] = 0
-                    ne += 1
-                elif t == 1 and a == b:
-                    pos[ne] = a
-                    typ[ne] = 1
-                    ne += 1
-                elif t == 2 and a != b:
-                    pos[ne] = a
-                    typ[ne] = 2
-                    ne += 1
-        order = np.argsort(pos[:ne], kind="mergesort")
         # dimensions of the node orthogonal to the axis
         if axis == 0:
             u, v = d1, d2
@@ -314,23 +342,27 @@ def _sah_split(clo, chi, m, lo, hi, ct, ci, eb):
             u, v = d0, d1
         nl = 0
         nr = m
-        i = 0
-        while i < ne:
-            p = pos[order[i]]
+        i = q0
+        end = q0 + ne
+        while i < end:
+            p = ev_pos[i]
             pe = 0
             pp = 0
             ps = 0
-            while i < ne and pos[order[i]] == p and typ[order[i]] == 0:
+            while i < end and ev_pos[i] == p and ev_typ[i] == 0:
                 pe += 1
                 i += 1
-            while i < ne and pos[order[i]] == p and typ[order[i]] == 1:
+            while i < end and ev_pos[i] == p and ev_typ[i] == 1:
                 pp += 1
                 i += 1
-            while i < ne and pos[order[i]] == p and typ[order[i]] == 2:
+            while i < end and ev_pos[i] == p and ev_typ[i] == 2:
                 ps += 1
                 i += 1
             nr -= pp + pe
-            # the tree stores float32 planes: judge the plane that will be used
+            # the tree stores float32 planes: judge the plane that will be
+            # used (its areas; the counts are the event's, so where rounding
+            # moves the plane past box sides, e.g. one on a face of the
+            # float64 root box, the partition differs from the counts)
             p32 = np.float64(np.float32(p))
             if p32 > lo[axis] and p32 < hi[axis]:
                 wl = p32 - lo[axis]
@@ -351,6 +383,25 @@ def _sah_split(clo, chi, m, lo, hi, ct, ci, eb):
                         best_left = side == 0
             nl += ps + pp
     return best, best_axis, best_pos, best_left
+
+
+@njit(cache=True)
+def _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp, tprim, pos, typ, counts):
+    # The per-node sort the presorted builder replaced (O(m log m) in every
+    # node, O(N log^2 N) in all): events of the node-clipped boxes clo/chi
+    # (m, 3), sorted here, then swept. ``rows`` is 0, 1, ...; the other
+    # arrays are scratch of at least 2 m (t*) and 6 m (pos, typ) entries.
+    # Used by _build for the comparison with _build_sah (tests, benchmarks).
+    w = 0
+    for axis in range(3):
+        ne = _axis_events(clo, chi, rows, m, axis, tpos, ttyp, tprim)
+        order = np.argsort(tpos[:ne], kind="mergesort")
+        for i in range(ne):
+            pos[w] = tpos[order[i]]
+            typ[w] = ttyp[order[i]]
+            w += 1
+        counts[axis] = ne
+    return _sah_sweep(pos, typ, 0, counts, m, lo, hi, ct, ci, eb)
 
 
 @njit(cache=True)
@@ -387,6 +438,33 @@ def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, 
     if nl == 0 or nr == 0:
         c *= 1.0 - eb
     return ct + ci * c
+
+
+@njit(cache=True)
+def _settle_split(cost, axis, pos, planar_left, work, seg0, m, prim_lo, prim_hi, clip_off, clip_v,
+                  spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi):
+    # From the sweep's best plane to the plane used, or axis -1 for a leaf.
+    if clip and m >= 8 and not cost < ci * m:
+        # the sweep sees node-clipped boxes only; where it gives up on many
+        # primitives, judge the midplanes (and its own best plane) with
+        # primitives clipped to the children
+        best = np.inf
+        if axis >= 0:
+            best = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                               lo, hi, axis, pos, ct, ci, eb, tlo, thi, blo, bhi)
+        for a in range(3):
+            mid = np.float64(np.float32(0.5 * (lo[a] + hi[a])))
+            c = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                            lo, hi, a, mid, ct, ci, eb, tlo, thi, blo, bhi)
+            if c < best:
+                best = c
+                axis = a
+                pos = mid
+                planar_left = True
+        cost = best
+    if not cost < ci * m and not (m > force and cost < np.inf):
+        axis = -1
+    return axis, pos, planar_left
 
 
 @njit(cache=True)
@@ -431,6 +509,13 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     clo = np.empty((max(n, 1), 3))
     chi = np.empty((max(n, 1), 3))
     split32 = np.empty(1, np.float32)
+    rows = np.arange(max(n, 1))
+    tpos = np.empty(2 * max(n, 1))
+    ttyp = np.empty(2 * max(n, 1), np.int8)
+    tprim = np.empty(2 * max(n, 1), np.int32)
+    ev_pos = np.empty(6 * max(n, 1))
+    ev_typ = np.empty(6 * max(n, 1), np.int8)
+    counts = np.zeros(3, np.int64)
     while sp > 0:
         sp -= 1
         lo[:] = s_lo[sp]
@@ -468,27 +553,11 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
                     axis = 2
                 pos = 0.5 * (lo[axis] + hi[axis])
             else:
-                cost, axis, pos, planar_left = _sah_split(clo, chi, m, lo, hi, ct, ci, eb)
-                if clip and m >= 8 and not cost < ci * m:
-                    # the sweep sees node-clipped boxes only; where it gives
-                    # up on many primitives, judge the midplanes (and its own
-                    # best plane) with primitives clipped to the children
-                    best = np.inf
-                    if axis >= 0:
-                        best = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
-                                           lo, hi, axis, pos, ct, ci, eb, tlo, thi, blo, bhi)
-                    for a in range(3):
-                        mid = np.float64(np.float32(0.5 * (lo[a] + hi[a])))
-                        c = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
-                                        lo, hi, a, mid, ct, ci, eb, tlo, thi, blo, bhi)
-                        if c < best:
-                            best = c
-                            axis = a
-                            pos = mid
-                            planar_left = True
-                    cost = best
-                if not cost < ci * m and not (m > force and cost < np.inf):
-                    axis = -1
+                cost, axis, pos, planar_left = _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp,
+                                                         tprim, ev_pos, ev_typ, counts)
+                axis, pos, planar_left = _settle_split(
+                    cost, axis, pos, planar_left, work, seg0, m, prim_lo, prim_hi, clip_off, clip_v,
+                    spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi)
         split = 0.0
         nl = 0
         nr = 0
@@ -517,7 +586,7 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             # leaf
             nodes[node, 0] = np.uint32(n_pidx)
             nodes[node, 1] = np.uint32((m << 2) | 3)
-            pidx = _grow_i32(pidx, n_pidx + m)
+            pidx = _grow_1d(pidx, n_pidx + m)
             for j in range(m):
                 pidx[n_pidx + j] = work[seg0 + j]
             n_pidx += m
@@ -574,6 +643,386 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     return nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), leaves, empty_leaves, deepest, sah_cost
 
 
+@njit(cache=True)
+def _sort_events(pos, typ, prim, k, order):
+    # order[:k] = the events pos/typ/prim[:k] sorted by (position, type,
+    # primitive). Straddlers are few per node: insertion sort below a
+    # handful, else a stable sort by position of the type-major layout of
+    # _axis_events (which gives the same order).
+    if k > 24:
+        order[:k] = np.argsort(pos[:k], kind="mergesort")
+        return
+    for i in range(k):
+        x = pos[i]
+        t = typ[i]
+        q = prim[i]
+        j = i
+        while j > 0:
+            o = order[j - 1]
+            if pos[o] < x or (pos[o] == x and (typ[o] < t or (typ[o] == t and prim[o] < q))):
+                break
+            order[j] = o
+            j -= 1
+        order[j] = i
+
+
+@njit(cache=True)
+def _merge_events(ev_pos, ev_typ, ev_prim, q0, nq, side, keep, tpos, ttyp, tprim, order, k,
+                  out_pos, out_typ, out_prim, w):
+    # Writes, from out[w], the events ev[q0:q0+nq] of primitives with
+    # side == keep merged with the k events t[order[:k]]; both inputs and the
+    # output are in (position, type, primitive) order. Returns the new w.
+    i = q0
+    end = q0 + nq
+    j = 0
+    while True:
+        while i < end and side[ev_prim[i]] != keep:
+            i += 1
+        if i < end and j < k:
+            o = order[j]
+            a = ev_pos[i]
+            b = tpos[o]
+            take_old = a < b or (a == b and (ev_typ[i] < ttyp[o]
+                                             or (ev_typ[i] == ttyp[o] and ev_prim[i] < tprim[o])))
+        elif i < end:
+            take_old = True
+        elif j < k:
+            take_old = False
+        else:
+            break
+        if take_old:
+            out_pos[w] = ev_pos[i]
+            out_typ[w] = ev_typ[i]
+            out_prim[w] = ev_prim[i]
+            i += 1
+        else:
+            o = order[j]
+            out_pos[w] = tpos[o]
+            out_typ[w] = ttyp[o]
+            out_prim[w] = tprim[o]
+            j += 1
+        w += 1
+    return w
+
+
+@njit(cache=True)
+def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
+               max_depth, leaf_size, ct, ci, eb, clip, force):
+    # SAH build with events sorted once (Wald & Havran 2006). A node owns a
+    # segment of ``ids`` (its primitives, ascending) with their node-clipped
+    # boxes in ``box_lo``/``box_hi``, and a segment of the event arrays (axis
+    # 0, 1, 2 one after the other, each in (position, type, primitive) order:
+    # the per-node builder's sort order, so the sweep sees the same sequence
+    # and breaks ties alike). Splitting a node keeps the events of primitives
+    # on one side and makes new events only for primitives straddling the
+    # plane, clipped to each child (and for the rare one-sided primitive whose
+    # box a second clip changes, see below): few, sorted on their own, merged
+    # with the kept ones. Children's segments replace the parent's (right
+    # then left), so the node being split is always on top.
+    n = prim_lo.shape[0]
+    nn = max(n, 1)
+    nodes = np.zeros((max(16, 2 * n + 1), 2), np.uint32)
+    n_nodes = 0
+    pidx = np.empty(max(16, 2 * n), np.int32)
+    n_pidx = 0
+    ids = np.empty(max(16, 4 * n), np.int32)
+    box_lo = np.empty((max(16, 4 * n), 3))
+    box_hi = np.empty((max(16, 4 * n), 3))
+    ev_pos = np.empty(max(16, 12 * n))
+    ev_typ = np.empty(max(16, 12 * n), np.int8)
+    ev_prim = np.empty(max(16, 12 * n), np.int32)
+    tpos = np.empty(max(16, 2 * n))
+    ttyp = np.empty(max(16, 2 * n), np.int8)
+    tprim = np.empty(max(16, 2 * n), np.int32)
+    order = np.empty(max(16, 2 * n), np.int64)
+    # per-primitive scratch for the node being split (rows are primitive ids):
+    # boxes of the primitives given new events in each child, and the side
+    side = np.zeros(nn, np.int8)  # 1 left, 2 right; 4 | children for new events
+    lbox_lo = np.empty((nn, 3))
+    lbox_hi = np.empty((nn, 3))
+    rbox_lo = np.empty((nn, 3))
+    rbox_hi = np.empty((nn, 3))
+    new_l = np.empty(nn, np.int32)
+    new_r = np.empty(nn, np.int32)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    tlo = np.empty(3)
+    thi = np.empty(3)
+    blo = np.empty(3)
+    bhi = np.empty(3)
+    llo = np.empty(3)
+    lhi = np.empty(3)
+    rlo = np.empty(3)
+    rhi = np.empty(3)
+    cnt = np.zeros(3, np.int64)
+    cnt_l = np.zeros(3, np.int64)
+    cnt_r = np.zeros(3, np.int64)
+    split32 = np.empty(1, np.float32)
+
+    # root: primitives clipped to the root box (a no-op but for its rules),
+    # and the one sort of all events
+    m0 = 0
+    for p in range(n):
+        if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi, clip, tlo, thi):
+            ids[m0] = p
+            box_lo[m0, :] = tlo
+            box_hi[m0, :] = thi
+            lbox_lo[p, :] = tlo
+            lbox_hi[p, :] = thi
+            m0 += 1
+    w = 0
+    for axis in range(3):
+        ne = _axis_events(lbox_lo, lbox_hi, ids, m0, axis, tpos, ttyp, tprim)
+        _sort_events(tpos, ttyp, tprim, ne, order)
+        for i in range(ne):
+            ev_pos[w] = tpos[order[i]]
+            ev_typ[w] = ttyp[order[i]]
+            ev_prim[w] = tprim[order[i]]
+            w += 1
+        cnt[axis] = ne
+
+    S = max_depth + 4
+    s_lo = np.empty((S, 3))
+    s_hi = np.empty((S, 3))
+    s_depth = np.empty(S, np.int64)
+    s_parent = np.empty(S, np.int64)
+    s_i0 = np.empty(S, np.int64)
+    s_m = np.empty(S, np.int64)
+    s_e0 = np.empty(S, np.int64)
+    s_cnt = np.empty((S, 3), np.int64)
+    s_lo[0, :] = root_lo
+    s_hi[0, :] = root_hi
+    s_depth[0] = 0
+    s_parent[0] = -1
+    s_i0[0] = 0
+    s_m[0] = m0
+    s_e0[0] = 0
+    s_cnt[0, :] = cnt
+    sp = 1
+    root_area = _area(root_hi[0] - root_lo[0], root_hi[1] - root_lo[1], root_hi[2] - root_lo[2])
+    if root_area <= 0.0:
+        root_area = 1.0
+    leaves = 0
+    empty_leaves = 0
+    deepest = 0
+    sah_cost = 0.0
+    while sp > 0:
+        sp -= 1
+        lo[:] = s_lo[sp]
+        hi[:] = s_hi[sp]
+        depth = s_depth[sp]
+        parent = s_parent[sp]
+        i0 = s_i0[sp]
+        m = s_m[sp]
+        e0 = s_e0[sp]
+        cnt[:] = s_cnt[sp]
+        node = n_nodes
+        n_nodes += 1
+        nodes = _grow_nodes(nodes, n_nodes)
+        if parent >= 0:
+            nodes[parent, 1] |= np.uint32(node << 2)
+        area_frac = _area(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / root_area
+        axis = -1
+        pos = 0.0
+        planar_left = True
+        if m > leaf_size and depth < max_depth:
+            cost, axis, pos, planar_left = _sah_sweep(ev_pos, ev_typ, e0, cnt, m, lo, hi, ct, ci, eb)
+            axis, pos, planar_left = _settle_split(
+                cost, axis, pos, planar_left, ids, i0, m, prim_lo, prim_hi, clip_off, clip_v,
+                spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi)
+        split = 0.0
+        if axis >= 0:
+            split32[0] = pos
+            split = np.float64(split32[0])
+            if not (split > lo[axis] and split < hi[axis]):
+                axis = -1
+        if axis < 0:
+            nodes[node, 0] = np.uint32(n_pidx)
+            nodes[node, 1] = np.uint32((m << 2) | 3)
+            pidx = _grow_1d(pidx, n_pidx + m)
+            for j in range(m):
+                pidx[n_pidx + j] = ids[i0 + j]
+            n_pidx += m
+            leaves += 1
+            if m == 0:
+                empty_leaves += 1
+            deepest = max(deepest, depth)
+            sah_cost += ci * m * area_frac
+            continue
+        sah_cost += ct * area_frac
+        nodes[node, 0] = split32.view(np.uint32)[0]
+        nodes[node, 1] = np.uint32(axis)
+
+        llo[:] = lo
+        lhi[:] = hi
+        lhi[axis] = split
+        rlo[:] = lo
+        rhi[:] = hi
+        rlo[axis] = split
+        # classify as the per-node builder partitions. A straddler is clipped
+        # to each child from its original shape, as that builder does on
+        # entering the child, and may leave either.
+        nl = 0
+        nr = 0
+        k_l = 0
+        k_r = 0
+        for j in range(m):
+            p = ids[i0 + j]
+            a = box_lo[i0 + j, axis]
+            b = box_hi[i0 + j, axis]
+            on_plane = a == b and a == split
+            left = a < split or (on_plane and planar_left)
+            right = b > split or (on_plane and not planar_left)
+            if left and right:
+                s = 4
+                if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi, clip, tlo, thi):
+                    lbox_lo[p, :] = tlo
+                    lbox_hi[p, :] = thi
+                    new_l[k_l] = p
+                    k_l += 1
+                    s |= 1
+                if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi, clip, tlo, thi):
+                    rbox_lo[p, :] = tlo
+                    rbox_hi[p, :] = thi
+                    new_r[k_r] = p
+                    k_r += 1
+                    s |= 2
+            else:
+                s = 1 if left else 2
+                # Its box lies within the child, and clipping it to the child
+                # (as the per-node builder does) gives the box back in exact
+                # arithmetic. In floating point, only the split face is new,
+                # and it cuts nothing unless the original shape reaches it:
+                # the other faces are the node's, and Sutherland-Hodgman's
+                # interpolated coordinates stay within the shape's extent up
+                # to a few ulps (margin below); a sphere short of the face
+                # cannot enclose the child. A shape that reaches the face is
+                # clipped again, and where the box differs (a last bit, or a
+                # sphere enclosing a flat child) the fresh box is taken: the
+                # per-node builder's boxes in every node, so its trees.
+                margin = 64.0 * 2.220446049250313e-16 * max(abs(prim_lo[p, axis]), abs(prim_hi[p, axis]))
+                if left:
+                    reach = prim_hi[p, axis] + margin >= split
+                else:
+                    reach = prim_lo[p, axis] - margin <= split
+                if clip and reach:
+                    if left:
+                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi,
+                                               True, tlo, thi)
+                    else:
+                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi,
+                                               True, tlo, thi)
+                    same = kept
+                    for c in range(3):
+                        same = same and tlo[c] == box_lo[i0 + j, c] and thi[c] == box_hi[i0 + j, c]
+                    if not same:
+                        if kept and left:
+                            lbox_lo[p, :] = tlo
+                            lbox_hi[p, :] = thi
+                            new_l[k_l] = p
+                            k_l += 1
+                        elif kept:
+                            rbox_lo[p, :] = tlo
+                            rbox_hi[p, :] = thi
+                            new_r[k_r] = p
+                            k_r += 1
+                        s = (4 | s) if kept else 4
+            side[p] = s
+            if s & 1:
+                nl += 1
+            if s & 2:
+                nr += 1
+        # children's primitives and boxes: right list then left list, written
+        # after the segment and moved down to i0 (ascending order kept)
+        need = i0 + m + nl + nr
+        ids = _grow_1d(ids, need)
+        if need > box_lo.shape[0]:
+            grown = max(need, 2 * box_lo.shape[0])
+            t_lo = np.empty((grown, 3))
+            t_hi = np.empty((grown, 3))
+            t_lo[:box_lo.shape[0]] = box_lo
+            t_hi[:box_hi.shape[0]] = box_hi
+            box_lo = t_lo
+            box_hi = t_hi
+        w = i0 + m
+        for child in range(2):
+            bit = 2 if child == 0 else 1
+            for j in range(m):
+                p = ids[i0 + j]
+                s = side[p]
+                if s & bit:
+                    ids[w] = p
+                    for c in range(3):
+                        if s & 4 and bit == 2:
+                            box_lo[w, c] = rbox_lo[p, c]
+                            box_hi[w, c] = rbox_hi[p, c]
+                        elif s & 4:
+                            box_lo[w, c] = lbox_lo[p, c]
+                            box_hi[w, c] = lbox_hi[p, c]
+                        else:
+                            box_lo[w, c] = box_lo[i0 + j, c]
+                            box_hi[w, c] = box_hi[i0 + j, c]
+                    w += 1
+        for j in range(nl + nr):
+            ids[i0 + j] = ids[i0 + m + j]
+            for c in range(3):
+                box_lo[i0 + j, c] = box_lo[i0 + m + j, c]
+                box_hi[i0 + j, c] = box_hi[i0 + m + j, c]
+        # children's events, likewise after the node's and moved down to e0
+        ne = cnt[0] + cnt[1] + cnt[2]
+        need = e0 + 2 * ne + 6 * (k_l + k_r)
+        ev_pos = _grow_1d(ev_pos, need)
+        ev_typ = _grow_1d(ev_typ, need)
+        ev_prim = _grow_1d(ev_prim, need)
+        kt = 2 * max(k_l, k_r)
+        tpos = _grow_1d(tpos, kt)
+        ttyp = _grow_1d(ttyp, kt)
+        tprim = _grow_1d(tprim, kt)
+        order = _grow_1d(order, kt)
+        w = e0 + ne
+        for child in range(2):
+            keep = 2 if child == 0 else 1
+            q = e0
+            for a in range(3):
+                w0 = w
+                if child == 0:
+                    k = _axis_events(rbox_lo, rbox_hi, new_r, k_r, a, tpos, ttyp, tprim)
+                else:
+                    k = _axis_events(lbox_lo, lbox_hi, new_l, k_l, a, tpos, ttyp, tprim)
+                _sort_events(tpos, ttyp, tprim, k, order)
+                w = _merge_events(ev_pos, ev_typ, ev_prim, q, cnt[a], side, keep, tpos, ttyp, tprim,
+                                  order, k, ev_pos, ev_typ, ev_prim, w)
+                q += cnt[a]
+                if child == 0:
+                    cnt_r[a] = w - w0
+                else:
+                    cnt_l[a] = w - w0
+        for j in range(w - e0 - ne):
+            ev_pos[e0 + j] = ev_pos[e0 + ne + j]
+            ev_typ[e0 + j] = ev_typ[e0 + ne + j]
+            ev_prim[e0 + j] = ev_prim[e0 + ne + j]
+        # push above (right) child, then below (left) child
+        s_lo[sp, :] = rlo
+        s_hi[sp, :] = rhi
+        s_depth[sp] = depth + 1
+        s_parent[sp] = node
+        s_i0[sp] = i0
+        s_m[sp] = nr
+        s_e0[sp] = e0
+        s_cnt[sp, :] = cnt_r
+        sp += 1
+        s_lo[sp, :] = llo
+        s_hi[sp, :] = lhi
+        s_depth[sp] = depth + 1
+        s_parent[sp] = -1
+        s_i0[sp] = i0 + nr
+        s_m[sp] = nl
+        s_e0[sp] = e0 + cnt_r[0] + cnt_r[1] + cnt_r[2]
+        s_cnt[sp, :] = cnt_l
+        sp += 1
+    return nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), leaves, empty_leaves, deepest, sah_cost
+
+
 def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
     """Build a kd-tree over all elements of ``scene``.
 
@@ -587,6 +1036,18 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
     -------
     KdTree
     """
+    return _build_kdtree(scene, config, per_node_sort=False)
+
+
+def _build_kdtree(scene: Scene, config: KdTreeConfig | None, per_node_sort: bool) -> KdTree:
+    """:func:`build_kdtree` with a choice of SAH builder.
+
+    ``per_node_sort=True`` selects the earlier SAH builder, which re-clips
+    every primitive to every node and sorts the node's events there
+    (O(N log^2 N)); it builds the same trees and is kept as the peer of the
+    presorted builder in the tests and ``benchmarks/bench_kdtree.py``. The
+    median builder ignores it.
+    """
     if config is None:
         config = KdTreeConfig()
     if not isinstance(config, KdTreeConfig):
@@ -599,20 +1060,10 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
         from dataclasses import replace
         config = replace(config, max_depth=max_depth)
     start = time.perf_counter()
-    lo, hi = element_bounds(scene)
-    if n:
-        root_lo, root_hi = lo.min(axis=0), hi.max(axis=0)
-    else:
-        root_lo, root_hi = np.zeros(3), np.zeros(3)
-    if not (np.all(np.isfinite(root_lo)) and np.all(np.isfinite(root_hi))):
-        raise ValueError("Scene geometry has non-finite coordinates")
-    clip_off, clip_v, spheres = element_clip_shapes(scene)
-    nodes, pidx, leaves, empty, deepest, cost = _build(
-        lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
-        config.builder == "median", max_depth, config.leaf_size,
-        config.traversal_cost, config.intersection_cost, config.empty_bonus, config.clip,
-        config.force_split)
+    inputs = _builder_inputs(scene)
+    nodes, pidx, leaves, empty, deepest, cost = _run_builder(inputs, config, per_node_sort)
     seconds = time.perf_counter() - start
+    root_lo, root_hi = inputs[5], inputs[6]
     filled = leaves - empty
     stats = {
         "nodes": int(len(nodes)),
@@ -627,3 +1078,42 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
     return KdTree(nodes=nodes, primitive_indices=pidx,
                   bounds=np.stack([root_lo, root_hi]).astype(np.float64),
                   config=config, stats=stats)
+
+
+def _builder_inputs(scene: Scene) -> tuple:
+    """The builder kernels' scene arrays.
+
+    Returns
+    -------
+    tuple
+        ``(lo, hi, clip_offsets, clip_vertices, spheres, root_lo, root_hi)``:
+        element boxes (N, 3) float64, the clip shapes of
+        :func:`tracer.geometry.element_clip_shapes`, and the root box (3,).
+    """
+    lo, hi = element_bounds(scene)
+    if scene.n_elements:
+        root_lo, root_hi = lo.min(axis=0), hi.max(axis=0)
+    else:
+        root_lo, root_hi = np.zeros(3), np.zeros(3)
+    if not (np.all(np.isfinite(root_lo)) and np.all(np.isfinite(root_hi))):
+        raise ValueError("Scene geometry has non-finite coordinates")
+    clip_off, clip_v, spheres = element_clip_shapes(scene)
+    return lo, hi, clip_off, clip_v, spheres, root_lo, root_hi
+
+
+def _run_builder(inputs: tuple, config: KdTreeConfig, per_node_sort: bool = False) -> tuple:
+    """Run the builder kernel of ``config`` (``max_depth`` resolved) on ``inputs``.
+
+    Returns ``(nodes, primitive_indices, leaves, empty_leaves, deepest,
+    sah_cost)``; see :func:`_build_kdtree` for ``per_node_sort``.
+    """
+    lo, hi, clip_off, clip_v, spheres, root_lo, root_hi = inputs
+    if config.builder == "sah" and not per_node_sort:
+        return _build_sah(lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
+                          config.max_depth, config.leaf_size, config.traversal_cost,
+                          config.intersection_cost, config.empty_bonus, config.clip,
+                          config.force_split)
+    return _build(lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
+                  config.builder == "median", config.max_depth, config.leaf_size,
+                  config.traversal_cost, config.intersection_cost, config.empty_bonus,
+                  config.clip, config.force_split)
