@@ -24,7 +24,8 @@
 4. runs every mapping at every process count per scene with the calibrated
    model on an 8-CPU machine whose real time carries a background load
    (:data:`DEFAULT_BACKGROUND` always-runnable processes of other users);
-5. judges each scene from the numbers (:func:`scene_verdicts`).
+5. judges each scene from the numbers with the report's rule
+   (:func:`scene_verdicts`, :func:`analyses.verdict.verdict`).
 
 The study's times are for 512x512 images. At another ``size`` the targets
 are scaled by ``(size / 512) ** 2`` (the pixel count), so a small test image
@@ -52,7 +53,7 @@ import pandas as pd
 
 from analyses.html import table_html
 from analyses.output import check_output_folder
-from analyses.verdict import format_percent
+from analyses.verdict import LOSSES, format_speedup, verdict
 from cachesim.config import write_bytes_atomic
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
@@ -417,20 +418,21 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
 
 
 def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Per scene: which mapping is best at ``n_processes`` and which loss decided.
+    """Per scene: :func:`analyses.verdict.verdict` on its runs, and its best mappings.
 
-    The decision compares the largest imbalance loss with the largest
-    coherence loss over the mappings (a negative coherence loss is a gain
-    from processes sharing a CPU's caches): "load balance decided" when the
-    worst imbalance exceeds the worst coherence loss, else "coherence
-    decided". Every number in the text is computed from ``runs`` and is
-    returned, exactly as printed, in the second table.
+    The rule is the report's: the headline names the loss (imbalance,
+    coherence or dispatch) whose worst case over the mappings is largest,
+    and one sentence per mapping gives its user speed-up and losses. Before
+    it, one sentence names the best mapping by user and by real-time
+    speed-up. Every number of the text is returned, exactly as printed, in
+    the second table.
 
     Parameters
     ----------
     runs : DataFrame
         Columns ``scene``, ``mapping``, ``n_processes``, ``speedup_user``,
-        ``speedup_real``, ``imbalance_loss``, ``coherence_loss``.
+        ``speedup_real``, ``imbalance_loss``, ``coherence_loss``,
+        ``dispatch_loss`` and optionally ``dispatch_share``.
     n_processes : int
     order : sequence of str, optional
         Mapping order of the texts.
@@ -439,66 +441,47 @@ def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tupl
     -------
     verdicts : DataFrame
         ``scene``, ``n_processes``, ``best_mapping``, ``best_speedup_user``,
-        ``best_mapping_real``, ``best_speedup_real``, ``max_imbalance_loss``,
-        ``max_imbalance_mapping``, ``max_coherence_loss``,
-        ``max_coherence_mapping``, ``decided_by``, ``text``.
+        ``best_mapping_real``, ``best_speedup_real``, then per loss of
+        :data:`analyses.verdict.LOSSES` ``max_<loss>`` and
+        ``max_<loss>_mapping`` (``max_imbalance_loss``,
+        ``max_imbalance_mapping``, ...), ``decided_by``, ``headline`` and
+        ``text``.
     numbers : DataFrame
         ``scene``, ``mapping``, ``n_processes``, ``metric``, ``value``.
     """
     verdicts = []
     numbers = []
     for scene in dict.fromkeys(runs["scene"]):
-        rows = runs[(runs["scene"] == scene) & (runs["n_processes"] == n_processes)]
-        if rows.empty:
+        rows = runs[runs["scene"] == scene]
+        at = rows[rows["n_processes"] == n_processes]
+        if at.empty:
             raise ValueError(f"{scene}: no runs with n_processes == {n_processes}")
-        rows = rows.set_index("mapping")
-        names = list(rows.index)
-        if order is not None:
-            names = [m for m in order if m in names] + [m for m in names if m not in order]
-
-        def quote(mapping, metric, text):
-            numbers.append({"scene": scene, "mapping": mapping, "n_processes": int(n_processes), "metric": metric,
-                            "value": float(text)})
-            return text
-
-        best = rows["speedup_user"].astype(float).idxmax()
-        best_real = rows["speedup_real"].astype(float).idxmax()
-        worst_imbalance = rows["imbalance_loss"].astype(float).idxmax()
-        worst_coherence = rows["coherence_loss"].astype(float).idxmax()
-        imbalance = float(rows.loc[worst_imbalance, "imbalance_loss"])
-        coherence = float(rows.loc[worst_coherence, "coherence_loss"])
-        decided = "load balance" if imbalance >= coherence else "coherence"
-        best_text = quote(best, "speedup_user", f"{float(rows.loc[best, 'speedup_user']):.2f}")
-        real_text = quote(best_real, "speedup_real", f"{float(rows.loc[best_real, 'speedup_real']):.2f}")
-        parts = [
-            f"{scene.capitalize()} at {n_processes} processes: {best} is best with a user speed-up of "
-            f"{best_text} (best real-time speed-up: {best_real} {real_text}).",
-            f"Imbalance costs up to {quote(worst_imbalance, 'imbalance_loss_pct', format_percent(imbalance))}% "
-            f"({worst_imbalance}), coherence "
-            + (f"at most {quote(worst_coherence, 'coherence_loss_pct', format_percent(coherence))}% ({worst_coherence})"
-               if coherence > 0 else "nothing (no mapping lost to it)")
-            + f": {decided} decided.",
-        ]
-        details = []
-        for mapping in names:
-            row = rows.loc[mapping]
-            speed = quote(mapping, "speedup_user", f"{row['speedup_user']:.2f}")
-            lost = quote(mapping, "imbalance_loss_pct", format_percent(row["imbalance_loss"]))
-            value = float(row["coherence_loss"])
-            coh = quote(mapping, "coherence_gain_pct" if value < 0 else "coherence_loss_pct", format_percent(abs(value)))
-            details.append(f"{mapping} {speed} (imbalance loss {lost}%, coherence {'gain' if value < 0 else 'loss'} "
-                           f"{coh}%)")
-        parts.append("Per mapping: " + "; ".join(details) + ".")
+        judged = verdict(rows, n_processes, order=order)
+        at = at.set_index("mapping")
+        best = at["speedup_user"].astype(float).idxmax()
+        best_real = at["speedup_real"].astype(float).idxmax()
+        best_text = format_speedup(at.loc[best, "speedup_user"])  # the verdict quotes every mapping's
+        real_text = format_speedup(at.loc[best_real, "speedup_real"])
+        quoted = judged.numbers.assign(scene=scene)
+        real_row = {"scene": scene, "mapping": best_real, "n_processes": int(n_processes), "metric": "speedup_real",
+                    "value": float(real_text)}
+        numbers.append(pd.concat([quoted, pd.DataFrame([real_row])], ignore_index=True))
+        text = (f"{scene.capitalize()} at {n_processes} processes: {best} is best with a user speed-up of "
+                f"{best_text} (best real-time speed-up: {best_real} {real_text}). {judged.text}")
+        worst = {}
+        for column, _, short in LOSSES:
+            mapping, value = judged.worst[column]
+            worst[f"max_{short}_loss"] = value
+            worst[f"max_{short}_mapping"] = mapping
         verdicts.append({
             "scene": scene, "n_processes": int(n_processes),
-            "best_mapping": best, "best_speedup_user": float(rows.loc[best, "speedup_user"]),
-            "best_mapping_real": best_real, "best_speedup_real": float(rows.loc[best_real, "speedup_real"]),
-            "max_imbalance_loss": imbalance, "max_imbalance_mapping": worst_imbalance,
-            "max_coherence_loss": coherence, "max_coherence_mapping": worst_coherence,
-            "decided_by": decided, "text": " ".join(parts),
+            "best_mapping": best, "best_speedup_user": float(at.loc[best, "speedup_user"]),
+            "best_mapping_real": best_real, "best_speedup_real": float(at.loc[best_real, "speedup_real"]),
+            **worst, "decided_by": judged.decided_by, "headline": judged.headline, "text": text,
         })
-    return (pd.DataFrame(verdicts),
-            pd.DataFrame(numbers, columns=["scene", "mapping", "n_processes", "metric", "value"]))
+    columns = ["scene", "mapping", "n_processes", "metric", "value"]
+    numbers = pd.concat(numbers, ignore_index=True)[columns] if numbers else pd.DataFrame(columns=columns)
+    return pd.DataFrame(verdicts), numbers
 
 
 # --------------------------------------------------------------------------

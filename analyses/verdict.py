@@ -10,15 +10,17 @@ dispatch; loss = 1 - factor), e.g. "S reaches 4.71 and loses 41.2% to
 imbalance and 0.8% to coherence". A negative coherence loss (processes
 sharing a CPU warmed each other's caches) is a gain and said so. The
 headline names the loss whose worst case over the mappings is largest.
+``coherence report`` (one scene) and ``coherence paper`` (each scene) both
+judge with :func:`verdict`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["Verdict", "verdict", "format_percent"]
+__all__ = ["Verdict", "verdict", "format_percent", "format_speedup", "LOSSES"]
 
 #: A dispatch loss below this (as a fraction) is not worth a clause.
 DISPATCH_SHOWN = 5e-4
@@ -43,7 +45,12 @@ class Verdict:
         number of the text, as printed (percentages in percent).
     n_processes : int
     decided_by : str
-        ``"load balance"``, ``"coherence"`` or ``"dispatch overhead"``.
+        ``"load balance"``, ``"coherence"`` or ``"dispatch overhead"``
+        (``"nothing"`` when no mapping lost anything).
+    worst : dict
+        Loss column of :data:`LOSSES` (``"imbalance_loss"`` ...) ->
+        ``(mapping, loss)``: the mapping losing most to it and that loss (a
+        fraction, unrounded); the headline ranks these.
     """
 
     headline: str
@@ -51,6 +58,7 @@ class Verdict:
     numbers: pd.DataFrame
     n_processes: int
     decided_by: str
+    worst: dict = field(default_factory=dict)
 
     @property
     def text(self) -> str:
@@ -67,6 +75,11 @@ def format_percent(fraction: float) -> str:
     if abs(value) >= 1.0:
         return f"{value:.1f}"
     return np.format_float_positional(value, precision=2, unique=False, fractional=False, trim="-")
+
+
+def format_speedup(speedup: float) -> str:
+    """A speed-up as printed in a verdict: two decimals."""
+    return f"{float(speedup):.2f}"
 
 
 def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
@@ -105,7 +118,7 @@ def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
     shown = {}  # (mapping, loss column) -> printed text
     for name in names:
         row = rows[rows["mapping"] == name].iloc[0]
-        speedup = quote(name, "speedup_user", f"{row['speedup_user']:.2f}")
+        speedup = quote(name, "speedup_user", format_speedup(row["speedup_user"]))
         parts = []
         for column, _, short in LOSSES:
             value = float(row[column])
@@ -145,7 +158,8 @@ def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
                     f"processes: {first_short} cost up to {first_text}% ({first_mapping}), {tail}.")
         decided = first_label
     table = pd.DataFrame(numbers, columns=["mapping", "n_processes", "metric", "value"])
-    return Verdict(headline, sentences, table, int(n_processes), decided)
+    return Verdict(headline, sentences, table, int(n_processes), decided,
+                   {column: (mapping, value) for column, (value, mapping, _, _) in worst.items()})
 
 
 def _join(parts: list) -> str:

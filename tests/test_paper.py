@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from analyses import paper
+from analyses import verdict as verdict_module
 from analyses.verdict import format_percent
 from coherence.cli import main
 
@@ -109,33 +110,90 @@ def test_runs_cover_every_scene_mapping_count(result):
     assert np.allclose(one["speedup_real"], 1.0)
 
 
+#: Quoted metric -> run-table column it rounds (percentages of the absolute value).
+SOURCES = {"speedup_user": "speedup_user", "speedup_real": "speedup_real",
+           "imbalance_loss_pct": "imbalance_loss", "imbalance_gain_pct": "imbalance_loss",
+           "coherence_loss_pct": "coherence_loss", "coherence_gain_pct": "coherence_loss",
+           "dispatch_loss_pct": "dispatch_loss", "dispatch_gain_pct": "dispatch_loss",
+           "dispatch_share_pct": "dispatch_share"}
+
+
+def check_verdicts(verdicts, numbers, runs, n):
+    """The paper's verdicts are the report's verdict per scene, and every printed number is quoted and sourced."""
+    at = runs[runs["n_processes"] == n]
+    assert list(verdicts["scene"]) == list(dict.fromkeys(runs["scene"]))
+    assert not numbers.duplicated(["scene", "mapping", "metric"]).any()
+    for row in numbers.itertuples():
+        run = at[(at["scene"] == row.scene) & (at["mapping"] == row.mapping)].iloc[0]
+        assert row.n_processes == n
+        value = float(run[SOURCES[row.metric]])
+        if row.metric.startswith("speedup"):
+            assert row.value == float(verdict_module.format_speedup(value))
+        else:
+            assert (value < 0) == row.metric.endswith("gain_pct"), row
+            assert row.value == float(format_percent(abs(value)))
+            assert row.value == pytest.approx(100 * abs(value), abs=0.051)
+    for row in verdicts.itertuples():
+        rows = runs[runs["scene"] == row.scene]
+        report = verdict_module.verdict(rows, n, order=paper.DEFAULT_MAPPINGS)  # what `coherence report` says
+        assert row.decided_by == report.decided_by
+        assert row.headline == report.headline
+        assert row.text.endswith(report.text)
+        scene = at[at["scene"] == row.scene].set_index("mapping")
+        assert row.best_mapping == scene["speedup_user"].idxmax()
+        assert row.best_mapping_real == scene["speedup_real"].idxmax()
+        for column, _, short in verdict_module.LOSSES:
+            assert getattr(row, f"max_{short}_loss") == scene[column].max()
+            assert getattr(row, f"max_{short}_mapping") == scene[column].idxmax()
+        quoted = set(numbers.loc[numbers["scene"] == row.scene, "value"]) | {float(n)}
+        printed = re.findall(r"\d+(?:\.\d+)?", row.text)
+        assert len(printed) >= 6
+        for number in printed:  # every number of the text, prefix included, is quoted
+            assert float(number) in quoted, (row.scene, number)
+
+
 def test_verdict_numbers_come_from_the_run_table(result):
     n = result.parameters["verdict_n_processes"]
     assert n == max(COUNTS)
-    runs = result.runs[result.runs["n_processes"] == n]
     assert list(result.verdicts["scene"]) == SCENES
-    for row in result.verdict_numbers.itertuples():
-        run = runs[(runs["scene"] == row.scene) & (runs["mapping"] == row.mapping)].iloc[0]
-        if row.metric.startswith("speedup"):
-            assert row.value == float(f"{run[row.metric]:.2f}")
-        else:
-            column = "imbalance_loss" if row.metric.startswith("imbalance") else "coherence_loss"
-            value = float(run[column])
-            assert (value < 0) == row.metric.endswith("gain_pct")
-            assert row.value == float(format_percent(abs(value)))
-            assert row.value == pytest.approx(100 * abs(value), abs=0.051)
-    for verdict in result.verdicts.itertuples():
-        rows = runs[runs["scene"] == verdict.scene].set_index("mapping")
-        assert verdict.best_mapping == rows["speedup_user"].idxmax()
-        assert verdict.max_imbalance_loss == rows["imbalance_loss"].max()
-        assert verdict.max_coherence_loss == rows["coherence_loss"].max()
-        expected = "load balance" if verdict.max_imbalance_loss >= verdict.max_coherence_loss else "coherence"
-        assert verdict.decided_by == expected
-        assert f"{expected} decided" in verdict.text
-        quoted = result.verdict_numbers[result.verdict_numbers["scene"] == verdict.scene]
-        # every number in the text is one of the quoted numbers
-        for number in re.findall(r"\d+\.\d+|\d+(?=%)", verdict.text.split(": ", 1)[1]):
-            assert any(math.isclose(float(number), v) for v in quoted["value"]), number
+    check_verdicts(result.verdicts, result.verdict_numbers, result.runs, n)
+
+
+def _runs(losses):
+    """Hand-built run table at 8 processes: scene -> mapping -> (imbalance, coherence, dispatch, share)."""
+    rows = []
+    for scene, mappings in losses.items():
+        for index, (mapping, (imbalance, coherence, dispatch, share)) in enumerate(mappings.items()):
+            user = 8 * (1 - imbalance) * (1 - coherence) * (1 - dispatch)
+            rows.append({"scene": scene, "mapping": mapping, "n_processes": 8, "speedup_user": user,
+                         "speedup_real": user * 0.8 - 0.01 * index, "imbalance_loss": imbalance,
+                         "coherence_loss": coherence, "dispatch_loss": dispatch, "dispatch_share": share})
+    return pd.DataFrame(rows)
+
+
+def test_dispatch_decides_in_report_and_paper():
+    runs = _runs({
+        "balls": {"S": (0.05, 0.002, 0.0, 0.0), "DB": (0.01, -0.003, 0.30, 0.25)},
+        "tetra": {"S": (0.40, 0.01, 0.0, 0.0), "DB": (0.02, 0.004, 0.12, 0.1)},
+        "room": {"S": (0.02, 0.15, 0.0, 0.0), "DB": (0.01, 0.003, 0.07, 0.05)},
+    })
+    report = verdict_module.verdict(runs[runs["scene"] == "balls"], 8)
+    assert report.decided_by == "dispatch overhead"
+    assert report.headline.startswith("Dispatch overhead, not load balance, decided the speed-up at 8 processes: "
+                                      "dispatch cost up to 30.0% (DB), imbalance at most 5.0% (S)")
+    assert report.worst["dispatch_loss"] == ("DB", 0.30)
+    verdicts, numbers = paper.scene_verdicts(runs, 8)
+    decided = dict(zip(verdicts["scene"], verdicts["decided_by"]))
+    assert decided == {"balls": "dispatch overhead", "tetra": "load balance", "room": "coherence"}
+    balls = verdicts.set_index("scene").loc["balls"]
+    assert "Dispatch overhead, not load balance, decided" in balls["text"]
+    assert "DB reaches a user speed-up of 5.56 and loses 1.0% to imbalance, gains 0.3% from coherence and " \
+           "loses 30.0% to dispatch; hand-outs take 25.0% of its work" in balls["text"]
+    assert balls["max_dispatch_loss"] == 0.30 and balls["max_dispatch_mapping"] == "DB"
+    assert verdicts.set_index("scene").loc["tetra", "text"].count("Load balance, not dispatch overhead") == 1
+    check_verdicts(verdicts, numbers, runs, 8)
+    with pytest.raises(ValueError, match="room: no runs with n_processes == 16"):
+        paper.scene_verdicts(runs[runs["scene"] == "room"], 16)
 
 
 def test_files_written_and_deterministic(written):
