@@ -200,7 +200,7 @@ def _sah_costs(boxes_lo, boxes_hi, lo, hi, axis, sides, config):
     its counts are taken at that side and its areas at the float32 plane the
     tree would store. (Where rounding moves the plane past box sides, the
     partition then differs from the count, e.g. a side on a face of the
-    float64 root box seen as an empty cut; see ``tracer.kdtree._sah_sweep``.)
+    float64 root box seen as an empty cut; see ``tracer.kd_split._sah_sweep``.)
     A primitive lying in the plane is put left, then right; the cheaper counts.
     """
     a = boxes_lo[:, axis][None, :]

@@ -1,0 +1,308 @@
+"""kd-tree split kernels: primitives clipped to a node, SAH event sweeps and costs.
+
+Shared by both SAH builders of :mod:`tracer.kd_build`; see :mod:`tracer.kdtree`
+for the node format and the rules.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+@njit(cache=True)
+def _clip_polygon_bounds(verts, a, b, lo, hi, out_lo, out_hi):
+    # Sutherland-Hodgman clip of polygon verts[a:b] against the box; writes the
+    # bounds of the clipped polygon and returns False when nothing is left.
+    n = b - a
+    cap = n + 8
+    cur = np.empty((cap, 3))
+    nxt = np.empty((cap, 3))
+    for k in range(n):
+        cur[k, 0] = verts[a + k, 0]
+        cur[k, 1] = verts[a + k, 1]
+        cur[k, 2] = verts[a + k, 2]
+    m = n
+    for plane in range(6):
+        axis = plane >> 1
+        upper = plane & 1
+        bound = hi[axis] if upper else lo[axis]
+        cnt = 0
+        for k in range(m):
+            k1 = k + 1 if k + 1 < m else 0
+            pa = cur[k, axis]
+            pb = cur[k1, axis]
+            ina = pa <= bound if upper else pa >= bound
+            inb = pb <= bound if upper else pb >= bound
+            if ina:
+                for c in range(3):
+                    nxt[cnt, c] = cur[k, c]
+                cnt += 1
+            if ina != inb:
+                s = (bound - pa) / (pb - pa)
+                for c in range(3):
+                    nxt[cnt, c] = cur[k, c] + s * (cur[k1, c] - cur[k, c])
+                nxt[cnt, axis] = bound
+                cnt += 1
+        tmp = cur
+        cur = nxt
+        nxt = tmp
+        m = cnt
+        if m == 0:
+            return False
+    for c in range(3):
+        mn = cur[0, c]
+        mx = cur[0, c]
+        for k in range(1, m):
+            mn = min(mn, cur[k, c])
+            mx = max(mx, cur[k, c])
+        out_lo[c] = max(mn, lo[c])
+        out_hi[c] = min(mx, hi[c])
+    return True
+
+
+@njit(cache=True)
+def _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, clip, out_lo, out_hi):
+    inside = True
+    for c in range(3):
+        a = max(prim_lo[p, c], lo[c])
+        b = min(prim_hi[p, c], hi[c])
+        if a > b:
+            return False
+        if prim_lo[p, c] < lo[c] or prim_hi[p, c] > hi[c]:
+            inside = False
+        out_lo[c] = a
+        out_hi[c] = b
+    if not clip or inside:
+        return True
+    r = spheres[p, 3]
+    if r >= 0.0:
+        near = 0.0
+        far = 0.0
+        for c in range(3):
+            x = spheres[p, c]
+            d = 0.0
+            if x < lo[c]:
+                d = lo[c] - x
+            elif x > hi[c]:
+                d = x - hi[c]
+            near += d * d
+            e = max(abs(x - lo[c]), abs(hi[c] - x))
+            far += e * e
+        if near > r * r:
+            return False
+        if far < r * r:
+            return False  # box strictly inside the ball: no surface here
+        return True
+    a = clip_off[p]
+    b = clip_off[p + 1]
+    if b - a >= 3:
+        return _clip_polygon_bounds(clip_v, a, b, lo, hi, out_lo, out_hi)
+    return True
+
+
+@njit(cache=True)
+def _area(dx, dy, dz):
+    return 2.0 * (dx * dy + dy * dz + dz * dx)
+
+
+@njit(cache=True)
+def _grow_nodes(a, need):
+    if need <= a.shape[0]:
+        return a
+    b = np.zeros((max(need, 2 * a.shape[0]), 2), np.uint32)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _grow_1d(a, need):
+    if need <= a.shape[0]:
+        return a
+    b = np.empty(max(need, 2 * a.shape[0]), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _axis_events(box_lo, box_hi, ids, k, axis, pos, typ, prim):
+    # Events of the boxes of primitives ids[:k] (rows of box_lo/box_hi are
+    # primitive ids) on one axis, unsorted but laid out end, planar, start
+    # and by ids order within a type, so that a stable sort by position
+    # gives the sweep order (position, type, then ids order). Returns the count.
+    ne = 0
+    for t in range(3):
+        for j in range(k):
+            p = ids[j]
+            a = box_lo[p, axis]
+            b = box_hi[p, axis]
+            if t == 0 and a != b:
+                pos[ne] = b
+            elif t == 1 and a == b:
+                pos[ne] = a
+            elif t == 2 and a != b:
+                pos[ne] = a
+            else:
+                continue
+            typ[ne] = t
+            prim[ne] = p
+            ne += 1
+    return ne
+
+
+@njit(cache=True)
+def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, ct, ci, eb):
+    # Best split (cost, axis, position, planar_left) of a node holding m
+    # primitives, from its events: counts[a] events of axis a, the axes one
+    # after the other from e0, each sorted by position with end (type 0) <
+    # planar (1) < start (2) at equal positions. Cost inf when no valid plane
+    # exists; among equal costs the first in (axis, position, planar side)
+    # order wins.
+    d0 = hi[0] - lo[0]
+    d1 = hi[1] - lo[1]
+    d2 = hi[2] - lo[2]
+    area = _area(d0, d1, d2)
+    best = np.inf
+    best_axis = -1
+    best_pos = 0.0
+    best_left = True
+    if area <= 0.0:
+        return best, best_axis, best_pos, best_left
+    inv_area = 1.0 / area
+    base = e0
+    for axis in range(3):
+        ne = counts[axis]
+        q0 = base
+        base += ne
+        if hi[axis] <= lo[axis]:
+            continue
+        # dimensions of the node orthogonal to the axis
+        if axis == 0:
+            u, v = d1, d2
+        elif axis == 1:
+            u, v = d0, d2
+        else:
+            u, v = d0, d1
+        nl = 0
+        nr = m
+        i = q0
+        end = q0 + ne
+        while i < end:
+            p = ev_pos[i]
+            pe = 0
+            pp = 0
+            ps = 0
+            while i < end and ev_pos[i] == p and ev_typ[i] == 0:
+                pe += 1
+                i += 1
+            while i < end and ev_pos[i] == p and ev_typ[i] == 1:
+                pp += 1
+                i += 1
+            while i < end and ev_pos[i] == p and ev_typ[i] == 2:
+                ps += 1
+                i += 1
+            nr -= pp + pe
+            # the tree stores float32 planes: judge the plane that will be
+            # used (its areas; the counts are the event's, so where rounding
+            # moves the plane past box sides, e.g. one on a face of the
+            # float64 root box, the partition differs from the counts)
+            p32 = np.float64(np.float32(p))
+            if p32 > lo[axis] and p32 < hi[axis]:
+                wl = p32 - lo[axis]
+                wr = hi[axis] - p32
+                pl = (2.0 * (u * v) + 2.0 * wl * (u + v)) * inv_area
+                pr = (2.0 * (u * v) + 2.0 * wr * (u + v)) * inv_area
+                for side in range(2):
+                    l = nl + pp if side == 0 else nl
+                    r = nr if side == 0 else nr + pp
+                    c = pl * l + pr * r
+                    if l == 0 or r == 0:
+                        c *= 1.0 - eb
+                    c = ct + ci * c
+                    if c < best:
+                        best = c
+                        best_axis = axis
+                        best_pos = p32
+                        best_left = side == 0
+            nl += ps + pp
+    return best, best_axis, best_pos, best_left
+
+
+@njit(cache=True)
+def _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp, tprim, pos, typ, counts):
+    # The per-node sort the presorted builder replaced (O(m log m) in every
+    # node, O(N log^2 N) in all): events of the node-clipped boxes clo/chi
+    # (m, 3), sorted here, then swept. ``rows`` is 0, 1, ...; the other
+    # arrays are scratch of at least 2 m (t*) and 6 m (pos, typ) entries.
+    # Used by _build for the comparison with _build_sah (tests, benchmarks).
+    w = 0
+    for axis in range(3):
+        ne = _axis_events(clo, chi, rows, m, axis, tpos, ttyp, tprim)
+        order = np.argsort(tpos[:ne], kind="mergesort")
+        for i in range(ne):
+            pos[w] = tpos[order[i]]
+            typ[w] = ttyp[order[i]]
+            w += 1
+        counts[axis] = ne
+    return _sah_sweep(pos, typ, 0, counts, m, lo, hi, ct, ci, eb)
+
+
+@njit(cache=True)
+def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
+                axis, split, ct, ci, eb, tlo, thi, clo_buf, chi_buf):
+    # SAH cost of a split with primitives clipped to each child, which the
+    # event sweep (node-clipped boxes only) cannot see: a sphere enclosing a
+    # child is dropped from it.
+    d0 = hi[0] - lo[0]
+    d1 = hi[1] - lo[1]
+    d2 = hi[2] - lo[2]
+    area = _area(d0, d1, d2)
+    if area <= 0.0 or not (split > lo[axis] and split < hi[axis]):
+        return np.inf
+    clo_buf[:] = lo
+    chi_buf[:] = hi
+    chi_buf[axis] = split
+    nl = 0
+    for j in range(m):
+        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
+                           clo_buf, chi_buf, True, tlo, thi):
+            nl += 1
+    al = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    clo_buf[:] = lo
+    chi_buf[:] = hi
+    clo_buf[axis] = split
+    nr = 0
+    for j in range(m):
+        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
+                           clo_buf, chi_buf, True, tlo, thi):
+            nr += 1
+    ar = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    c = (al * nl + ar * nr) / area
+    if nl == 0 or nr == 0:
+        c *= 1.0 - eb
+    return ct + ci * c
+
+
+@njit(cache=True)
+def _settle_split(cost, axis, pos, planar_left, work, seg0, m, prim_lo, prim_hi, clip_off, clip_v,
+                  spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi):
+    # From the sweep's best plane to the plane used, or axis -1 for a leaf.
+    if clip and m >= 8 and not cost < ci * m:
+        # the sweep sees node-clipped boxes only; where it gives up on many
+        # primitives, judge the midplanes (and its own best plane) with
+        # primitives clipped to the children
+        best = np.inf
+        if axis >= 0:
+            best = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                               lo, hi, axis, pos, ct, ci, eb, tlo, thi, blo, bhi)
+        for a in range(3):
+            mid = np.float64(np.float32(0.5 * (lo[a] + hi[a])))
+            c = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
+                            lo, hi, a, mid, ct, ci, eb, tlo, thi, blo, bhi)
+            if c < best:
+                best = c
+                axis = a
+                pos = mid
+                planar_left = True
+        cost = best
+    if not cost < ci * m and not (m > force and cost < np.inf):
+        axis = -1
+    return axis, pos, planar_left
