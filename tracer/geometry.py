@@ -196,15 +196,15 @@ def element_clip_shapes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarra
     offsets = np.zeros(n + 1, dtype=np.int64)
     offsets[1:] = np.cumsum(counts)
     vertices = np.zeros((offsets[-1], 3))
-    for e in np.flatnonzero(counts):
-        k, i = kind[e], index[e]
-        if k == ElementKind.TRIANGLE:
-            v = scene.triangle_vertices[i]
-        elif k == ElementKind.POLYGON:
-            v = scene.polygon_vertices[scene.polygon_offsets[i]:scene.polygon_offsets[i + 1]]
-        else:
-            v = scene.patch_vertices[scene.patch_offsets[i]:scene.patch_offsets[i + 1]]
-        vertices[offsets[e]:offsets[e + 1]] = v
+    tri = np.flatnonzero(kind == ElementKind.TRIANGLE)
+    vertices[offsets[tri][:, None] + np.arange(3)] = np.asarray(scene.triangle_vertices).reshape(-1, 3, 3)[index[tri]]
+    for k, source, source_offsets in ((ElementKind.POLYGON, scene.polygon_vertices, scene.polygon_offsets),
+                                      (ElementKind.PATCH, scene.patch_vertices, scene.patch_offsets)):
+        elements = np.flatnonzero(kind == k)
+        c = counts[elements]
+        within = np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c)  # vertex number in its element
+        vertices[np.repeat(offsets[elements], c) + within] = \
+            np.asarray(source).reshape(-1, 3)[np.repeat(np.asarray(source_offsets)[index[elements]], c) + within]
     spheres = np.full((n, 4), -1.0)
     sel = kind == ElementKind.SPHERE
     spheres[sel, :3] = scene.sphere_center[index[sel]]
