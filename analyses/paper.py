@@ -44,6 +44,7 @@ The study's numbers, the defaults and the checks of the inputs live in
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -112,6 +113,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     from coherence import Machine, get_layout, get_mapping, study
     from coherence.cost import OPERATIONS, alpha8400
     from tracer.scenes import PAPER_SCENES
+    from tracer.trace import AccessTrace
 
     # every argument is checked before rendering anything
     scenes = check_scenes(PAPER_SCENES if scenes is None else scenes)
@@ -134,8 +136,8 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
 
     # 1-2: traces, and counters and memory cycles of the sequential S run. One trace at a time: a trace is
     # memory-mapped and every page a run touched stays resident while it is mapped, so holding all five
-    # (about 4 GB at 512x512) set the peak memory. Only the scene and its render info are kept; the trace
-    # is memory-mapped again from the cache for step 4.
+    # (about 4 GB at 512x512) set the peak memory. Only the scene and its render info are kept; step 4
+    # maps the same cache entry again.
     loaded = {}
     measurements = []
     info_out = {}
@@ -165,9 +167,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         scene, _, info = loaded[name]
         if progress:
             print(f"simulating {name}", file=sys.stderr)
-        _, trace, again = cached_trace(name, size, cache_dir=cache_dir, progress=progress)
-        if again["key"] != info["key"]:
-            raise RuntimeError(f"{name}: trace cache key changed during the run ({info['key']} -> {again['key']})")
+        trace = AccessTrace.load(Path(info["path"]) / "trace", mmap=True)  # the entry of step 1
         result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
                        machine=machine, scene=scene, progress=progress)
         del trace

@@ -1,9 +1,11 @@
 """coherence paper: the study's table verbatim, calibration, verdicts from the run table, files, errors."""
 from __future__ import annotations
 
+import gc
 import json
 import math
 import re
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -194,6 +196,35 @@ def test_dispatch_decides_in_report_and_paper():
     check_verdicts(verdicts, numbers, runs, 8)
     with pytest.raises(ValueError, match="room: no runs with n_processes == 16"):
         paper.scene_verdicts(runs[runs["scene"] == "room"], 16)
+
+
+def test_one_trace_mapped_at_a_time(cache, monkeypatch):
+    """A trace's pages stay resident while it is mapped: reproduce must drop each before mapping the next."""
+    import coherence
+    from analyses import traces
+
+    seen = []
+
+    def live(current=None):
+        gc.collect()
+        return [name for name, ref in seen if ref() is not None and ref() is not current]
+
+    def cached_trace(name, *args, **kwargs):
+        assert not live(), f"{name} loaded while {live()} still mapped"
+        return real_cached_trace(name, *args, **kwargs)
+
+    def study(trace, *args, **kwargs):
+        assert not live(trace.records), f"{live(trace.records)} still mapped"
+        seen.append((kwargs["scene"].name, weakref.ref(trace.records)))
+        return real_study(trace, *args, **kwargs)
+
+    real_cached_trace, real_study = traces.cached_trace, coherence.study
+    monkeypatch.setattr(traces, "cached_trace", cached_trace)
+    monkeypatch.setattr(coherence, "study", study)
+    result = paper.reproduce(size=SIZE, n_processes=[2], scenes=SCENES, cache_dir=cache, progress=False)
+    assert len(seen) == 2 * len(SCENES)  # a sequential run and a full study per scene
+    assert not live()
+    assert list(result.table["scene"]) == SCENES
 
 
 def test_files_written_and_deterministic(written):
