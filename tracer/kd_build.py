@@ -14,6 +14,17 @@ from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _gr
                              _sah_sweep, _settle_split)
 
 @njit(cache=True)
+def _emit_leaf(nodes, node, pidx, n_pidx, ids, start, m):
+    # leaf node: its m element ids ids[start:start + m] go to pidx[n_pidx:]
+    nodes[node, 0] = np.uint32(n_pidx)
+    nodes[node, 1] = np.uint32((m << 2) | 3)
+    pidx = _grow_1d(pidx, n_pidx + m)
+    for j in range(m):
+        pidx[n_pidx + j] = ids[start + j]
+    return pidx, n_pidx + m
+
+
+@njit(cache=True)
 def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
            median, max_depth, leaf_size, ct, ci, eb, clip, force):
     n = prim_lo.shape[0]
@@ -129,13 +140,7 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             if median and nl == m and nr == m:
                 axis = -1
         if axis < 0:
-            # leaf
-            nodes[node, 0] = np.uint32(n_pidx)
-            nodes[node, 1] = np.uint32((m << 2) | 3)
-            pidx = _grow_1d(pidx, n_pidx + m)
-            for j in range(m):
-                pidx[n_pidx + j] = work[seg0 + j]
-            n_pidx += m
+            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, work, seg0, m)
             leaves += 1
             if m == 0:
                 empty_leaves += 1
@@ -383,12 +388,7 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             if not (split > lo[axis] and split < hi[axis]):
                 axis = -1
         if axis < 0:
-            nodes[node, 0] = np.uint32(n_pidx)
-            nodes[node, 1] = np.uint32((m << 2) | 3)
-            pidx = _grow_1d(pidx, n_pidx + m)
-            for j in range(m):
-                pidx[n_pidx + j] = ids[i0 + j]
-            n_pidx += m
+            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, ids, i0, m)
             leaves += 1
             if m == 0:
                 empty_leaves += 1
