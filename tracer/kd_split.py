@@ -246,6 +246,25 @@ def _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp, tprim, pos, ty
 
 
 @njit(cache=True)
+def _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
+                      axis, split, above, tlo, thi, clo_buf, chi_buf):
+    # primitives left in the child below (or above) the plane after clipping
+    # them to it, and the child's surface area
+    clo_buf[:] = lo
+    chi_buf[:] = hi
+    if above:
+        clo_buf[axis] = split
+    else:
+        chi_buf[axis] = split
+    n = 0
+    for j in range(m):
+        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
+                           clo_buf, chi_buf, True, tlo, thi):
+            n += 1
+    return n, _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+
+
+@njit(cache=True)
 def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
                 axis, split, ct, ci, eb, tlo, thi, clo_buf, chi_buf):
     # SAH cost of a split with primitives clipped to each child, which the
@@ -257,24 +276,10 @@ def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, 
     area = _area(d0, d1, d2)
     if area <= 0.0 or not (split > lo[axis] and split < hi[axis]):
         return np.inf
-    clo_buf[:] = lo
-    chi_buf[:] = hi
-    chi_buf[axis] = split
-    nl = 0
-    for j in range(m):
-        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
-                           clo_buf, chi_buf, True, tlo, thi):
-            nl += 1
-    al = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
-    clo_buf[:] = lo
-    chi_buf[:] = hi
-    clo_buf[axis] = split
-    nr = 0
-    for j in range(m):
-        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
-                           clo_buf, chi_buf, True, tlo, thi):
-            nr += 1
-    ar = _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    nl, al = _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
+                               axis, split, False, tlo, thi, clo_buf, chi_buf)
+    nr, ar = _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
+                               axis, split, True, tlo, thi, clo_buf, chi_buf)
     c = (al * nl + ar * nr) / area
     if nl == 0 or nr == 0:
         c *= 1.0 - eb
