@@ -42,6 +42,7 @@ import pandas as pd
 
 from analyses.html import table_html
 from analyses.output import check_output_folder, prepare_output_folder
+from analyses.paper_study import check_process_counts
 from cachesim.config import write_text_atomic
 from numba import njit
 
@@ -120,12 +121,7 @@ class Report:
 
 def _process_counts(max_processes, n_processes) -> list[int]:
     if n_processes is not None:
-        counts = []
-        for n in n_processes:
-            if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-                raise ValueError(f"process counts must be integers >= 1, got {n!r}")
-            counts.append(int(n))
-        return sorted({1, *counts})
+        return check_process_counts(n_processes)
     if isinstance(max_processes, bool) or not isinstance(max_processes, (int, np.integer)) or max_processes < 1:
         raise ValueError(f"max_processes must be an integer >= 1, got {max_processes!r}")
     return list(range(1, int(max_processes) + 1))
