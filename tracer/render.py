@@ -164,6 +164,24 @@ def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.
 # --------------------------------------------------------------------------
 
 @njit(cache=True, error_model="numpy")
+def _push_ray(rays, n, ox, oy, oz, dx, dy, dz, wr, wg, wb, depth, typ):
+    # put a secondary ray (direction normalised here) on the ray stack
+    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    rays[n, 0] = ox
+    rays[n, 1] = oy
+    rays[n, 2] = oz
+    rays[n, 3] = dx / ln
+    rays[n, 4] = dy / ln
+    rays[n, 5] = dz / ln
+    rays[n, 6] = wr
+    rays[n, 7] = wg
+    rays[n, 8] = wb
+    rays[n, 9] = depth
+    rays[n, 10] = typ
+    return n + 1
+
+
+@njit(cache=True, error_model="numpy")
 def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
                   nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
                   mats, lights, ambient, background,
@@ -268,35 +286,11 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
             k2 = 1.0 - eta * eta * (1.0 - cosi * cosi)
             if k2 >= 0.0:
                 c2 = eta * cosi - math.sqrt(k2)
-                tx, ty, tz = eta * rdx + c2 * fx, eta * rdy + c2 * fy, eta * rdz + c2 * fz
-                ln = math.sqrt(tx * tx + ty * ty + tz * tz)
-                rays[n, 0] = hx
-                rays[n, 1] = hy
-                rays[n, 2] = hz
-                rays[n, 3] = tx / ln
-                rays[n, 4] = ty / ln
-                rays[n, 5] = tz / ln
-                rays[n, 6] = wr * tr
-                rays[n, 7] = wg * tr
-                rays[n, 8] = wb * tr
-                rays[n, 9] = depth + 1
-                rays[n, 10] = 2.0
-                n += 1
+                n = _push_ray(rays, n, hx, hy, hz, eta * rdx + c2 * fx, eta * rdy + c2 * fy,
+                              eta * rdz + c2 * fz, wr * tr, wg * tr, wb * tr, depth + 1, 2.0)
         if ks > 0.0:
-            qx, qy, qz = rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny, rdz - 2.0 * ddn * nz
-            ln = math.sqrt(qx * qx + qy * qy + qz * qz)
-            rays[n, 0] = hx
-            rays[n, 1] = hy
-            rays[n, 2] = hz
-            rays[n, 3] = qx / ln
-            rays[n, 4] = qy / ln
-            rays[n, 5] = qz / ln
-            rays[n, 6] = wr * ks
-            rays[n, 7] = wg * ks
-            rays[n, 8] = wb * ks
-            rays[n, 9] = depth + 1
-            rays[n, 10] = 1.0
-            n += 1
+            n = _push_ray(rays, n, hx, hy, hz, rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny,
+                          rdz - 2.0 * ddn * nz, wr * ks, wg * ks, wb * ks, depth + 1, 1.0)
     return cr, cg, cb, pos
 
 
