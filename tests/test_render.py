@@ -164,7 +164,8 @@ def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):
     # records are logged into a fixed slot per work item of CHUNK samples; an
     # item that overflows its slot is traced again. Slots of the median item
     # size make about half the items overflow, three items per batch give
-    # several batches, and one thread against all must not matter.
+    # several batches, the in-memory array starts tiny, and one thread
+    # against all must not matter.
     scene, tree = mixed
     ref = render(scene, tree, size=24)
     per_item = np.add.reduceat(np.diff(ref.trace.pixel_offsets),
@@ -172,6 +173,7 @@ def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):
     slot = int(np.median(per_item))
     monkeypatch.setattr(render_module, "BATCH_CHUNKS", 3)
     monkeypatch.setattr(render_module, "SLOT_BUFFER_BYTES", 4 * slot * 3)
+    monkeypatch.setattr(render_module._GrowingRecords, "initial_capacity", 5)  # grows many times
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:

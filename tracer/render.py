@@ -487,9 +487,11 @@ def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.
 class _GrowingRecords:
     """A uint32 array that grows in place (``realloc``) as records arrive."""
 
+    initial_capacity = 1 << 20
+
     def __init__(self, memory_budget: int):
         self.memory_budget = memory_budget
-        self.data = np.empty(1 << 20, np.uint32)
+        self.data = np.empty(self.initial_capacity, np.uint32)
         self.n = 0
 
     def extend(self, pieces) -> None:
