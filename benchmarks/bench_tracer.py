@@ -22,7 +22,9 @@ import numba
 import numpy as np
 
 from tracer.kdtree import build_kdtree
-from tracer.render import camera_rays, closest_hit, render
+from tracer.camera import camera_rays
+from tracer.closest import closest_hit
+from tracer.render import render
 from tracer.scenes import PAPER_SCENES, load
 
 # DESIGN.md section 2: the study's intersection tests per scene, in millions

@@ -6,7 +6,7 @@ import pytest
 
 from scene_factory import KINDS, one_sphere, random_rays, random_scene
 from tracer.kdtree import KdTreeConfig, _build_kdtree, build_kdtree, default_max_depth
-from tracer.render import closest_hit, closest_hit_bruteforce
+from tracer.closest import closest_hit, closest_hit_bruteforce
 from tracer.scene import ElementKind, Material, Scene, SceneBuilder
 
 CONFIGS = {

@@ -8,7 +8,9 @@ import pytest
 from scene_factory import KINDS, one_sphere, random_scene
 from tracer.kdtree import KdTreeConfig, build_kdtree
 import tracer.render as render_module
-from tracer.render import camera_rays, closest_hit, render, save_png
+from tracer.camera import camera_rays
+from tracer.closest import closest_hit
+from tracer.render import render, save_png
 from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, pack, unpack
 
 

@@ -42,8 +42,9 @@ import numpy as np
 from numba import njit, prange
 
 from tracer.geometry import element_normal, prepare_geometry
-from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
-from tracer.traverse import brute_force, traverse
+from tracer.kdtree import KdTree, KdTreeConfig
+from tracer.camera import _resolve_size, camera_frame
+from tracer.traverse import _scene_arrays, _tree_arrays, traverse
 from tracer.scene import Scene
 from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versions
 
@@ -102,61 +103,6 @@ class RenderResult:
         if self.trace is not None:
             out["records"] = self.trace.n_records
         return out
-
-
-# --------------------------------------------------------------------------
-# camera
-# --------------------------------------------------------------------------
-
-def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = False) -> np.ndarray:
-    """Camera parameters the kernel uses, as one float64 array (16,).
-
-    ``eye (3), forward (3), right (3), up (3), pitch, cx, cy, samples_x``:
-    sample ``(i, j)`` (column, row from the top) looks along
-    ``forward + (i - cx) * pitch * right + (cy - j) * pitch * up``.
-    """
-    cam = scene.camera
-    eye = np.array(cam.eye, dtype=np.float64)
-    fwd = np.array(cam.look_at, dtype=np.float64) - eye
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(fwd, np.array(cam.up, dtype=np.float64))
-    if np.linalg.norm(right) == 0.0:
-        raise ValueError("Camera.up must not be parallel to the viewing direction")
-    right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    span = 2.0 * math.tan(math.radians(cam.angle) / 2.0)
-    # angle = between the outermost sample rows; aspect 1 (square pixels).
-    # With corner rays the (H + 1) corner rows are the samples, which is the
-    # convention SPD's published counts use (tetra's 49,950 primary hits
-    # come out exactly only this way).
-    if corner_rays:
-        pitch = span / height
-        cx, cy, sx = width / 2.0, height / 2.0, width + 1
-    else:
-        pitch = span / (height - 1) if height > 1 else span
-        cx, cy, sx = (width - 1) / 2.0, (height - 1) / 2.0, width
-    return np.concatenate([eye, fwd, right, up, [pitch, cx, cy, sx]]).astype(np.float64)
-
-
-def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Primary rays of :func:`render` (for comparisons with other tracers).
-
-    Returns
-    -------
-    origin : ndarray, shape (3,)
-    directions : ndarray, shape (H', W', 3) unit vectors, H' = H (+1 with corner rays)
-    """
-    width, height = _resolve_size(scene, size)
-    cam = camera_frame(scene, width, height, corner_rays)
-    sx = width + 1 if corner_rays else width
-    sy = height + 1 if corner_rays else height
-    i = np.arange(sx, dtype=np.float64)
-    j = np.arange(sy, dtype=np.float64)
-    u = (i - cam[13]) * cam[12]
-    v = (cam[14] - j) * cam[12]
-    d = cam[3:6][None, None, :] + u[None, :, None] * cam[6:9] + v[:, None, None] * cam[9:12]
-    d /= np.linalg.norm(d, axis=2, keepdims=True)
-    return cam[0:3].copy(), d
 
 
 # --------------------------------------------------------------------------
@@ -351,137 +297,9 @@ def _render_kernel(chunk_start, chunk_base, chunk_cap, n_samples, cam, hither, e
         chunk_used[k] = end - chunk_base[k]
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
-def _closest_kernel(orig, dirs, tmin, tmax, nodes, fnodes, pidx, blo, bhi, ekind, eidx, geo,
-                    n_counters, out_t, out_e, out_nodes):
-    dummy = np.empty(0, np.uint32)
-    for r in prange(orig.shape[0]):
-        cnt = np.zeros(n_counters, np.int64)
-        st_node = np.empty(64, np.int64)
-        st_t0 = np.empty(64)
-        st_t1 = np.empty(64)
-        t, e, _ = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
-                           orig[r, 0], orig[r, 1], orig[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
-                           tmin[r], tmax[r], False, dummy, 0, 0, cnt, st_node, st_t0, st_t1)
-        out_t[r] = t
-        out_e[r] = e
-        out_nodes[r] = cnt[8]
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def _brute_kernel(orig, dirs, tmin, tmax, ekind, eidx, geo, out_t, out_e):
-    for r in prange(orig.shape[0]):
-        t, e = brute_force(ekind, eidx, geo, orig[r, 0], orig[r, 1], orig[r, 2],
-                           dirs[r, 0], dirs[r, 1], dirs[r, 2], tmin[r], tmax[r])
-        out_t[r] = t
-        out_e[r] = e
-
-
 # --------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------
-
-def _resolve_size(scene: Scene, size) -> tuple[int, int]:
-    if size is None:
-        return scene.camera.resolution
-    if np.ndim(size) == 0:
-        size = (size, size)
-    if len(size) != 2 or any(int(s) != s or int(s) < 1 for s in size):
-        raise ValueError(f"size must be a positive int or (width, height), got {size!r}")
-    return int(size[0]), int(size[1])
-
-
-def _scene_arrays(scene: Scene):
-    n = scene.n_elements
-    for name in ("element_index", "element_material"):
-        if getattr(scene, name).shape != (n,):
-            raise ValueError(f"Scene.{name} must have shape ({n},)")
-    ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
-    eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
-    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
-    if n and ekind.max() > 4:
-        raise ValueError("Scene.element_kind holds a value outside ElementKind (0..4)")
-    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
-                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
-    mats = np.ascontiguousarray(mats.reshape(-1, 8))
-    if n and (emat.min() < 0 or emat.max() >= len(mats)):
-        raise ValueError("Scene.element_material refers to a material row that does not exist")
-    return ekind, eidx, emat, mats
-
-
-def _tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | None):
-    if tree is None:
-        tree = build_kdtree(scene, kd_config)
-    elif not isinstance(tree, KdTree):
-        raise ValueError(f"tree must be a KdTree, got {type(tree).__name__}")
-    nodes = np.ascontiguousarray(tree.nodes, dtype=np.uint32)
-    return tree, nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32), \
-        np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1])
-
-
-def _rays(origins, directions):
-    o = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 3))
-    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    if o.shape != d.shape:
-        raise ValueError(f"origins and directions must both be (R, 3), got {o.shape} and {d.shape}")
-    norm = np.linalg.norm(d, axis=1)
-    if np.any(norm == 0.0):
-        raise ValueError("directions must be non-zero")
-    return o, np.ascontiguousarray(d / norm[:, None])
-
-
-def _bounds(value, n, what):
-    a = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
-    return np.ascontiguousarray(a)
-
-
-def closest_hit(scene: Scene, tree: KdTree | None, origins, directions, tmin=0.0, tmax=np.inf):
-    """Closest hit of each ray through the kd-tree.
-
-    Parameters
-    ----------
-    scene : Scene
-    tree : KdTree or None
-        Built with :func:`~tracer.kdtree.build_kdtree` if None.
-    origins, directions : array_like, shape (R, 3)
-        Directions are normalised here (``t`` is a distance).
-    tmin, tmax : float or array_like (R,)
-
-    Returns
-    -------
-    t : ndarray, shape (R,) float64, ``inf`` on a miss
-    element : ndarray, shape (R,) int64, -1 on a miss
-    node_visits : ndarray, shape (R,) int64
-    """
-    o, d = _rays(origins, directions)
-    tree, nodes, fnodes, pidx, blo, bhi = _tree_arrays(scene, tree, None)
-    ekind, eidx, _, _ = _scene_arrays(scene)
-    geo = prepare_geometry(scene)
-    r = len(o)
-    out_t = np.empty(r)
-    out_e = np.empty(r, np.int64)
-    out_n = np.empty(r, np.int64)
-    _closest_kernel(o, d, _bounds(tmin, r, "tmin"), _bounds(tmax, r, "tmax"), nodes, fnodes, pidx,
-                    blo, bhi, ekind, eidx, geo, N_COUNTERS, out_t, out_e, out_n)
-    return out_t, out_e, out_n
-
-
-def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf):
-    """Closest hit of each ray by testing every element (the slow reference).
-
-    Returns
-    -------
-    t : ndarray, shape (R,) float64
-    element : ndarray, shape (R,) int64
-    """
-    o, d = _rays(origins, directions)
-    ekind, eidx, _, _ = _scene_arrays(scene)
-    geo = prepare_geometry(scene)
-    r = len(o)
-    out_t = np.empty(r)
-    out_e = np.empty(r, np.int64)
-    _brute_kernel(o, d, _bounds(tmin, r, "tmin"), _bounds(tmax, r, "tmax"), ekind, eidx, geo, out_t, out_e)
-    return out_t, out_e
 
 
 class _GrowingRecords:

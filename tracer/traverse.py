@@ -2,7 +2,8 @@
 
 :func:`traverse` walks the flat tree of :mod:`tracer.kdtree` front to back
 and appends every record it reads to the access log; :func:`brute_force` is
-the slow reference that tests every element.
+the slow reference that tests every element. ``_scene_arrays`` and
+``_tree_arrays`` check and prepare the arrays the kernels read.
 """
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import numpy as np
 from numba import njit
 
 from tracer.geometry import hit_element
+from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
+from tracer.scene import Scene
 
 # Record kinds (tracer.trace.RecordKind): 0 KD_NODE, 1 INDEX_ENTRY,
 # 2 + ElementKind for primitives. Counter columns (tracer.trace.COUNTER_NAMES):
@@ -151,3 +154,31 @@ def brute_force(ekind, eidx, geo, ox, oy, oz, dx, dy, dz, tmin, tmax):
     if best_e < 0:
         return np.inf, -1
     return best_t, best_e
+
+
+def _scene_arrays(scene: Scene):
+    n = scene.n_elements
+    for name in ("element_index", "element_material"):
+        if getattr(scene, name).shape != (n,):
+            raise ValueError(f"Scene.{name} must have shape ({n},)")
+    ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
+    eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
+    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
+    if n and ekind.max() > 4:
+        raise ValueError("Scene.element_kind holds a value outside ElementKind (0..4)")
+    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
+                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
+    mats = np.ascontiguousarray(mats.reshape(-1, 8))
+    if n and (emat.min() < 0 or emat.max() >= len(mats)):
+        raise ValueError("Scene.element_material refers to a material row that does not exist")
+    return ekind, eidx, emat, mats
+
+
+def _tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | None):
+    if tree is None:
+        tree = build_kdtree(scene, kd_config)
+    elif not isinstance(tree, KdTree):
+        raise ValueError(f"tree must be a KdTree, got {type(tree).__name__}")
+    nodes = np.ascontiguousarray(tree.nodes, dtype=np.uint32)
+    return tree, nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32), \
+        np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1])
