@@ -37,9 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from tracer.trace import INDEX_MASK, KIND_SHIFT, RecordKind
+from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_kind
 
-N_KINDS = len(RecordKind)
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
 
 
@@ -259,7 +258,7 @@ def _round_up(value: int, align: int) -> int:
 def _lines_touched(records, record_start, record_size, kind_first, shift):
     out = np.empty(records.shape[0], dtype=np.int64)
     for i in range(records.shape[0]):
-        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        row = kind_first[record_kind(records[i])] + record_id(records[i])
         start = record_start[row]
         out[i] = ((start + record_size[row] - 1) >> shift) - (start >> shift) + 1
     return out
@@ -269,7 +268,7 @@ def _lines_touched(records, record_start, record_size, kind_first, shift):
 def _fill_addresses(records, record_start, record_size, kind_first, shift, out):
     k = 0
     for i in range(records.shape[0]):
-        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        row = kind_first[record_kind(records[i])] + record_id(records[i])
         start = record_start[row]
         for line in range(start >> shift, ((start + record_size[row] - 1) >> shift) + 1):
             out[k] = np.uint64(line << shift)

@@ -35,6 +35,7 @@ from cachesim import _kernels as K
 from coherence.cost import CostModel
 from coherence.layout import PlacedLayout
 from coherence.distribution import Distribution
+from tracer.records import record_id, record_kind
 
 PLACEMENTS = ("round-robin", "neighbours")
 
@@ -234,7 +235,7 @@ def _pixel_addresses(records, start, stop, record_start, record_size, kind_first
     """Line addresses of records[start:stop] into ``buffer`` (grown if needed)."""
     k = 0
     for i in range(start, stop):
-        row = kind_first[records[i] >> 28] + (records[i] & 0x0FFFFFFF)
+        row = kind_first[record_kind(records[i])] + record_id(records[i])
         first = record_start[row]
         last = first + record_size[row] - 1
         for line in range(first >> shift, (last >> shift) + 1):

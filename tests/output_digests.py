@@ -6,7 +6,9 @@ Runs a fixed set of command-line jobs in a scratch folder and writes one line
 per output file: ``sha256  path``. Arrays (``.npy``) are digested by dtype,
 shape and bytes; CSV files byte for byte; JSON files after dropping what
 differs between two runs of the same commit: ``versions`` blocks, wall times
-(``timings``, ``*seconds``) and the scratch folder's name in paths.
+(``timings``, ``*seconds``), the scratch folder's name in paths, and the
+hash part of ``trace_key`` (it hashes the tracer's source by design, so any
+edit of ``tracer/`` changes it).
 The jobs: each paper scene rendered with its trace at 64x64 (SAH and median
 kd-trees for balls), ``simulate`` on the balls trace, ``paper`` at 64x64,
 ``report balls`` at 128x128 and two ``whatif`` studies at 32x32.
@@ -48,7 +50,7 @@ def jobs(work: pathlib.Path) -> list[list[str]]:
 def _stable(value, work: str):
     """The JSON value without what changes from run to run of one commit."""
     if isinstance(value, dict):
-        return {k: _stable(v, work) for k, v in value.items()
+        return {k: (v.rsplit("-", 1)[0] if k == "trace_key" else _stable(v, work)) for k, v in value.items()
                 if k not in ("versions", "timings") and not k.endswith("seconds")}
     if isinstance(value, list):
         return [_stable(v, work) for v in value]
@@ -75,10 +77,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", help="digest file to write")
     parser.add_argument("--work", help="scratch folder (default: a temporary one)")
+    parser.add_argument("--digest-only", action="store_true", help="digest the outputs already in --work")
     args = parser.parse_args(argv)
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="digests-"))
     (work / "simulate").mkdir(parents=True, exist_ok=True)
-    for job in jobs(work):
+    for job in [] if args.digest_only else jobs(work):
         name = job[0] + " " + job[1]
         print("running", name, file=sys.stderr, flush=True)
         done = subprocess.run([sys.executable, "-m", "coherence", *job], capture_output=True, text=True)

@@ -11,7 +11,7 @@ from numba import njit, prange
 from tracer.geometry import prepare_geometry
 from tracer.kdtree import KdTree
 from tracer.scene import Scene
-from tracer.trace import COUNTER_NAMES
+from tracer.records import COUNTER_NAMES, Counter
 from tracer.traverse import _scene_arrays, _tree_arrays, brute_force, traverse
 
 
@@ -29,7 +29,7 @@ def _closest_kernel(orig, dirs, tmin, tmax, nodes, fnodes, pidx, blo, bhi, ekind
                            tmin[r], tmax[r], False, dummy, 0, 0, cnt, st_node, st_t0, st_t1)
         out_t[r] = t
         out_e[r] = e
-        out_nodes[r] = cnt[8]
+        out_nodes[r] = cnt[Counter.NODE_VISITS]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

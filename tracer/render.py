@@ -45,6 +45,7 @@ from tracer.geometry import element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.camera import _resolve_size, camera_frame
 from tracer.traverse import _scene_arrays, _tree_arrays, traverse
+from tracer.records import Counter, RecordKind, make_record
 from tracer.scene import Scene
 from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versions
 
@@ -175,9 +176,9 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
         nx, ny, nz = element_normal(k, eidx[e], geo, hx, hy, hz)
         m = emat[e]
         if pos < limit:
-            rec[pos] = (7 << 28) | m
+            rec[pos] = make_record(RecordKind.MATERIAL, m)
         pos += 1
-        cnt[16] += 1
+        cnt[Counter.SHADING] += 1
         mr, mg, mb = mats[m, 0], mats[m, 1], mats[m, 2]
         kd, ks, shine, tr, ior = mats[m, 3], mats[m, 4], mats[m, 5], mats[m, 6], mats[m, 7]
         lr = ambient * kd * mr
@@ -185,9 +186,9 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
         lb = ambient * kd * mb
         for li in range(n_lights):
             if pos < limit:
-                rec[pos] = (8 << 28) | li
+                rec[pos] = make_record(RecordKind.LIGHT, li)
             pos += 1
-            cnt[17] += 1
+            cnt[Counter.LIGHT_READS] += 1
             lx, ly, lz = lights[li, 0] - hx, lights[li, 1] - hy, lights[li, 2] - hz
             dist = math.sqrt(lx * lx + ly * ly + lz * lz)
             if dist == 0.0:
@@ -196,12 +197,12 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
             ndl = nx * lx + ny * ly + nz * lz
             if ndl <= 0.0:
                 continue
-            cnt[2] += 1
+            cnt[Counter.SHADOW_RAYS] += 1
             ts, es, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
                                    hx, hy, hz, lx, ly, lz, eps, dist, True,
                                    rec, pos, limit, cnt, st_node, st_t0, st_t1)
             if es >= 0:
-                cnt[3] += 1
+                cnt[Counter.SHADOW_BLOCKED] += 1
                 continue
             diff = kd * ndl
             spec = 0.0

@@ -1,7 +1,7 @@
 """Per-pixel access logs: record packing, counters and :class:`AccessTrace`.
 
 A *record* is one read of one scene record, packed into a uint32 as
-``kind << 28 | index`` (4-bit kind, 28-bit index):
+described in :mod:`tracer.records` (4-bit kind, 28-bit index):
 
 =============  ===============================================================
 KD_NODE        kd-tree node ``index`` (row of ``KdTree.nodes``), each visit;
@@ -20,7 +20,6 @@ records. Rays of one pixel appear in depth-first (recursive Whitted) order.
 """
 from __future__ import annotations
 
-import enum
 import json
 import os
 import shutil
@@ -30,72 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-KIND_SHIFT = 28
-INDEX_MASK = (1 << KIND_SHIFT) - 1
-FORMAT_VERSION = 1
-
-
-class RecordKind(enum.IntEnum):
-    """Kinds of scene records a pixel reads (4 bits in a packed record)."""
-
-    KD_NODE = 0
-    INDEX_ENTRY = 1
-    SPHERE = 2
-    TRIANGLE = 3
-    POLYGON = 4
-    PATCH = 5
-    CONE = 6
-    MATERIAL = 7
-    LIGHT = 8
-
-
-# Per-pixel counter columns of AccessTrace.counters / RenderResult.counters.
-COUNTER_NAMES = (
-    "primary_rays", "primary_hits",
-    "shadow_rays", "shadow_blocked",
-    "reflection_rays", "reflection_hits",
-    "refraction_rays", "refraction_hits",
-    "node_visits", "leaf_visits", "index_reads",
-    "tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tests_cone",
-    "shading", "light_reads",
+from tracer.records import (  # noqa: F401  (re-exported: the format's names)
+    COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
+    Counter, RecordKind, pack, unpack,
 )
-
-# Which counter equals the number of records of each kind.
-COUNTER_OF_KIND = {
-    RecordKind.KD_NODE: "node_visits",
-    RecordKind.INDEX_ENTRY: "index_reads",
-    RecordKind.SPHERE: "tests_sphere",
-    RecordKind.TRIANGLE: "tests_triangle",
-    RecordKind.POLYGON: "tests_polygon",
-    RecordKind.PATCH: "tests_patch",
-    RecordKind.CONE: "tests_cone",
-    RecordKind.MATERIAL: "shading",
-    RecordKind.LIGHT: "light_reads",
-}
-
-
-def pack(kind, index) -> np.ndarray:
-    """Pack ``kind`` and ``index`` (scalars or arrays) into uint32 records.
-
-    Raises
-    ------
-    ValueError
-        If a kind is not a :class:`RecordKind` or an index is outside
-        ``0 .. 2**28 - 1``.
-    """
-    kind = np.asarray(kind, dtype=np.int64)
-    index = np.asarray(index, dtype=np.int64)
-    if np.any((kind < 0) | (kind > max(RecordKind))):
-        raise ValueError("pack: kind must be a RecordKind value (0..8)")
-    if np.any((index < 0) | (index > INDEX_MASK)):
-        raise ValueError(f"pack: index must be in 0..{INDEX_MASK}")
-    return ((kind << KIND_SHIFT) | index).astype(np.uint32)
-
-
-def unpack(records) -> tuple[np.ndarray, np.ndarray]:
-    """Split uint32 records into ``(kind, index)`` arrays (uint8, uint32)."""
-    records = np.asarray(records, dtype=np.uint32)
-    return (records >> KIND_SHIFT).astype(np.uint8), records & np.uint32(INDEX_MASK)
 
 
 def package_versions() -> dict:

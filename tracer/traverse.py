@@ -12,11 +12,9 @@ from numba import njit
 
 from tracer.geometry import hit_element
 from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
+from tracer.records import Counter, RecordKind, make_record
 from tracer.scene import Scene
 
-# Record kinds (tracer.trace.RecordKind): 0 KD_NODE, 1 INDEX_ENTRY,
-# 2 + ElementKind for primitives. Counter columns (tracer.trace.COUNTER_NAMES):
-# 8 node visits, 9 leaf visits, 10 index reads, 11 + ElementKind tests.
 
 @njit(cache=True, error_model="numpy")
 def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
@@ -25,7 +23,7 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
     """Closest (or any, with ``anyhit``) hit of a ray in ``(tmin, tmax)``.
 
     Every node visit, leaf index-entry read and primitive test is counted in
-    ``cnt`` and advances ``pos``; its record (packed ``kind << 28 | index``)
+    ``cnt`` and advances ``pos``; its packed record (:mod:`tracer.records`)
     is stored at ``rec[pos]`` while ``pos < limit`` (``limit = 0`` logs
     nothing, and a caller whose slot overflows learns the size it needs).
 
@@ -63,9 +61,9 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             t1 = min(t1, tb)
     if miss or t0 > t1:
         if pos < limit:
-            rec[pos] = 0
+            rec[pos] = make_record(RecordKind.KD_NODE, 0)
         pos += 1
-        cnt[8] += 1
+        cnt[Counter.NODE_VISITS] += 1
         return np.inf, -1, pos
     sp = 0
     node = 0
@@ -73,9 +71,9 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
         if best_t < t0:
             break  # stacked nodes lie even farther along the ray
         if pos < limit:
-            rec[pos] = node
+            rec[pos] = make_record(RecordKind.KD_NODE, node)
         pos += 1
-        cnt[8] += 1
+        cnt[Counter.NODE_VISITS] += 1
         w1 = nodes[node, 1]
         flag = w1 & 3
         if flag != 3:
@@ -107,7 +105,7 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
                 t1 = tp
             continue
         # leaf
-        cnt[9] += 1
+        cnt[Counter.LEAF_VISITS] += 1
         count = np.int64(w1 >> 2)
         off = np.int64(nodes[node, 0])
         for j in range(off, off + count):
@@ -115,13 +113,13 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             k = np.int64(ekind[e])
             i = eidx[e]
             if pos + 1 < limit:
-                rec[pos] = (1 << 28) | j
-                rec[pos + 1] = ((2 + k) << 28) | i
+                rec[pos] = make_record(RecordKind.INDEX_ENTRY, j)
+                rec[pos + 1] = make_record(RecordKind.SPHERE + k, i)
             elif pos < limit:
-                rec[pos] = (1 << 28) | j
+                rec[pos] = make_record(RecordKind.INDEX_ENTRY, j)
             pos += 2
-            cnt[10] += 1
-            cnt[11 + k] += 1
+            cnt[Counter.INDEX_READS] += 1
+            cnt[Counter.TESTS_SPHERE + k] += 1
             t = hit_element(k, i, geo, ox, oy, oz, dx, dy, dz, tmin, best_t)
             if t < best_t:
                 best_t = t

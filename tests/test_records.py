@@ -1,0 +1,40 @@
+"""The trace format's compiled accessors against the numpy pack/unpack."""
+import numpy as np
+from numba import njit
+
+from tracer.records import COUNTER_NAMES, INDEX_MASK, Counter, RecordKind, make_record, pack, record_id, record_kind, unpack
+
+
+@njit
+def _roundtrip(kinds, indices, out_records, out_kinds, out_ids):
+    for i in range(kinds.shape[0]):
+        out_records[i] = make_record(kinds[i], indices[i])
+        out_kinds[i] = record_kind(out_records[i])
+        out_ids[i] = record_id(out_records[i])
+
+
+def test_compiled_accessors_match_pack_and_unpack():
+    rng = np.random.default_rng(7)
+    kinds = rng.integers(0, len(RecordKind), 1000)
+    indices = rng.integers(0, INDEX_MASK + 1, 1000)
+    indices[:2] = (0, INDEX_MASK)
+    records = np.empty(1000, np.uint32)
+    out_kinds = np.empty(1000, np.int64)
+    out_ids = np.empty(1000, np.int64)
+    _roundtrip(kinds, indices, records, out_kinds, out_ids)
+    np.testing.assert_array_equal(records, pack(kinds, indices))
+    k, i = unpack(records)
+    np.testing.assert_array_equal(out_kinds, k)
+    np.testing.assert_array_equal(out_ids, i)
+
+
+def test_hand_packed_records():
+    assert make_record(RecordKind.LIGHT, 5) == (8 << 28) + 5
+    assert record_kind(np.uint32(0x7000_0003)) == RecordKind.MATERIAL
+    assert record_id(np.uint32(0x7000_0003)) == 3
+
+
+def test_counter_names_follow_the_enum():
+    assert COUNTER_NAMES[Counter.NODE_VISITS] == "node_visits"
+    assert COUNTER_NAMES[Counter.TESTS_SPHERE + 4] == "tests_cone"
+    assert len(COUNTER_NAMES) == 18

@@ -1,0 +1,124 @@
+"""The trace format's contract: record kinds, record packing and counters.
+
+A *record* is one read of one scene record, packed into a uint32 as
+``kind << KIND_SHIFT | index`` (4-bit :class:`RecordKind`, 28-bit index).
+Writers (the tracer's kernels) and readers (layouts, simulation) use the
+names here, never bare shifts, masks or counter positions: the compiled
+helpers :func:`make_record`, :func:`record_kind` and :func:`record_id` inline
+into kernels, and :class:`Counter` members are compile-time constants there.
+
+Element primitives map to record kinds and test counters by offset:
+``RecordKind.SPHERE + element_kind`` and ``Counter.TESTS_SPHERE +
+element_kind`` (``tracer.scene.ElementKind`` order: sphere, triangle,
+polygon, patch, cone).
+"""
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+from numba import njit
+
+KIND_SHIFT = 28
+INDEX_MASK = (1 << KIND_SHIFT) - 1
+FORMAT_VERSION = 1
+
+
+class RecordKind(enum.IntEnum):
+    """Kinds of scene records a pixel reads (4 bits in a packed record)."""
+
+    KD_NODE = 0
+    INDEX_ENTRY = 1
+    SPHERE = 2
+    TRIANGLE = 3
+    POLYGON = 4
+    PATCH = 5
+    CONE = 6
+    MATERIAL = 7
+    LIGHT = 8
+
+
+N_KINDS = len(RecordKind)
+
+
+class Counter(enum.IntEnum):
+    """Per-pixel counter columns of ``AccessTrace.counters``."""
+
+    PRIMARY_RAYS = 0
+    PRIMARY_HITS = 1
+    SHADOW_RAYS = 2
+    SHADOW_BLOCKED = 3
+    REFLECTION_RAYS = 4
+    REFLECTION_HITS = 5
+    REFRACTION_RAYS = 6
+    REFRACTION_HITS = 7
+    NODE_VISITS = 8
+    LEAF_VISITS = 9
+    INDEX_READS = 10
+    TESTS_SPHERE = 11
+    TESTS_TRIANGLE = 12
+    TESTS_POLYGON = 13
+    TESTS_PATCH = 14
+    TESTS_CONE = 15
+    SHADING = 16
+    LIGHT_READS = 17
+
+
+# Column names of the counters, in column order (the on-disk format's names).
+COUNTER_NAMES = tuple(c.name.lower() for c in Counter)
+N_COUNTERS = len(Counter)
+
+# Which counter equals the number of records of each kind.
+COUNTER_OF_KIND = {
+    RecordKind.KD_NODE: "node_visits",
+    RecordKind.INDEX_ENTRY: "index_reads",
+    RecordKind.SPHERE: "tests_sphere",
+    RecordKind.TRIANGLE: "tests_triangle",
+    RecordKind.POLYGON: "tests_polygon",
+    RecordKind.PATCH: "tests_patch",
+    RecordKind.CONE: "tests_cone",
+    RecordKind.MATERIAL: "shading",
+    RecordKind.LIGHT: "light_reads",
+}
+
+
+@njit(cache=True, inline="always")
+def make_record(kind, index):
+    """The packed uint32 record of ``index`` of ``kind``."""
+    return np.uint32((np.int64(kind) << KIND_SHIFT) | np.int64(index))
+
+
+@njit(cache=True, inline="always")
+def record_kind(record):
+    """The :class:`RecordKind` value of a packed record, as an int64."""
+    return np.int64(record >> KIND_SHIFT)
+
+
+@njit(cache=True, inline="always")
+def record_id(record):
+    """The index part of a packed record, as an int64."""
+    return np.int64(record & INDEX_MASK)
+
+
+def pack(kind, index) -> np.ndarray:
+    """Pack ``kind`` and ``index`` (scalars or arrays) into uint32 records.
+
+    Raises
+    ------
+    ValueError
+        If a kind is not a :class:`RecordKind` or an index is outside
+        ``0 .. 2**28 - 1``.
+    """
+    kind = np.asarray(kind, dtype=np.int64)
+    index = np.asarray(index, dtype=np.int64)
+    if np.any((kind < 0) | (kind > max(RecordKind))):
+        raise ValueError(f"pack: kind must be a RecordKind value (0..{int(max(RecordKind))})")
+    if np.any((index < 0) | (index > INDEX_MASK)):
+        raise ValueError(f"pack: index must be in 0..{INDEX_MASK}")
+    return ((kind << KIND_SHIFT) | index).astype(np.uint32)
+
+
+def unpack(records) -> tuple[np.ndarray, np.ndarray]:
+    """Split uint32 records into ``(kind, index)`` arrays (uint8, uint32)."""
+    records = np.asarray(records, dtype=np.uint32)
+    return (records >> KIND_SHIFT).astype(np.uint8), records & np.uint32(INDEX_MASK)
