@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib.util
 import json
 import pathlib
 import subprocess
@@ -29,6 +30,10 @@ import tempfile
 import numpy as np
 
 SCENES = ("balls", "tetra", "shell", "room", "fluid")
+
+
+# The command-line front end: analyses.cli once the CLI sits at the top layer.
+CLI_MODULE = "analyses" if importlib.util.find_spec("analyses.cli") else "coherence"
 
 
 def jobs(work: pathlib.Path) -> list[list[str]]:
@@ -84,7 +89,7 @@ def main(argv=None) -> int:
     for job in [] if args.digest_only else jobs(work):
         name = job[0] + " " + job[1]
         print("running", name, file=sys.stderr, flush=True)
-        done = subprocess.run([sys.executable, "-m", "coherence", *job], capture_output=True, text=True)
+        done = subprocess.run([sys.executable, "-m", CLI_MODULE, *job], capture_output=True, text=True)
         if done.returncode != 0:
             print(done.stdout, done.stderr, file=sys.stderr)
             return 1
