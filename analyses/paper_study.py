@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from coherence.mappings import DEFAULT_MAPPINGS
+
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
            "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
            "check_size", "check_background"]
@@ -41,7 +43,6 @@ STUDY_SIZE = 512
 DEFAULT_BACKGROUND = 2
 
 DEFAULT_PROCESSES = (1, 2, 4, 6, 8, 10, 12, 14, 16)
-DEFAULT_MAPPINGS = ("S", "P", "R", "B", "DB")
 
 #: Cost-model operations fitted to the study's times; the rest stay at alpha8400.
 FIT = ("node_visit", "test_sphere", "test_triangle", "test_polygon")

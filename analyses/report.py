@@ -41,13 +41,13 @@ from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_html import _html
 from cachesim.config import write_text_atomic
+from coherence.mappings import DEFAULT_MAPPINGS
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
            "RESULT_COLUMNS",
            "SECTIONS", "DEFAULT_MAPPINGS"]
 
-DEFAULT_MAPPINGS = ("S", "P", "R", "B", "DB")
 
 #: Columns of ``results.csv``.
 RESULT_COLUMNS = ("section", "mapping", "n_processes", "item", "metric", "value")

@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
+from coherence.mappings import DEFAULT_MAPPINGS
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "scene_size", "n_processes",
@@ -74,7 +75,7 @@ class WhatIf:
     name: str = "custom"
     scene: str = "balls"
     size: int = 128
-    mappings: tuple = ("S", "P", "R", "B", "DB")
+    mappings: tuple = DEFAULT_MAPPINGS
     n_processes: int = 8
     hierarchy: str = "alpha21164"
     cost: str = "alpha8400"

@@ -23,6 +23,7 @@ _EXPORTS = {
     "DynamicBlock": "coherence.mappings", "CurveSegments": "coherence.mappings",
     "CurveTiles": "coherence.mappings", "CustomMapping": "coherence.mappings",
     "from_owner_image": "coherence.mappings", "MAPPINGS": "coherence.mappings", "get_mapping": "coherence.mappings",
+    "DEFAULT_MAPPINGS": "coherence.mappings",
     "hilbert_order": "coherence.curves", "morton_order": "coherence.curves", "serpentine_order": "coherence.curves",
 }
 

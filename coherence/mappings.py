@@ -28,6 +28,7 @@ from .distribution import (Distribution, _check_coverage, _csr_from_labels, _int
 
 __all__ = [
     "DEFAULT_DISPATCH_CYCLES",
+    "DEFAULT_MAPPINGS",
     "MAPPINGS",
     "Block",
     "CurveSegments",
@@ -603,6 +604,11 @@ MAPPINGS: dict[str, Mapping] = {
         CurveTiles(),
     )
 }
+
+
+#: The study's five mappings, in its order: the default of every comparison
+#: (the command line, :func:`coherence.studies.study`, reports, the paper, what-ifs).
+DEFAULT_MAPPINGS = ("S", "P", "R", "B", "DB")
 
 
 def get_mapping(name_or_mapping) -> Mapping:

@@ -16,7 +16,7 @@ import pandas as pd
 from cachesim import Hierarchy, get_hierarchy
 from coherence.cost import CostModel, get_cost_model
 from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_counts_of
-from coherence.mappings import get_mapping
+from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.simulation import Machine, simulate_run
 from tracer.trace import COUNTER_NAMES, RecordKind
@@ -63,7 +63,7 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
     return layout.place(counts, vertices)
 
 
-def study(trace, mappings=("S", "P", "R", "B", "DB"), n_processes=(1, 2, 4, 8, 16), *,
+def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
           hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
           cost: CostModel | str = "alpha8400", machine: Machine | None = None, scene=None,
           progress: bool = True, n_jobs: int | None = None) -> StudyResult:

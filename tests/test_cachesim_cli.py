@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from cachesim import CacheLevel, Hierarchy, alpha21164, read_addresses, simulate
-from coherence.cli import main
+from analyses.cli import main
 
 
 @pytest.fixture

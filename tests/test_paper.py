@@ -15,7 +15,7 @@ import pytest
 from analyses import paper
 from analyses import verdict as verdict_module
 from analyses.verdict import format_percent
-from coherence.cli import main
+from analyses.cli import main
 
 SCENES = ["tetra", "balls"]
 COUNTS = [1, 2, 4]

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from coherence.cli import main
+from analyses.cli import main
 from tracer.trace import AccessTrace
 
 

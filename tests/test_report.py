@@ -12,7 +12,7 @@ import tracer.render
 from analyses import traces
 from analyses.report import RESULT_COLUMNS, SECTIONS
 from analyses.verdict import format_percent, verdict
-from coherence.cli import main
+from analyses.cli import main
 
 SIZE = "32"
 ARGS = ["--size", SIZE, "--processes", "2", "8", "--mappings", "S", "P", "B", "DB"]

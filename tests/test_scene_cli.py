@@ -1,11 +1,11 @@
-"""``coherence scene`` through :func:`coherence.cli.main`."""
+"""``coherence scene`` through :func:`analyses.cli.main`."""
 from __future__ import annotations
 
 import json
 
 import pytest
 
-from coherence import cli
+from analyses import cli
 from tracer.nff import read_nff
 from tracer.scenes import load
 

@@ -4,7 +4,7 @@ import json
 import pandas as pd
 import pytest
 
-from coherence.cli import main
+from analyses.cli import main
 from coherence.simulation import Machine
 from coherence.studies import study
 from test_simulation import random_trace

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from analyses.whatif import WhatIf, configure, load_study_file, parse_grid_flag, parse_value, run_whatif
-from coherence.cli import main
+from analyses.cli import main
 
 
 @pytest.fixture

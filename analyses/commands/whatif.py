@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from analyses.commands.options import HelpFormatter, cache_options, mappings_options, size_options
+
 HELP = "what-if studies: where would coherence matter more than load balance?"
 
 EPILOG = """\
@@ -43,17 +45,22 @@ examples:
 
 
 def register(subparsers) -> None:
+    """Add the ``whatif`` subcommand to ``subparsers``."""
+    # A study's defaults come from its file or the WhatIf dataclass, so these options only override
+    # them; the image is smaller than elsewhere because a grid renders and replays many points.
+    size = size_options(default=None, why="the study's, 128x128, small because every grid point is a "
+                                          "full replay")
+    mappings = mappings_options(why="the study's, %(default_mappings)s")
     parser = subparsers.add_parser("whatif", help=HELP, description=HELP[0].upper() + HELP[1:],
-                                   epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   epilog=EPILOG, formatter_class=HelpFormatter, parents=[size, mappings, cache_options()])
     parser.add_argument("study", nargs="?", metavar="STUDY", help="a built-in study (see below)")
     parser.add_argument("--grid", action="append", metavar="NAME=V1,V2", help="vary a parameter (repeatable)")
     parser.add_argument("--file", metavar="TOML", help="a study file with a [grid] table")
-    parser.add_argument("--scene", help="scene name or NFF/OBJ path (default: the study's, balls)")
-    parser.add_argument("--size", type=int, help="image width and height (default: the study's, 128)")
-    parser.add_argument("--mappings", nargs="+", metavar="NAME", help="mappings (default: S P R B DB)")
-    parser.add_argument("--processes", type=int, metavar="N", help="processes per run (default: 8)")
+    parser.add_argument("--scene", metavar="SCENE",
+                        help="a study scene (%(scenes)s) or a .nff/.obj path (default: the study's, balls)")
+    parser.add_argument("--processes", type=int, metavar="N",
+                        help="processes per run (default: the study's, 8; vary it with --grid n_processes=...)")
     parser.add_argument("--out", default="whatif", metavar="DIR", help="output folder (default: ./whatif)")
-    parser.add_argument("--cache", metavar="DIR", help="trace cache folder (default: ~/.cache/raytrace-coherence)")
     parser.add_argument("--dask", metavar="ADDRESS", help="run the grid points on a Dask scheduler")
     parser.add_argument("--jobs", type=int, metavar="N", help="local worker processes (default: CPUs)")
     parser.add_argument("--list", action="store_true", help="list the built-in studies' grids and exit")

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from analyses.commands.options import HelpFormatter, hierarchy_options
+
 EPILOG = """\
 addresses file:
   .npy   a one-dimensional integer array (e.g. np.save("a.npy", addresses))
@@ -33,6 +35,7 @@ examples:
 
 
 def register(subparsers) -> None:
+    """Add the ``cachesim`` subcommand to ``subparsers``."""
     parser = subparsers.add_parser(
         "cachesim",
         help="run an address stream through a simulated cache hierarchy",
@@ -42,11 +45,10 @@ def register(subparsers) -> None:
             "level. Every level sees only the misses of the level above."
         ),
         epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
+        parents=[hierarchy_options()],
     )
     parser.add_argument("addresses", metavar="ADDRESSES", help="a .npy or text file of byte addresses")
-    parser.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE",
-                        help="preset name or .toml/.json file (default: alpha21164)")
     parser.add_argument("--json", action="store_true", help="print JSON with the same numbers instead of a table")
     parser.add_argument("--csv", metavar="PATH", help="also write the per-level table to a CSV file")
     parser.set_defaults(func=run)

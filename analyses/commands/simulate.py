@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from analyses.commands.options import PLACEMENTS, HelpFormatter, machine_options, model_options
+
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
 
 EPILOG = """\
@@ -10,8 +12,8 @@ TRACE is a folder written by 'coherence render SCENE --trace TRACE'. Every
 mapping is also run by one process, the reference of its speed-up.
 
 mappings: S (strips), P (pixels), R (rows), B (64x64 fields cut in n blocks),
-DB (32x32 blocks handed out on demand), hilbert, morton, serpentine,
-hilbert-tiles.
+DB (32x32 blocks handed out on demand), and orders along space-filling curves
+(see --mapping).
 
 columns: speedup_user = T1 / worst process user time (the study's
 definition); efficiency = speedup / n = load_balance x coherence_factor x
@@ -29,27 +31,20 @@ COLUMNS = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency
 
 
 def register(subparsers) -> None:
+    """Add the ``simulate`` subcommand to ``subparsers``."""
+    machine = machine_options(processes=[8], processes_help="process counts (default: 8, one per CPU)",
+                              background=0, background_why="an idle machine, no other users")
     parser = subparsers.add_parser("simulate", help=HELP, description=HELP[0].upper() + HELP[1:] + ".",
-                                   epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   epilog=EPILOG, formatter_class=HelpFormatter, parents=[machine, model_options()])
     parser.add_argument("trace", metavar="TRACE", help="trace folder saved by 'coherence render --trace'")
     parser.add_argument("--mapping", action="append", metavar="NAME",
-                        help="mapping to simulate (repeatable; default: S P R B DB)")
-    parser.add_argument("--processes", type=int, nargs="+", default=[8], metavar="N",
-                        help="process counts (default: 8)")
-    parser.add_argument("--cpus", type=int, default=8, help="CPUs of the machine (default: 8)")
-    parser.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE",
-                        help="cache hierarchy preset or .toml/.json file (default: alpha21164)")
-    parser.add_argument("--layout", default="compact", choices=["compact", "alpha1997"],
-                        help="memory layout of scene records (default: compact)")
-    parser.add_argument("--cost", default="alpha8400", choices=["alpha8400", "modern"],
-                        help="cycles per operation and clock rate (default: alpha8400)")
+                        help="mapping to simulate, any of %(mappings)s (repeatable; default: %(default_mappings)s)")
     parser.add_argument("--quantum", type=float, default=3e6, metavar="CYCLES",
                         help="time slice of processes sharing a CPU; 0 runs them one after another "
                              "(default: 3e6, 10 ms at 300 MHz)")
-    parser.add_argument("--placement", default="round-robin", choices=["round-robin", "neighbours"],
-                        help="how processes are placed on CPUs when there are more of them")
-    parser.add_argument("--background", type=int, default=0, metavar="B",
-                        help="always-runnable processes of other users, for real time (default: 0)")
+    parser.add_argument("--placement", default="round-robin", choices=PLACEMENTS, metavar="NAME",
+                        help="how processes are placed on CPUs when there are more of them: %(choices)s "
+                             "(default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON (runs and parameters) instead of a table")
     parser.add_argument("--csv", metavar="PATH", help="write the full per-run table to CSV (+ .meta.json)")
     parser.add_argument("--processes-csv", metavar="PATH", help="write the per-process table to CSV")
@@ -62,14 +57,14 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from cachesim import get_hierarchy
-    from coherence.mappings import get_mapping
+    from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
     from coherence.provenance import provenance, write_csv_atomic
     from coherence.simulation import Machine
     from coherence.studies import study
     from tracer.trace import AccessTrace
 
     hierarchy = get_hierarchy(args.hierarchy)
-    mappings = [get_mapping(name) for name in (args.mapping or ["S", "P", "R", "B", "DB"])]
+    mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
     machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, placement=args.placement,
                       background_load=args.background)
     for option in (args.csv, args.processes_csv):

@@ -6,11 +6,13 @@ import json
 import sys
 import time
 
+from analyses.commands.options import HelpFormatter, check_at_least, scene_options, size_options, tree_options
+
 HELP = "render a scene with the instrumented ray tracer; report rays, tests, node visits, records"
 
 EPILOG = """\
-SCENE is one of the study's scenes (balls, tetra, shell, room, fluid; built in
-memory with the paper's maximum depth) or a path to a .nff or .obj file.
+SCENE is one of the study's scenes (built in memory with the paper's maximum
+depth) or a path to a .nff or .obj file.
 
 The renderer shoots one ray per pixel centre (or, with --corner-rays, a
 (W+1) x (H+1) grid through the pixel corners, as SPD's published counts do),
@@ -36,19 +38,10 @@ def register(subparsers) -> None:
     """Add the ``render`` subcommand to ``subparsers``."""
     parser = subparsers.add_parser(
         "render", help=HELP, description=HELP[0].upper() + HELP[1:] + ".", epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("scene", metavar="SCENE",
-                        help="balls | tetra | shell | room | fluid, or a .nff/.obj path")
-    parser.add_argument("--size", type=int, metavar="N", default=512,
-                        help="image width and height in pixels (default 512)")
+        formatter_class=HelpFormatter, parents=[scene_options(), size_options(), tree_options()])
     parser.add_argument("--png", metavar="PATH", help="save the image as PNG")
     parser.add_argument("--trace", metavar="DIR",
                         help="save the access trace to directory DIR (atomically)")
-    parser.add_argument("--kd", choices=("sah", "median"), default="sah",
-                        help="kd-tree builder: surface area heuristic (default) or spatial "
-                             "median like a 1990s BSP")
-    parser.add_argument("--max-depth", type=int, metavar="N", default=None,
-                        help="ray-tree depth, primary = 1 (default: the scene's)")
     parser.add_argument("--corner-rays", action="store_true",
                         help="trace (N+1)^2 rays through pixel corners (SPD counting)")
     parser.add_argument("--epsilon", type=_epsilon, metavar="E", default=None,
@@ -139,8 +132,7 @@ def run(args: argparse.Namespace) -> int:
     from tracer.kdtree import KdTreeConfig
     from tracer.render import render, save_png
 
-    if args.size < 1:
-        raise ValueError(f"--size must be >= 1, got {args.size}")
+    check_at_least(args, size=1)
     if args.no_log and args.trace:
         raise ValueError("--trace needs logging; drop --no-log")
     if not args.memory_budget > 0:

@@ -3,6 +3,9 @@ from __future__ import annotations
 
 import argparse
 
+from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least,
+                                       machine_options, mappings_options, size_options)
+
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
 
 EPILOG = """\
@@ -37,19 +40,18 @@ examples:
 
 def register(subparsers) -> None:
     """Add the ``paper`` subcommand to ``subparsers``."""
+    # the study's machine had 8 CPUs and the calibration assumes them: no --cpus here
+    machine = machine_options(processes=None, processes_help="process counts (default the study's: "
+                              "%(paper_processes)s; 1 is always added)", background=2,
+                              background_why="a lone process runs at full speed, as the calibration to the "
+                              "study's sequential times needs, and real-time speed-up keeps growing past 8 "
+                              "processes as on the study's shared machine", cpus=False)
     parser = subparsers.add_parser("paper", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   formatter_class=HelpFormatter,
+                                   parents=[size_options(), mappings_options(), machine, cache_options()])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
-    parser.add_argument("--size", type=int, default=512, metavar="N", help="image width and height (default 512)")
     parser.add_argument("--scenes", nargs="+", metavar="SCENE",
-                        help="study scenes (default: balls tetra shell room fluid)")
-    parser.add_argument("--processes", type=int, nargs="+", metavar="N",
-                        help="process counts (default 1 2 4 6 8 10 12 14 16; 1 is always added)")
-    parser.add_argument("--mappings", nargs="+", default=["S", "P", "R", "B", "DB"], metavar="NAME",
-                        help="mappings (default S P R B DB)")
-    parser.add_argument("--background", type=int, default=2, metavar="B",
-                        help="always-runnable processes of other users, for real time (default 2)")
-    parser.add_argument("--cache", metavar="DIR", help="trace cache folder")
+                        help="study scenes (default: all of %(scenes)s)")
     parser.add_argument("--json", action="store_true", help="print paper.json to stdout instead of the verdicts")
     parser.set_defaults(func=run)
 
@@ -64,17 +66,15 @@ def run(args: argparse.Namespace) -> int:
     from tracer.scenes import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
-    if args.size < 1:
-        raise ValueError(f"--size must be >= 1, got {args.size}")
-    if args.background < 0:
-        raise ValueError(f"--background must be >= 0, got {args.background}")
+    check_at_least(args, size=1, background=0)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
     counts = check_process_counts(args.processes if args.processes else DEFAULT_PROCESSES)
-    for name in args.mappings:
+    mappings = chosen_mappings(args)
+    for name in mappings:
         get_mapping(name)
     out = check_output_folder(args.out)
     progress = sys.stderr.isatty()
-    result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=args.mappings,
+    result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
                        background=args.background, cache_dir=args.cache, progress=progress)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, paper.json, speedup_real.png, speedup_user.png",

@@ -5,6 +5,8 @@ import argparse
 import json
 import sys
 
+from analyses.commands.options import HelpFormatter, scene_options
+
 HELP = "summarise a paper scene or an NFF/OBJ file; optionally write it as NFF"
 
 EPILOG = """\
@@ -32,9 +34,7 @@ def register(subparsers) -> None:
     """Add the ``scene`` subcommand to ``subparsers``."""
     parser = subparsers.add_parser(
         "scene", help=HELP, description=HELP[0].upper() + HELP[1:] + ".", epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("scene", metavar="SCENE",
-                        help="balls | tetra | shell | room | fluid, or a .nff/.obj path")
+        formatter_class=HelpFormatter, parents=[scene_options()])
     parser.add_argument("--max-depth", type=int, metavar="N", default=None,
                         help="maximum recursion depth (default: the paper's for a named "
                              "scene, the file's for a path)")

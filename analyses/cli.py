@@ -1,9 +1,14 @@
 """The ``coherence`` command line: a thin front end over the Python API.
 
-Each subcommand lives in its own module under :mod:`coherence.commands` and
+It sits in :mod:`analyses`, the top layer (DESIGN.md §4): it imports
+tracer, cachesim, coherence and analyses, and nothing imports it. Run it as
+``coherence ...`` (the installed script) or ``python -m analyses ...``.
+
+Each subcommand lives in its own module under :mod:`analyses.commands` and
 exposes ``register(subparsers)``, which adds its parser and sets
 ``func=run`` (a callable taking the parsed ``argparse.Namespace`` and
-returning an exit status). Heavy imports happen inside ``run`` so that
+returning an exit status). Options that several subcommands share come from
+:mod:`analyses.commands.options`. Heavy imports happen inside ``run`` so that
 ``coherence --help`` stays instant.
 """
 from __future__ import annotations
@@ -14,13 +19,13 @@ import sys
 
 # Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
-    "coherence.commands.cachesim",
-    "coherence.commands.scene",
-    "coherence.commands.render",
-    "coherence.commands.simulate",
-    "coherence.commands.report",
-    "coherence.commands.whatif",
-    "coherence.commands.paper",
+    "analyses.commands.cachesim",
+    "analyses.commands.scene",
+    "analyses.commands.render",
+    "analyses.commands.simulate",
+    "analyses.commands.report",
+    "analyses.commands.whatif",
+    "analyses.commands.paper",
 )
 
 
@@ -29,6 +34,7 @@ class UserError(Exception):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``coherence`` parser with every subcommand registered."""
     parser = argparse.ArgumentParser(
         prog="coherence",
         description=(
@@ -48,11 +54,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one subcommand; return its exit status (2 for a user error, printed in one line)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    # Only the command line picks how figures are drawn: into files, never a window. Library code
+    # leaves the backend alone so that a notebook keeps its inline one. Picked after parsing, so
+    # that --help does not pay for importing matplotlib.
+    import matplotlib
+
+    matplotlib.use("Agg")
     try:
         return int(args.func(args) or 0)
     except (UserError, ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as error:

@@ -1,0 +1,222 @@
+"""Options shared by several subcommands, as argparse parent parsers.
+
+An option that several subcommands take is defined once here, with one
+meaning and one help text; a subcommand names the parents it needs when it
+adds its parser (``parents=[model_options(), ...]``). Where a default must
+differ between subcommands (image size, process counts, background load),
+the parent takes it as an argument together with the sentence that explains
+the difference, so ``--help`` always says why.
+
+Choices come from the registries that define them (hierarchy presets in
+:mod:`cachesim.config`, memory layouts and cost models in :mod:`coherence`,
+kd-tree builders in :mod:`tracer.kdtree`, mappings, study scenes) through
+:class:`RegistryNames`. Those modules load numba, which takes seconds, so the
+names are looked up only when argparse needs them (to check a value or to
+print a subcommand's help): ``coherence --help`` stays instant.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from importlib import import_module
+
+__all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
+           "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
+           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS"]
+
+
+class RegistryNames(Sequence):
+    """The names of a registry, imported on first use.
+
+    Parameters
+    ----------
+    module : str
+        Module that holds the registry, e.g. ``"coherence.layout"``.
+    attribute : str
+        Its dict or tuple of names, e.g. ``"LAYOUTS"``.
+
+    Notes
+    -----
+    Usable as argparse ``choices`` (argparse only iterates and tests
+    membership) as long as the option has a ``metavar``: without one, argparse
+    would list the choices, and so import the registry, when the option is
+    added. ``str()`` gives the names comma-separated, for help texts.
+    """
+
+    def __init__(self, module: str, attribute: str):
+        self.module = module
+        self.attribute = attribute
+        self._names: tuple[str, ...] | None = None
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        if self._names is None:
+            self._names = tuple(getattr(import_module(self.module), self.attribute))
+        return self._names
+
+    def __getitem__(self, index):
+        return self.names[index]
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __contains__(self, name) -> bool:
+        return name in self.names
+
+    def __str__(self) -> str:
+        return ", ".join(str(name) for name in self.names)
+
+
+SCENES = RegistryNames("tracer.scenes", "PAPER_SCENES")
+MAPPINGS = RegistryNames("coherence.mappings", "MAPPINGS")
+DEFAULT_MAPPINGS = RegistryNames("coherence.mappings", "DEFAULT_MAPPINGS")
+HIERARCHIES = RegistryNames("cachesim.config", "PRESETS")
+LAYOUTS = RegistryNames("coherence.layout", "LAYOUTS")
+COST_MODELS = RegistryNames("coherence.cost", "COST_MODELS")
+KD_BUILDERS = RegistryNames("tracer.kdtree", "BUILDERS")
+PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
+PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the epilog's layout and lets help texts name registries.
+
+    Besides argparse's own ``%(default)s`` and ``%(choices)s``, a help text
+    may say ``%(scenes)s``, ``%(mappings)s``, ``%(default_mappings)s``,
+    ``%(hierarchies)s`` or ``%(paper_processes)s``: the registry's names,
+    looked up when the help is printed.
+    """
+
+    _REGISTRIES = {"scenes": SCENES, "mappings": MAPPINGS, "default_mappings": DEFAULT_MAPPINGS,
+                   "hierarchies": HIERARCHIES, "paper_processes": PAPER_PROCESSES}
+
+    def _expand_help(self, action):
+        help_text = self._get_help_string(action)
+        wanted = {key: names for key, names in self._REGISTRIES.items() if f"%({key})" in help_text}
+        if not wanted:
+            return super()._expand_help(action)
+        # argparse formats with vars(action); a copy carrying the names leaves the parser untouched
+        expanded = argparse.Namespace(**vars(action))
+        expanded.__dict__.update({key: str(names) for key, names in wanted.items()})
+        return super()._expand_help(expanded)
+
+
+def check_at_least(args: argparse.Namespace, **minimum: int) -> None:
+    """Raise ``ValueError`` naming the option if an integer option is below its minimum.
+
+    Runs inside a subcommand, before any work, so the error is printed as
+    ``coherence CMD: error: --size must be >= 1, got 0`` and exits with 2.
+    Options left at ``None`` (meaning "the default") are not checked.
+    """
+    for name, low in minimum.items():
+        value = getattr(args, name)
+        values = value if isinstance(value, list) else [value]
+        for item in values:
+            if item is not None and item < low:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= {low}, got {item}")
+
+
+def _parent() -> argparse.ArgumentParser:
+    return argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter)
+
+
+def scene_options(default: str | None = None) -> argparse.ArgumentParser:
+    """The positional ``SCENE``: a study scene's name or a .nff/.obj path (optional if ``default``)."""
+    parent = _parent()
+    optional = {} if default is None else {"nargs": "?", "default": default}
+    parent.add_argument("scene", metavar="SCENE", **optional,
+                        help="a study scene (%(scenes)s) or a .nff/.obj path"
+                             + ("" if default is None else f" (default {default})"))
+    return parent
+
+
+def hierarchy_options() -> argparse.ArgumentParser:
+    """``--hierarchy NAME|FILE``: a cachesim preset or a .toml/.json file."""
+    parent = _parent()
+    parent.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE",
+                        help="cache hierarchy: a preset (%(hierarchies)s) or a .toml/.json file "
+                             "(default %(default)s)")
+    return parent
+
+
+def model_options() -> argparse.ArgumentParser:
+    """The simulated machine's memory: ``--hierarchy``, ``--layout``, ``--cost``."""
+    parent = argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter, parents=[hierarchy_options()])
+    parent.add_argument("--layout", default="compact", choices=LAYOUTS, metavar="NAME",
+                        help="memory layout of scene records: %(choices)s (default %(default)s)")
+    parent.add_argument("--cost", default="alpha8400", choices=COST_MODELS, metavar="NAME",
+                        help="cycles per operation and clock rate: %(choices)s (default %(default)s)")
+    return parent
+
+
+def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the scene's)") -> argparse.ArgumentParser:
+    """How the scene is traced: ``--kd`` builder and ``--max-depth`` of the ray tree."""
+    parent = _parent()
+    parent.add_argument("--kd", default="sah", choices=KD_BUILDERS, metavar="BUILDER",
+                        help="kd-tree builder: %(choices)s; sah = surface area heuristic, median = spatial "
+                             "median like a 1990s BSP (default %(default)s)")
+    parent.add_argument("--max-depth", type=int, metavar="N", default=None, help=depth_help)
+    return parent
+
+
+def size_options(default: int | None = 512, why: str = "the study's 512x512") -> argparse.ArgumentParser:
+    """``--size N``, the image's width and height; ``why`` explains the default."""
+    parent = _parent()
+    parent.add_argument("--size", type=int, default=default, metavar="N",
+                        help=f"image width and height in pixels (default: {why})")
+    return parent
+
+
+def cache_options() -> argparse.ArgumentParser:
+    """``--cache DIR``, where rendered traces are kept between runs."""
+    parent = _parent()
+    parent.add_argument("--cache", metavar="DIR",
+                        help="trace cache folder (default: $COHERENCE_CACHE, else ~/.cache/raytrace-coherence)")
+    return parent
+
+
+def mappings_options(why: str = "") -> argparse.ArgumentParser:
+    """``--mappings NAME ...``; left at None, the subcommand uses :data:`coherence.mappings.DEFAULT_MAPPINGS`.
+
+    ``why`` replaces the default's description when a subcommand's default
+    comes from elsewhere (a what-if study file).
+    """
+    parent = _parent()
+    parent.add_argument("--mappings", nargs="+", metavar="NAME",
+                        help="mappings to compare, any of %(mappings)s (default: "
+                             f"{why or '%(default_mappings)s'})")
+    return parent
+
+
+def chosen_mappings(args: argparse.Namespace) -> list:
+    """The mappings asked for, else the default ones, as a list of names."""
+    from coherence.mappings import DEFAULT_MAPPINGS
+
+    return list(args.mappings) if args.mappings else list(DEFAULT_MAPPINGS)
+
+
+def machine_options(*, processes, processes_help: str, background: int, background_why: str,
+                    cpus: bool = True) -> argparse.ArgumentParser:
+    """The simulated machine: ``--processes``, ``--cpus`` and ``--background``.
+
+    Parameters
+    ----------
+    processes : list of int or None
+        Default process counts (None: the subcommand chooses, as
+        ``processes_help`` says).
+    background : int
+        Default always-runnable processes of other users.
+    background_why : str
+        Why this subcommand's default background load is what it is.
+    cpus : bool
+        Whether ``--cpus`` is offered (the paper fixes the study's 8).
+    """
+    parent = _parent()
+    parent.add_argument("--processes", type=int, nargs="+", default=processes, metavar="N", help=processes_help)
+    if cpus:
+        parent.add_argument("--cpus", type=int, default=8, metavar="C",
+                            help="CPUs of the simulated machine (default 8, the study's AlphaServer 8400)")
+    parent.add_argument("--background", type=int, default=background, metavar="B",
+                        help="always-runnable processes of other users, for real time "
+                             f"(default {background}: {background_why})")
+    return parent

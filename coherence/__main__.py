@@ -1,5 +1,0 @@
-import sys
-
-from coherence.cli import main
-
-sys.exit(main())

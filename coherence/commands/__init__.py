@@ -1,1 +1,0 @@
-"""Subcommands of the ``coherence`` command line, one module each."""
