@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from analyses.plots import _axes
+
 
 def plot_loss_map(df, x: str, y: str, mapping: str, ax=None):
     """Map of ``coherence_loss - imbalance_loss`` over two grid parameters.
@@ -23,10 +25,7 @@ def plot_loss_map(df, x: str, y: str, mapping: str, ax=None):
     matplotlib Axes
         Red cells: coherence lost more than balance; blue: balance lost more.
     """
-    import matplotlib.pyplot as plt
-
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6, 4.5))
+    ax = _axes(ax, (6, 4.5))
     rows = df[df["mapping"] == mapping]
     table = rows.assign(difference=rows["coherence_loss"] - rows["imbalance_loss"]) \
         .pivot_table(index=y, columns=x, values="difference", sort=False)
@@ -49,10 +48,7 @@ def plot_loss_lines(df, x: str, mapping_column: str = "mapping", ax=None):
     ``df`` holds rows of :func:`analyses.whatif.run_whatif` for a one-parameter
     grid ``x``.
     """
-    import matplotlib.pyplot as plt
-
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6, 4))
+    ax = _axes(ax, (6, 4))
     positions = {value: index for index, value in enumerate(dict.fromkeys(df[x]))}
     for mapping, rows in df.groupby(mapping_column, sort=False):
         line, = ax.plot([positions[v] for v in rows[x]], rows["imbalance_loss"], marker="o", label=f"{mapping} imbalance")

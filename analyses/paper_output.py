@@ -6,9 +6,6 @@ numbers come from :func:`analyses.paper.reproduce`. Outputs are deterministic
 """
 from __future__ import annotations
 
-import base64
-import html
-import io
 import json
 import math
 from pathlib import Path
@@ -16,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analyses.html import table_html
+from analyses.html import figure_png, render_page
 from analyses.output import check_output_folder
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
+from analyses.plots import plot_speedup_panels
 from cachesim.config import write_bytes_atomic
 
 __all__ = ["speedup_figure", "paper_summary", "paper_html", "write_paper"]
@@ -32,60 +30,11 @@ def speedup_figure(runs: pd.DataFrame, column: str = "speedup_real", *, n_cpus: 
                    title: str | None = None):
     """A grid of speed-up panels, one per scene, one line per mapping (the study's figure style).
 
-    Draws only what ``runs`` holds: the ideal line, the ``n_cpus`` mark where
-    processes start sharing CPUs, and ``column`` against ``n_processes``.
-    Returns a :class:`matplotlib.figure.Figure`.
+    Draws only what ``runs`` holds (see :func:`analyses.plots.plot_speedup_panels`);
+    ``n_cpus`` defaults to the study's 8. Returns a
+    :class:`matplotlib.figure.Figure`.
     """
-    import matplotlib
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import MaxNLocator
-
-    scenes = list(dict.fromkeys(runs["scene"]))
-    names = list(dict.fromkeys(runs["mapping"]))
-    if order is not None:
-        names = [m for m in order if m in names] + [m for m in names if m not in order]
-    colours = list(matplotlib.colormaps["tab10"].colors)
-    markers = ["o", "s", "^", "D", "v", "P", "X", "*"]
-    ncols = min(3, len(scenes))
-    nrows = -(-len(scenes) // ncols)
-    fig = Figure(figsize=(4.0 * ncols, 3.5 * nrows + 0.4))
-    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
-    top = int(runs["n_processes"].max())
-    for ax, scene in zip(axes, scenes):
-        rows = runs[runs["scene"] == scene]
-        ax.plot([1, top], [1, top], color="0.6", linewidth=1, linestyle="--", label="ideal")
-        for index, name in enumerate(names):
-            line = rows[rows["mapping"] == name].sort_values("n_processes")
-            ax.plot(line["n_processes"], line[column], marker=markers[index % len(markers)], markersize=3.5,
-                    linewidth=1.2, color=colours[index % len(colours)], label=name)
-        if n_cpus < top:
-            ax.axvline(n_cpus, color="0.35", linestyle=":", linewidth=1, label=f"{n_cpus} CPUs")
-        ax.set_title(scene.capitalize(), fontsize=10)
-        ax.set_xlabel("processes")
-        ax.set_ylabel("speed-up")
-        ax.set_xlim(0.5, top + 0.5)
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_ylim(0, top + 0.5)
-        ax.grid(True, color="0.92", linewidth=0.6)
-    for ax in axes[len(scenes):]:
-        ax.set_axis_off()
-    handles, labels = axes[0].get_legend_handles_labels()
-    spare = axes[len(scenes)] if len(scenes) < len(axes) else None
-    if spare is not None:
-        spare.legend(handles, labels, loc="center", frameon=False, fontsize=10)
-    else:
-        axes[0].legend(fontsize=7, frameon=False)
-    if title:
-        fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
-    return fig
-
-
-def _png_bytes(fig) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=90, metadata={"Software": None})
-    return buffer.getvalue()
+    return plot_speedup_panels(runs, column=column, order=order, n_cpus=n_cpus, title=title)
 
 
 # --------------------------------------------------------------------------
@@ -141,17 +90,12 @@ def paper_summary(result: PaperResult) -> dict:
     })
 
 
-_CSS = """body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
-h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
-table{border-collapse:collapse;font-size:.85em;margin:.6em 0}th,td{border:1px solid #ddd;padding:.2em .5em;
-text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
-img{max-width:100%;height:auto}.verdict{background:#f5f8ff;border-left:4px solid #36c;padding:.4em 1em;margin:.5em 0}
-.note{color:#555;font-size:.9em}"""
-
-
 def paper_html(result: PaperResult, pngs: dict) -> str:
-    """The self-contained page: tables, calibration, verdicts and the embedded figures."""
-    e = html.escape
+    """The self-contained page: tables, calibration, verdicts and the embedded figures.
+
+    ``pngs`` holds the PNG bytes of ``speedup_real`` and ``speedup_user``;
+    ``templates/paper.html.j2`` lays the page out.
+    """
     p = result.parameters
     cal = result.calibration
     model = pd.DataFrame({"operation": list(cal["fitted"]),
@@ -160,52 +104,13 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
     fixed = pd.DataFrame({"operation": list(cal["fixed"]), "cycles (held)": list(cal["fixed"].values())})
     residuals = cal["residuals"][["scene", "study_seconds", "target_seconds", "fitted_seconds", "residual_seconds",
                                   "relative_error", "memory_seconds"]]
-    table = result.table.drop(columns=["study_geometry"])
     decomposition = result.runs[result.runs["n_processes"] == p["verdict_n_processes"]][
         ["scene", "mapping", "speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
          "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss"]]
-    verdicts = "".join(f'<div class="verdict"><p>{e(text)}</p></div>' for text in result.verdicts["text"])
-    images = {k: base64.b64encode(v).decode("ascii") for k, v in pngs.items()}
-    counts = ", ".join(str(n) for n in p["n_processes"])
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<title>The study reproduced: {p['size']}x{p['size']}</title>
-<style>{_CSS}</style></head><body>
-<h1>Havran &amp; &#381;&aacute;ra's study reproduced, {p['size']}&times;{p['size']} pixels</h1>
-<p class="note">Scenes {e(', '.join(p['scenes']))}; mappings {e(' '.join(p['mappings']))}; {counts} processes on
-{p['n_cpus']} simulated CPUs ({e(p['hierarchy'].get('name', 'alpha21164'))} caches, {e(p['layout'])} layout,
-{p['clock_hz'] / 1e6:g} MHz). Real time carries a background load of {p['background_load']} always-runnable
-processes of other users: the study's machine was shared, and every process, not every user, gets a CPU share.</p>
-
-<h2>Verdict per scene at {p['verdict_n_processes']} processes</h2>
-{verdicts}
-<p class="note">Loss = 1 &minus; factor of efficiency = load balance &times; coherence &times; dispatch; a coherence
-gain (negative loss) comes from processes sharing a CPU's caches or from smaller per-process working sets.</p>
-
-<h2>The scenes beside the study's table</h2>
-{table_html(STUDY_TABLE, 1)}
-<p class="note">Study: 512&times;512, BSP tree. Ours: intersection tests at {p['size']}&times;{p['size']} with an SAH
-kd-tree, which tests far fewer primitives per ray than the study's BSP; fitted seconds are the calibrated cost
-model's sequential S time, against the study's time scaled to our pixel count (target).</p>
-{table_html(table, 3)}
-
-<h2>Cost-model calibration</h2>
-<p class="note">Non-negative least squares ({e(cal['weighting'])} errors) of the study's sequential times (minus our
-simulated memory cycles) on our operation counters, {len(cal['fitted'])} fitted operations, the rest held at the alpha8400 defaults.
-RMS relative error {cal['rms_relative_error'] * 100:.1f}%. The cycles per test absorb our tree's smaller test
-counts: they are what the study's tracer would have paid to do our work.</p>
-{table_html(model, 1)}{table_html(residuals, 3)}{table_html(fixed, 1)}
-
-<h2>Speed-up from real time</h2>
-<img alt="speed-up from real time" src="data:image/png;base64,{images['speedup_real']}">
-<h2>Speed-up from user time (worst process)</h2>
-<img alt="speed-up from user time" src="data:image/png;base64,{images['speedup_user']}">
-
-<h2>Efficiency decomposition at {p['verdict_n_processes']} processes</h2>
-{table_html(decomposition, 3)}
-<p class="note">Every run is in paper.csv; parameters, versions, calibration and verdicts in paper.json.</p>
-</body></html>
-"""
+    return render_page("paper.html.j2", p=p, calibration=cal, verdicts=list(result.verdicts["text"]),
+                       study_table=STUDY_TABLE, scenes_table=result.table.drop(columns=["study_geometry"]),
+                       model_table=model, residuals_table=residuals, fixed_table=fixed,
+                       decomposition=decomposition, pngs=pngs)
 
 
 def _csv(frame: pd.DataFrame) -> str:
@@ -220,9 +125,9 @@ def write_paper(result: PaperResult, out="paper") -> Path:
     n_cpus = result.parameters["n_cpus"]
     background = result.parameters["background_load"]
     pngs = {
-        "speedup_real": _png_bytes(speedup_figure(result.runs, "speedup_real", n_cpus=n_cpus, order=order,
+        "speedup_real": figure_png(speedup_figure(result.runs, "speedup_real", n_cpus=n_cpus, order=order,
                                                   title=f"Speed-up from real time (background load {background})")),
-        "speedup_user": _png_bytes(speedup_figure(result.runs, "speedup_user", n_cpus=n_cpus, order=order,
+        "speedup_user": figure_png(speedup_figure(result.runs, "speedup_user", n_cpus=n_cpus, order=order,
                                                   title="Speed-up from user time (worst process)")),
     }
     summary = paper_summary(result)

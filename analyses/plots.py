@@ -12,11 +12,16 @@ import numpy as np
 
 __all__ = [
     "plot_image", "plot_scene_bytes", "plot_level_metric", "plot_miss_ratio_curves", "plot_cost_map",
-    "plot_process_times", "plot_speedup", "mapping_colours",
+    "plot_process_times", "plot_speedup", "plot_speedup_panels", "mapping_colours",
 ]
 
 
 def _axes(ax, figsize=(6.0, 4.0)):
+    """``ax``, or the axes of a new pyplot figure: a notebook user calling ``plot_x(df)`` sees it inline.
+
+    pyplot is imported only then, and the backend is left as it is (only the
+    command line picks one).
+    """
     if ax is not None:
         return ax
     import matplotlib.pyplot as plt
@@ -27,9 +32,9 @@ def _axes(ax, figsize=(6.0, 4.0)):
 
 def mapping_colours(names) -> dict:
     """Colour of each name, in order (tab10, repeating after ten)."""
-    import matplotlib.pyplot as plt
+    import matplotlib
 
-    colours = list(plt.get_cmap("tab10").colors)
+    colours = list(matplotlib.colormaps["tab10"].colors)
     return {name: colours[index % len(colours)] for index, name in enumerate(names)}
 
 
@@ -211,29 +216,97 @@ def plot_process_times(df, ax=None, *, order=None, parts=("compute_cycles", "mem
     return ax
 
 
-def plot_speedup(df, ax=None, *, column="speedup_user", order=None, n_cpus=None, title=None):
+def plot_speedup(df, ax=None, *, column="speedup_user", order=None, n_cpus=None, title=None, legend=True):
     """Speed-up against the number of processes, one line per mapping, with the ideal line.
+
+    The one speed-up plot of the package: the report draws one panel, the
+    paper one per scene (:func:`plot_speedup_panels`).
 
     Parameters
     ----------
     df : DataFrame
         Columns ``mapping``, ``n_processes`` and ``column``.
+    ax : matplotlib Axes, optional
+        Where to draw; a new figure's axes if None.
+    column : str
+        The speed-up to draw, e.g. ``speedup_user`` or ``speedup_real``.
+    order : sequence of str, optional
+        Mapping order (colours and markers).
     n_cpus : int, optional
-        Draws a vertical line where processes start sharing CPUs.
+        Marks where processes start sharing CPUs with a dotted line.
+    title : str, optional
+    legend : bool
+        Draw the legend on these axes.
+
+    Returns
+    -------
+    matplotlib Axes
     """
+    from matplotlib.ticker import MaxNLocator
+
     ax = _axes(ax, (5.0, 4.0))
     names = _names(df, "mapping", order)
     colours = mapping_colours(names)
+    markers = ["o", "s", "^", "D", "v", "P", "X", "*"]
     top = int(df["n_processes"].max())
     ax.plot([1, top], [1, top], color="0.6", linewidth=1, linestyle="--", label="ideal")
-    for name in names:
+    for index, name in enumerate(names):
         rows = df[df["mapping"] == name].sort_values("n_processes")
-        ax.plot(rows["n_processes"], rows[column], marker="o", markersize=3, color=colours[name], label=name)
+        ax.plot(rows["n_processes"], rows[column], marker=markers[index % len(markers)], markersize=3.5,
+                linewidth=1.2, color=colours[name], label=name)
     if n_cpus is not None and n_cpus < top:
         ax.axvline(n_cpus, color="0.35", linestyle=":", linewidth=1)
+        ax.annotate(f"{n_cpus} CPUs", xy=(n_cpus, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -10),
+                    textcoords="offset points", fontsize=8, color="0.25")
+    ax.set_xlim(0.5, top + 0.5)
+    ax.set_ylim(0, top + 0.5)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.grid(True, color="0.92", linewidth=0.6)
     ax.set_xlabel("processes")
     ax.set_ylabel(column.replace("_", " "))
     if title:
         ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, frameon=False)
+    if legend:
+        ax.legend(fontsize=8, frameon=False)
     return ax
+
+
+def plot_speedup_panels(df, *, column="speedup_real", order=None, n_cpus=None, title=None, by="scene"):
+    """One :func:`plot_speedup` panel per value of ``by`` (the study's figure style), on a new figure.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Columns ``by``, ``mapping``, ``n_processes`` and ``column``.
+    column, order, n_cpus :
+        As for :func:`plot_speedup`.
+    title : str, optional
+        The figure's title.
+    by : str
+        Column whose values get a panel each, in order of appearance.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Up to three panels a row; a spare panel, if any, holds the legend.
+    """
+    from matplotlib.figure import Figure
+
+    panels = list(dict.fromkeys(df[by]))
+    ncols = min(3, len(panels))
+    nrows = -(-len(panels) // ncols)
+    fig = Figure(figsize=(4.0 * ncols, 3.5 * nrows + 0.4))
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    spare = axes[len(panels)] if len(panels) < len(axes) else None
+    for index, (ax, panel) in enumerate(zip(axes, panels)):
+        plot_speedup(df[df[by] == panel], ax, column=column, order=order, n_cpus=n_cpus,
+                     title=str(panel).capitalize(), legend=spare is None and index == 0)
+    for ax in axes[len(panels):]:
+        ax.set_axis_off()
+    if spare is not None:
+        spare.legend(*axes[0].get_legend_handles_labels(), loc="center", frameon=False, fontsize=10)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig

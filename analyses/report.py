@@ -39,7 +39,7 @@ import pandas as pd
 
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
-from analyses.report_html import _html
+from analyses.report_html import report_html
 from cachesim.config import write_text_atomic
 from coherence.mappings import DEFAULT_MAPPINGS
 from numba import njit
@@ -238,8 +238,8 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
         "cost": cost.to_dict(), "trace_key": info["key"],
     }
     summary = _summary(parameters, summary_scene, tree, runs, verdict, verdict_n, top_n, names, scene_bytes)
-    page = _html(scene, info, parameters, summary_scene, tree, totals, runs, processes, curves, cost_map,
-                 scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress)
+    page = report_html(scene, info, parameters, summary_scene, tree, totals, runs, processes, curves, cost_map,
+                       scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress)
     return Report(results=results, summary=summary, html=page, runs=runs, processes=processes, curves=curves,
                   scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info)
 

@@ -338,12 +338,11 @@ def long_form(table: pd.DataFrame, study: WhatIf) -> pd.DataFrame:
 
 def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]:
     """Write ``whatif-<name>.csv`` (long form, with .meta.json) and a figure."""
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    from analyses.html import figure_png
     from analyses.maps import plot_loss_lines, plot_loss_map
+    from cachesim.config import write_bytes_atomic
     from coherence.provenance import provenance, write_csv_atomic
 
     folder = Path(folder)
@@ -356,19 +355,17 @@ def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]
     keys = list(study.grid)
     if len(keys) >= 2:
         mappings = list(dict.fromkeys(table["mapping"]))
-        figure, axes = plt.subplots(1, len(mappings), figsize=(5.5 * len(mappings), 4.5), squeeze=False)
+        figure = Figure(figsize=(5.5 * len(mappings), 4.5))
+        axes = figure.subplots(1, len(mappings), squeeze=False)
         rest = keys[2:]
         rows = table if not rest else table[(table[rest] == table[rest].iloc[0]).all(axis=1)]
         for ax, mapping in zip(axes[0], mappings):
             plot_loss_map(rows, keys[0], keys[1], mapping, ax=ax)
     else:
-        figure, ax = plt.subplots(figsize=(7, 4.5))
-        plot_loss_lines(table, keys[0], ax=ax)
+        figure = Figure(figsize=(7, 4.5))
+        plot_loss_lines(table, keys[0], ax=figure.subplots())
     png = folder / f"whatif-{study.name}.png"
-    temporary = folder / f".whatif-{study.name}.png.tmp"
-    figure.savefig(temporary, format="png", dpi=100, bbox_inches="tight", metadata={"Software": None})
-    plt.close(figure)
-    os.replace(temporary, png)
+    write_bytes_atomic(png, figure_png(figure, dpi=100))
     return csv, png
 
 

@@ -53,6 +53,29 @@ def test_speedup_creates_axes_when_none_given():
     assert ax is not None and ax.figure is not None
 
 
+def test_speedup_panels_one_per_scene_with_the_legend_in_the_spare_panel():
+    scenes = ("balls", "tetra", "shell", "room")  # four panels on a 3x2 grid leave two spare
+    runs = pd.concat([_runs().assign(scene=scene) for scene in scenes], ignore_index=True)
+    before = runs.copy(deep=True)
+    fig = plots.plot_speedup_panels(runs, column="speedup_user", order=["DB", "S", "P"], n_cpus=4, title="t")
+    pd.testing.assert_frame_equal(runs, before)
+    drawn = [ax for ax in fig.axes if ax.get_lines()]
+    assert [ax.get_title() for ax in drawn] == [scene.capitalize() for scene in scenes]
+    spare = [ax for ax in fig.axes if ax.get_legend() is not None]
+    assert len(spare) == 1 and not spare[0].get_lines()
+    assert [text.get_text() for text in spare[0].get_legend().get_texts()] == ["ideal", "DB", "S", "P"]
+
+
+def test_figure_png_is_a_png_without_software_entry():
+    from analyses.html import figure_png, png_base64
+
+    fig = Figure(figsize=(1, 1))
+    fig.subplots().plot([0, 1], [0, 1])
+    data = figure_png(fig)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and b"matplotlib" not in data
+    assert png_base64(data) == png_base64(figure_png(fig))
+
+
 def test_level_metric_bar_per_mapping_count_and_level():
     rows = [{"mapping": m, "n_processes": n, "level": lv, "misses_per_ray": 0.1 * (i + 1)}
             for m in ("S", "P") for n in (1, 8) for i, lv in enumerate(("L1", "L2", "L3"))]
@@ -98,3 +121,13 @@ def test_scene_bytes_and_cost_map_and_image():
 def test_mapping_colours_are_stable():
     colours = plots.mapping_colours(["S", "P", "R"])
     assert colours["S"] != colours["P"] and plots.mapping_colours(["S"])["S"] == colours["S"]
+
+
+def test_pages_escape_data_but_not_tables():
+    from analyses.html import _environment, table_html
+
+    template = _environment().from_string("{{ name }} {{ frame|table }}")
+    page = template.render(name="<b>", frame=pd.DataFrame({"a&b": ["<i>"]}))
+    assert page.startswith("&lt;b&gt; <div class=\"wide\"><table>")
+    assert "<th>a&amp;b</th>" in page and "<td>&lt;i&gt;</td>" in page
+    assert str(table_html(pd.DataFrame({"x": [1234]}))).count("1,234") == 1
