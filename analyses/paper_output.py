@@ -17,7 +17,7 @@ from analyses.html import figure_png, render_page
 from analyses.output import check_output_folder
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
-from cachesim.config import write_bytes_atomic
+from rtcommon.files import write_bytes_atomic
 
 __all__ = ["speedup_figure", "paper_summary", "paper_html", "write_paper"]
 

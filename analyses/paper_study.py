@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 import pandas as pd
 
 from coherence.mappings import DEFAULT_MAPPINGS
+from rtcommon.validate import require_int
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
            "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
@@ -119,21 +119,12 @@ def check_scenes(scenes) -> list[str]:
 
 def check_process_counts(n_processes) -> list[int]:
     """Sorted distinct process counts with 1 added (speed-ups need it)."""
-    counts = []
-    for n in n_processes:
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"process counts must be integers >= 1, got {n!r}")
-        counts.append(int(n))
-    return sorted({1, *counts})
+    return sorted({1, *(require_int("process counts", n, 1) for n in n_processes)})
 
 
 def check_size(size) -> int:
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
-        raise ValueError(f"size must be an integer >= 1, got {size!r}")
-    return int(size)
+    return require_int("size", size, 1)
 
 
 def check_background(background) -> int:
-    if isinstance(background, bool) or not isinstance(background, (int, np.integer)) or background < 0:
-        raise ValueError(f"background must be an integer >= 0, got {background!r}")
-    return int(background)
+    return require_int("background", background, 0)

@@ -40,8 +40,8 @@ import pandas as pd
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_html import report_html
-from cachesim.config import write_text_atomic
 from coherence.mappings import DEFAULT_MAPPINGS
+from rtcommon.files import write_text_atomic
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",

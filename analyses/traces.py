@@ -40,7 +40,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from tracer.trace import json_default
+from rtcommon.jsonio import json_default
+from rtcommon.validate import require_int
 
 __all__ = ["cached_trace", "default_cache_dir", "trace_key", "CACHE_ENV"]
 
@@ -112,12 +113,6 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int) -> st
     return f"{label}-{int(size)}-{kd}-d{int(max_depth)}-{digest}"
 
 
-def _check_size(size) -> int:
-    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
-        raise ValueError(f"size must be an integer >= 1, got {size!r}")
-    return size
-
-
 def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sah", max_depth: int | None = None,
                  progress: bool = True):
     """The scene and its access trace at ``size`` x ``size``, rendered once and then loaded.
@@ -159,7 +154,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
     from tracer.scenes import load
     from tracer.trace import AccessTrace
 
-    size = _check_size(size)
+    size = require_int("size", size, 1)
     if kd not in _KD_BUILDERS:
         raise ValueError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
     scene = load(scene_name_or_path, max_depth=max_depth)

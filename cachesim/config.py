@@ -9,12 +9,13 @@ and may only grow towards memory.
 from __future__ import annotations
 
 import json
-import math
 import os
-import tempfile
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+
+from rtcommon.files import write_text_atomic
+from rtcommon.validate import require_int, require_number
 
 POLICIES = ("lru", "fifo", "random")
 INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
@@ -23,20 +24,6 @@ MAX_LEVELS = 8
 
 def _is_power_of_two(value: int) -> bool:
     return value > 0 and value & (value - 1) == 0
-
-
-def _require_int(owner: str, name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value}")
-    return value
-
-
-def _require_number(owner: str, name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise ValueError(f"{owner}.{name} must be a finite number >= 0 (cycles), got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -75,8 +62,8 @@ class CacheLevel:
         owner = f"CacheLevel({self.name!r})" if isinstance(self.name, str) else "CacheLevel"
         if not isinstance(self.name, str) or not self.name.strip():
             raise ValueError(f"CacheLevel.name must be a non-empty string, got {self.name!r}")
-        _require_int(owner, "size", self.size, 1)
-        _require_int(owner, "line_size", self.line_size, 1)
+        object.__setattr__(self, "size", require_int(f"{owner}.size", self.size, 1))
+        object.__setattr__(self, "line_size", require_int(f"{owner}.line_size", self.line_size, 1))
         if not _is_power_of_two(self.line_size):
             raise ValueError(f"{owner}.line_size must be a power of two, got {self.line_size}")
         if self.line_size > self.size:
@@ -86,7 +73,7 @@ class CacheLevel:
                 raise ValueError(f"{owner}.assoc must be a positive integer or 'full', got {self.assoc!r}")
             object.__setattr__(self, "assoc", "full")
         else:
-            _require_int(owner, "assoc", self.assoc, 1)
+            object.__setattr__(self, "assoc", require_int(f"{owner}.assoc", self.assoc, 1))
         ways = self.ways
         if self.size % (self.line_size * ways) != 0:
             raise ValueError(
@@ -96,8 +83,8 @@ class CacheLevel:
         if not isinstance(self.policy, str) or self.policy.lower() not in POLICIES:
             raise ValueError(f"{owner}.policy must be one of {', '.join(POLICIES)}; got {self.policy!r}")
         object.__setattr__(self, "policy", self.policy.lower())
-        object.__setattr__(self, "latency", _require_number(owner, "latency", self.latency))
-        _require_int(owner, "seed", self.seed, 0)
+        object.__setattr__(self, "latency", require_number(f"{owner}.latency", self.latency, 0, "cycles"))
+        object.__setattr__(self, "seed", require_int(f"{owner}.seed", self.seed, 0))
 
     @property
     def ways(self) -> int:
@@ -165,7 +152,7 @@ class Hierarchy:
         names = [level.name for level in levels]
         if len(set(names)) != len(names):
             raise ValueError(f"Hierarchy.levels must have distinct names, got {names}")
-        object.__setattr__(self, "memory_latency", _require_number("Hierarchy", "memory_latency", self.memory_latency))
+        object.__setattr__(self, "memory_latency", require_number("Hierarchy.memory_latency", self.memory_latency, 0, "cycles"))
         if not isinstance(self.inclusion, str) or self.inclusion.lower() not in INCLUSIONS:
             raise ValueError(f"Hierarchy.inclusion must be one of {', '.join(INCLUSIONS)}; got {self.inclusion!r}")
         object.__setattr__(self, "inclusion", self.inclusion.lower())
@@ -271,31 +258,6 @@ class Hierarchy:
         except json.JSONDecodeError as error:
             raise ValueError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
         return cls.from_dict(data, source=str(path))
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` (UTF-8, newlines kept as ``\\n``) atomically; see :func:`write_bytes_atomic`."""
-    write_bytes_atomic(path, text.encode("utf-8"))
-
-
-def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, then rename it.
-
-    The file gets the permissions a plain ``open`` would give (0666 less the
-    umask), not the private 0600 of a temporary file.
-    """
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def alpha21164() -> Hierarchy:

@@ -15,35 +15,17 @@ The validation helpers here are shared with :mod:`coherence.mappings`.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
+from rtcommon.validate import require_int, require_number
+
 __all__ = ["Distribution"]
 
 # --------------------------------------------------------------------------
 # validation helpers
-
-
-def _require_int(owner: str, name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{owner}.{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
-def _require_cycles(owner: str, name: str, value) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.integer, np.floating))
-        or not math.isfinite(value)
-        or value < 0
-    ):
-        raise ValueError(f"{owner}.{name} must be a finite number >= 0 (cycles), got {value!r}")
-    return float(value)
 
 
 def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
@@ -98,9 +80,9 @@ def _validate_distribution(d: "Distribution") -> None:
     if not isinstance(d.name, str) or not d.name:
         raise ValueError(f"Distribution.name must be a non-empty string, got {d.name!r}")
     owner = f"Distribution {d.name!r}"
-    width = _require_int(owner, "width", d.width, 1)
-    height = _require_int(owner, "height", d.height, 1)
-    n = _require_int(owner, "n_processes", d.n_processes, 1)
+    width = require_int(f"{owner}.width", d.width, 1)
+    height = require_int(f"{owner}.height", d.height, 1)
+    n = require_int(f"{owner}.n_processes", d.n_processes, 1)
     offsets = _int_array(owner, "task_offsets", d.task_offsets, 1)
     pixels = _int_array(owner, "task_pixels", d.task_pixels, 1)
     n_pixels = width * height
@@ -134,8 +116,8 @@ def _validate_distribution(d: "Distribution") -> None:
                 f"{owner}: task_process must be in [0, {n}); task {int(bad[0])} "
                 f"has process {int(process[bad[0]])} ({bad.size} bad entries)"
             )
-    dispatch = _require_cycles(owner, "dispatch_cycles", d.dispatch_cycles)
-    take_ahead = _require_int(owner, "take_ahead", d.take_ahead, 0)
+    dispatch = require_number(f"{owner}.dispatch_cycles", d.dispatch_cycles, 0, "cycles")
+    take_ahead = require_int(f"{owner}.take_ahead", d.take_ahead, 0)
     if process is not None and (dispatch != 0.0 or take_ahead != 0):
         raise ValueError(
             f"{owner}: dispatch_cycles and take_ahead apply to dynamic distributions only "
@@ -231,7 +213,7 @@ class Distribution:
 
     def task(self, t: int) -> np.ndarray:
         """Pixel indices of task ``t`` in render order (a read-only view)."""
-        t = _require_int(f"Distribution {self.name!r}", "task", t, 0)
+        t = require_int(f"Distribution {self.name!r}.task", t, 0)
         if t >= self.n_tasks:
             raise ValueError(f"task must be < n_tasks = {self.n_tasks}, got {t}")
         return self.task_pixels[self.task_offsets[t]:self.task_offsets[t + 1]]
@@ -250,7 +232,7 @@ class Distribution:
         return self.task_process
 
     def _require_process(self, p) -> int:
-        p = _require_int(f"Distribution {self.name!r}", "process", p, 0)
+        p = require_int(f"Distribution {self.name!r}.process", p, 0)
         if p >= self.n_processes:
             raise ValueError(f"process must be < n_processes = {self.n_processes}, got {p}")
         return p

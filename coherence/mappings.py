@@ -23,8 +23,9 @@ import numpy as np
 from numba import njit
 
 from .curves import CURVES, curve_order, hilbert_order, morton_keys
-from .distribution import (Distribution, _check_coverage, _csr_from_labels, _int_array, _pixel_text,
-                           _require_cycles, _require_int)
+from rtcommon.validate import require_int, require_number
+
+from .distribution import Distribution, _check_coverage, _csr_from_labels, _int_array, _pixel_text
 
 __all__ = [
     "DEFAULT_DISPATCH_CYCLES",
@@ -74,9 +75,9 @@ class Mapping:
             If a size is not an integer >= 1.
         """
         owner = type(self).__name__
-        width = _require_int(owner, "width", width, 1)
-        height = _require_int(owner, "height", height, 1)
-        n_processes = _require_int(owner, "n_processes", n_processes, 1)
+        width = require_int(f"{owner}.width", width, 1)
+        height = require_int(f"{owner}.height", height, 1)
+        n_processes = require_int(f"{owner}.n_processes", n_processes, 1)
         return self._build(width, height, n_processes)
 
     def _build(self, width: int, height: int, n_processes: int) -> Distribution:  # pragma: no cover
@@ -302,7 +303,7 @@ class Block(Mapping):
     name: ClassVar[str] = "B"
 
     def __post_init__(self):
-        _require_int("Block", "field", self.field, 1)
+        require_int("Block.field", self.field, 1)
 
     def _build(self, width, height, n):
         field = self.field
@@ -328,8 +329,8 @@ class Block(Mapping):
 
 
 def _check_dynamic(owner: str, dispatch_cycles, take_ahead) -> None:
-    _require_cycles(owner, "dispatch_cycles", dispatch_cycles)
-    _require_int(owner, "take_ahead", take_ahead, 0)
+    require_number(f"{owner}.dispatch_cycles", dispatch_cycles, 0, "cycles")
+    require_int(f"{owner}.take_ahead", take_ahead, 0)
 
 
 @dataclass(frozen=True)
@@ -357,7 +358,7 @@ class DynamicBlock(Mapping):
     name: ClassVar[str] = "DB"
 
     def __post_init__(self):
-        _require_int("DynamicBlock", "block", self.block, 1)
+        require_int("DynamicBlock.block", self.block, 1)
         _check_dynamic("DynamicBlock", self.dispatch_cycles, self.take_ahead)
 
     def _build(self, width, height, n):
@@ -430,7 +431,7 @@ class CurveTiles(Mapping):
     take_ahead: int = 0
 
     def __post_init__(self):
-        _require_int("CurveTiles", "tile", self.tile, 1)
+        require_int("CurveTiles.tile", self.tile, 1)
         if self.inner not in ("morton", "scan"):
             raise ValueError(f"CurveTiles.inner must be 'morton' or 'scan', got {self.inner!r}")
         if not isinstance(self.dynamic, bool):

@@ -13,7 +13,7 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from cachesim.config import write_text_atomic
+from rtcommon.files import write_text_atomic
 
 _PACKAGES = ("raytrace-coherence", "numpy", "numba", "pandas", "scipy")
 

@@ -19,6 +19,7 @@ from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_coun
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.simulation import Machine, simulate_run
+from rtcommon.validate import require_int
 from tracer.trace import COUNTER_NAMES, RecordKind
 
 
@@ -99,7 +100,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     names = [mapping.name for mapping in mapping_objects]
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must have distinct names, got {names}")
-    counts = sorted({1, *(_positive_int(n) for n in n_processes)})
+    counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
     placed = place_layout(layout, trace, scene)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
@@ -131,12 +132,6 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
                   "machine": asdict(machine), "mappings": names, "n_processes": counts}
     return StudyResult(runs, processes, parameters)
-
-
-def _positive_int(value) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"n_processes must be integers >= 1, got {value!r}")
-    return int(value)
 
 
 def _progress(total: int, enabled: bool):

@@ -17,6 +17,7 @@ import os
 from pathlib import Path
 
 from tracer import spd, standins
+from rtcommon.validate import require_int
 from tracer.scene import Scene
 
 __all__ = ["PAPER_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
@@ -34,12 +35,6 @@ _GENERATORS = {
 }
 _ALIASES = {"shells": "shell"}  # the SPD generator's own name
 _SUFFIXES = (".nff", ".obj")
-
-
-def _check_depth(max_depth) -> int:
-    if isinstance(max_depth, bool) or not isinstance(max_depth, int) or max_depth < 0:
-        raise ValueError(f"max_depth must be an integer >= 0, got {max_depth!r}")
-    return max_depth
 
 
 def load(name_or_path, max_depth: int | None = None) -> Scene:
@@ -68,7 +63,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         A path that does not exist.
     """
     if max_depth is not None:
-        max_depth = _check_depth(max_depth)
+        max_depth = require_int("max_depth", max_depth, 0)
     text = os.fspath(name_or_path)
     key = _ALIASES.get(text.lower(), text.lower())
     if key in _GENERATORS and not isinstance(name_or_path, Path):

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from rtcommon.validate import require_int
 from tracer.scene import Camera, Material, Scene, SceneBuilder
 
 __all__ = ["balls", "tetra", "shells", "balls_count", "tetra_count", "shells_count"]
@@ -24,14 +25,6 @@ __all__ = ["balls", "tetra", "shells", "balls_count", "tetra_count", "shells_cou
 # The SPD generators' shared background ("sky blue").
 _BACKGROUND = (0.078, 0.361, 0.753)
 _SPD_DEPTH = 5
-
-
-def _check_size(name: str, size, lowest: int, highest: int) -> int:
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)):
-        raise ValueError(f"{name} size must be an integer, got {size!r}")
-    if not lowest <= size <= highest:
-        raise ValueError(f"{name} size must be in [{lowest}, {highest}], got {size}")
-    return int(size)
 
 
 # ---------------------------------------------------------------- balls
@@ -92,7 +85,7 @@ def balls(size: int = 4) -> Scene:
     Scene
         ``balls_count(size)`` elements (7382 at size 4), 3 lights, depth 5.
     """
-    size = _check_size("balls", size, 0, 6)
+    size = require_int("balls size", size, 0, 6)
     builder = SceneBuilder("balls")
     builder.background = _BACKGROUND
     builder.camera = Camera((2.1, 1.3, 1.7), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 45.0, 0.01,
@@ -159,7 +152,7 @@ def tetra(size: int = 6) -> Scene:
     Scene
         ``4**size`` triangles (4096 at size 6), 1 light, diffuse only, depth 5.
     """
-    size = _check_size("tetra", size, 1, 8)
+    size = require_int("tetra size", size, 1, 8)
     builder = SceneBuilder("tetra")
     builder.background = _BACKGROUND
     builder.camera = Camera((1.02285, -3.17715, -2.17451), (-0.004103, -0.004103, 0.216539),
@@ -208,7 +201,7 @@ def shells(size: int = 5) -> Scene:
         ``180 * 2**size + 1`` spheres (5761 at size 5), 1 light, Ks 0.2,
         depth 5.
     """
-    size = _check_size("shells", size, 0, 10)
+    size = require_int("shells size", size, 0, 10)
     builder = SceneBuilder("shells")
     builder.background = _BACKGROUND
     builder.camera = Camera((-6.0, -60.0, 35.0), (0.0, 8.0, -15.0), (0.0, 0.0, 1.0), 45.0, 0.5,

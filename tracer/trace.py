@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rtcommon.jsonio import json_default
 from tracer.records import (  # noqa: F401  (re-exported: the format's names)
     COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
     Counter, RecordKind, pack, unpack,
@@ -189,15 +190,6 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata}
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1, default=json_default))
-
-
-def json_default(value):
-    """``json.dumps`` fallback for numpy scalars and arrays."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def _publish(tmp: Path, directory: Path) -> None:

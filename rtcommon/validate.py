@@ -1,0 +1,67 @@
+"""Checks of user-given numbers that raise ``ValueError`` naming field and range.
+
+One approach for the whole toolkit: frozen dataclasses call these in
+``__post_init__`` and public functions call them before any work. A small
+module rather than a validation library (pydantic, attrs validators): the
+checks are few, numpy integers must pass as integers and ``bool`` must not,
+and the messages stay the toolkit's own (``CacheLevel.size must be >= 1``).
+Never ``assert``: ``python -O`` strips it.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+
+def _range_text(minimum, maximum) -> str:
+    if minimum is not None and maximum is not None:
+        return f" in [{minimum}, {maximum}]"
+    if minimum is not None:
+        return f" >= {minimum}"
+    if maximum is not None:
+        return f" <= {maximum}"
+    return ""
+
+
+def require_int(name: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
+    """``value`` as a Python int, checked against ``minimum <= value <= maximum``.
+
+    Parameters
+    ----------
+    name : str
+        What the message calls the value, e.g. ``"CacheLevel.size"``.
+    value : int or numpy integer
+        ``bool`` is refused although it is an ``int``.
+    minimum, maximum : int, optional
+        Inclusive bounds.
+
+    Raises
+    ------
+    ValueError
+        ``"<name> must be an integer >= 1, got 'x'"`` for a non-integer,
+        ``"<name> must be >= 1, got 0"`` (or ``in [lo, hi]``) out of range.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer{_range_text(minimum, maximum)}, got {value!r}")
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        raise ValueError(f"{name} must be{_range_text(minimum, maximum)}, got {value}")
+    return int(value)
+
+
+def require_number(name: str, value, minimum: float | None = None, unit: str = "") -> float:
+    """``value`` as a finite float, checked against ``minimum``.
+
+    Raises
+    ------
+    ValueError
+        ``"<name> must be a finite number >= 0 (cycles), got ..."`` for a
+        non-number, NaN, an infinity or a value below ``minimum``.
+    """
+    ok = (not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
+          and math.isfinite(value) and (minimum is None or value >= minimum))
+    if not ok:
+        suffix = f" ({unit})" if unit else ""
+        raise ValueError(f"{name} must be a finite number{_range_text(minimum, None)}{suffix}, got {value!r}")
+    return float(value)

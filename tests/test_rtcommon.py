@@ -1,0 +1,67 @@
+"""The shared helpers: checks, atomic files, JSON fallback."""
+import json
+import os
+import stat
+
+import numpy as np
+import pytest
+
+from rtcommon.files import write_bytes_atomic, write_text_atomic
+from rtcommon.jsonio import json_default
+from rtcommon.validate import require_int, require_number
+
+
+def test_require_int_accepts_python_and_numpy_integers():
+    assert require_int("n", 3, 1) == 3
+    value = require_int("n", np.int32(5), 0, 5)
+    assert value == 5 and type(value) is int
+
+
+@pytest.mark.parametrize("value, message", [
+    (True, "n must be an integer >= 1, got True"),
+    (1.0, "n must be an integer >= 1, got 1.0"),
+    ("2", "n must be an integer >= 1, got '2'"),
+    (0, "n must be >= 1, got 0"),
+])
+def test_require_int_messages(value, message):
+    with pytest.raises(ValueError) as error:
+        require_int("n", value, 1)
+    assert str(error.value) == message
+
+
+def test_require_int_range():
+    with pytest.raises(ValueError, match=r"^size must be in \[0, 6\], got 7$"):
+        require_int("size", 7, 0, 6)
+    with pytest.raises(ValueError, match=r"^size must be an integer in \[0, 6\], got None$"):
+        require_int("size", None, 0, 6)
+
+
+def test_require_number():
+    assert require_number("latency", np.float32(2.5), 0, "cycles") == 2.5
+    for bad in (-1, float("nan"), float("inf"), True, "3"):
+        with pytest.raises(ValueError, match=r"^latency must be a finite number >= 0 \(cycles\), got"):
+            require_number("latency", bad, 0, "cycles")
+
+
+def test_atomic_write_replaces_whole_file_with_plain_permissions(tmp_path):
+    target = tmp_path / "out.txt"
+    write_text_atomic(target, "old\n")
+    write_bytes_atomic(target, b"new\n")
+    assert target.read_bytes() == b"new\n"
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~umask
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_atomic_write_leaves_nothing_when_it_fails(tmp_path):
+    with pytest.raises(TypeError):
+        write_bytes_atomic(tmp_path / "out.bin", "not bytes")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_json_default():
+    text = json.dumps({"a": np.int64(3), "b": np.arange(2.0), "c": np.bool_(True)}, default=json_default)
+    assert json.loads(text) == {"a": 3, "b": [0.0, 1.0], "c": True}
+    with pytest.raises(TypeError, match="not JSON serialisable: object"):
+        json.dumps(object(), default=json_default)
