@@ -7,28 +7,20 @@ writes. The checks run before any rendering, so a bad argument costs nothing.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import pandas as pd
 
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.validate import require_int
+from tracer.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
            "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
            "check_size", "check_background"]
 
 #: The study's scene table and sequential S times (DESIGN.md §2), verbatim.
-STUDY_TABLE = pd.DataFrame({
-    "scene": ["balls", "tetra", "shell", "room", "fluid"],
-    "geometry": ["spheres (SPD sphereflake)", "triangles (SPD tetra)", "spheres (SPD shells)",
-                 "polygon meshes (CAAD interior)", "spheres (fluid-dynamics visualisation)"],
-    "elements": [7382, 4096, 5761, 7786, 2899],
-    "lights": [3, 1, 1, 3, 2],
-    "tests_1e6": [193.0, 7.6, 212.2, 114.4, 29.3],
-    "max_depth": [2, 2, 2, 4, 5],
-    "sequential_seconds": [345.8, 28.8, 403.0, 365.7, 97.5],
-})
+STUDY_TABLE = pd.DataFrame([asdict(scene) for scene in STUDY_SCENES.values()]).rename(columns={"name": "scene"})
 
 #: Image width and height of the study's runs.
 STUDY_SIZE = 512
@@ -101,13 +93,11 @@ def check_scenes(scenes) -> list[str]:
         A name that is not one of the study's scenes (only they have study
         numbers to compare with), or no scene at all.
     """
-    from tracer.scenes import PAPER_SCENES
-
     if isinstance(scenes, str):
         scenes = [scenes]
     names = []
     for scene in scenes:
-        key = {"shells": "shell"}.get(str(scene).lower(), str(scene).lower())
+        key = canonical_scene_name(scene)
         if key not in PAPER_SCENES:
             raise ValueError(f"unknown scene {scene!r}: the study has {', '.join(PAPER_SCENES)}")
         if key not in names:

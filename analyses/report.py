@@ -416,7 +416,7 @@ def _clean(value):
 
 
 def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, names, scene_bytes) -> dict:
-    from coherence.provenance import package_versions
+    from rtcommon.versions import package_versions
 
     headline = {}
     for n in sorted({verdict_n, top_n}):

@@ -73,10 +73,10 @@ def _source_digest() -> str:
 
 def _scene_identity(name_or_path) -> tuple[str, str]:
     """(short label, identity string) of a scene name or file."""
-    from tracer.scenes import PAPER_SCENES
+    from tracer.study import PAPER_SCENES, canonical_scene_name
 
     text = os.fspath(name_or_path)
-    lowered = {"shells": "shell"}.get(text.lower(), text.lower())
+    lowered = canonical_scene_name(text)
     if lowered in PAPER_SCENES and not isinstance(name_or_path, Path):
         return lowered, f"name:{lowered}"
     path = Path(text)

@@ -41,6 +41,7 @@ import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
 from coherence.mappings import DEFAULT_MAPPINGS
+from rtcommon.validate import require_int
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "scene_size", "n_processes",
@@ -402,16 +403,15 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     from analyses.traces import default_cache_dir
     from tracer import spd
     from tracer.nff import write_nff
-    from tracer.scenes import PAPER_DEPTH
+    from tracer.study import PAPER_DEPTH, canonical_scene_name
 
-    generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells, "shells": spd.shells}
-    if name not in generators:
-        raise ValueError(f"scene_size applies to the SPD scenes {sorted(set(generators) - {'shells'})}, "
-                         f"not {name!r}")
-    if isinstance(size_factor, bool) or not isinstance(size_factor, int) or size_factor < 1:
-        raise ValueError(f"scene_size must be a positive integer SPD size factor, got {size_factor!r}")
-    scene = generators[name](size_factor)
-    scene.max_depth = PAPER_DEPTH["shell" if name == "shells" else name]
+    generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells}
+    key = canonical_scene_name(name)
+    if key not in generators:
+        raise ValueError(f"scene_size applies to the SPD scenes {sorted(generators)}, not {name!r}")
+    size_factor = require_int("scene_size (an SPD size factor)", size_factor, 1)
+    scene = generators[key](size_factor)
+    scene.max_depth = PAPER_DEPTH[key]
     folder = Path(cache_dir) if cache_dir else default_cache_dir().parent / "scenes"
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}-size{size_factor}.nff"

@@ -9,24 +9,10 @@ from __future__ import annotations
 
 import json
 import os
-import platform
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from rtcommon.files import write_text_atomic
-
-_PACKAGES = ("raytrace-coherence", "numpy", "numba", "pandas", "scipy")
-
-
-def package_versions() -> dict[str, str]:
-    """Versions of Python and of the packages that shape results."""
-    versions = {"python": platform.python_version()}
-    for package in _PACKAGES:
-        try:
-            versions[package] = version(package)
-        except PackageNotFoundError:
-            versions[package] = "not installed"
-    return versions
+from rtcommon.versions import package_versions
 
 
 def provenance(**parameters) -> dict:

@@ -19,12 +19,9 @@ from pathlib import Path
 from tracer import spd, standins
 from rtcommon.validate import require_int
 from tracer.scene import Scene
+from tracer.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
 
 __all__ = ["PAPER_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
-
-PAPER_SCENES = ("balls", "tetra", "shell", "room", "fluid")
-PAPER_DEPTH = {"balls": 2, "tetra": 2, "shell": 2, "room": 4, "fluid": 5}
-PAPER_ELEMENTS = {"balls": 7382, "tetra": 4096, "shell": 5761, "room": 7786, "fluid": 2899}
 
 _GENERATORS = {
     "balls": spd.balls,
@@ -33,7 +30,6 @@ _GENERATORS = {
     "room": standins.room,
     "fluid": standins.fluid,
 }
-_ALIASES = {"shells": "shell"}  # the SPD generator's own name
 _SUFFIXES = (".nff", ".obj")
 
 
@@ -65,7 +61,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     if max_depth is not None:
         max_depth = require_int("max_depth", max_depth, 0)
     text = os.fspath(name_or_path)
-    key = _ALIASES.get(text.lower(), text.lower())
+    key = canonical_scene_name(text)
     if key in _GENERATORS and not isinstance(name_or_path, Path):
         scene = _GENERATORS[key]()
         scene.name = key

@@ -23,11 +23,12 @@ import math
 import numpy as np
 
 from tracer.scene import Camera, Material, Scene, SceneBuilder
+from tracer.study import PAPER_ELEMENTS
 
 __all__ = ["room", "fluid", "ROOM_ELEMENTS", "FLUID_ELEMENTS"]
 
-ROOM_ELEMENTS = 7786
-FLUID_ELEMENTS = 2899
+ROOM_ELEMENTS = PAPER_ELEMENTS["room"]
+FLUID_ELEMENTS = PAPER_ELEMENTS["fluid"]
 
 
 def _target(name: str, paper_count: int, scale, lowest: float, highest: float) -> int:
