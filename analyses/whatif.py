@@ -343,7 +343,7 @@ def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]
 
     from analyses.html import figure_png
     from analyses.maps import plot_loss_lines, plot_loss_map
-    from cachesim.config import write_bytes_atomic
+    from rtcommon.files import write_bytes_atomic
     from coherence.provenance import provenance, write_csv_atomic
 
     folder = Path(folder)
