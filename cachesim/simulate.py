@@ -17,37 +17,32 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from cachesim import _kernels as K
+from cachesim import kernels as K
 from cachesim.config import Hierarchy
 
 _POLICY_CODES = {"lru": K.LRU, "fifo": K.FIFO, "random": K.RANDOM}
 _INCLUSION_CODES = {"non-inclusive": K.NON_INCLUSIVE, "inclusive": K.INCLUSIVE, "exclusive": K.EXCLUSIVE}
 
 
-class _Geometry:
-    """Kernel parameters of a hierarchy as flat int64 arrays."""
-
-    def __init__(self, hierarchy: Hierarchy):
-        levels = hierarchy.levels
-        shifts = np.array([level.line_size.bit_length() - 1 for level in levels], dtype=np.int64)
-        self.shift0 = int(shifts[0])
-        self.rel_shift = shifts - shifts[0]
-        self.n_sets = np.array([level.n_sets for level in levels], dtype=np.int64)
-        self.set_mask = np.array(
-            [n - 1 if n & (n - 1) == 0 else -1 for n in self.n_sets], dtype=np.int64
-        )
-        self.ways = np.array([level.ways for level in levels], dtype=np.int64)
-        self.policy = np.array([_POLICY_CODES[level.policy] for level in levels], dtype=np.int64)
-        sizes = self.n_sets * self.ways
-        self.offset = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
-        self.total_ways = int(sizes.sum())
-        self.inclusion = _INCLUSION_CODES[hierarchy.inclusion]
-        self.seeds = np.array([_seed_state(level.seed, index) for index, level in enumerate(levels)],
-                              dtype=np.uint64)
-
-    def args(self):
-        return (self.shift0, self.rel_shift, self.n_sets, self.set_mask, self.ways, self.policy,
-                self.offset, self.inclusion)
+def cache_geometry(hierarchy: Hierarchy) -> K.CacheGeometry:
+    """The kernels' view of a hierarchy (see :class:`cachesim.kernels.CacheGeometry`)."""
+    levels = hierarchy.levels
+    shifts = np.array([level.line_size.bit_length() - 1 for level in levels], dtype=np.int64)
+    n_sets = np.array([level.n_sets for level in levels], dtype=np.int64)
+    ways = np.array([level.ways for level in levels], dtype=np.int64)
+    sizes = n_sets * ways
+    return K.CacheGeometry(
+        line_shift=int(shifts[0]),
+        rel_shift=shifts - shifts[0],
+        n_sets=n_sets,
+        set_mask=np.array([n - 1 if n & (n - 1) == 0 else -1 for n in n_sets], dtype=np.int64),
+        ways=ways,
+        policy=np.array([_POLICY_CODES[level.policy] for level in levels], dtype=np.int64),
+        offset=np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64),
+        inclusion=_INCLUSION_CODES[hierarchy.inclusion],
+        seeds=np.array([_seed_state(level.seed, index) for index, level in enumerate(levels)],
+                       dtype=np.uint64),
+    )
 
 
 def _seed_state(seed: int, level: int) -> int:
@@ -69,14 +64,26 @@ class CacheState:
         if not isinstance(hierarchy, Hierarchy):
             raise ValueError(f"CacheState needs a Hierarchy, got {type(hierarchy).__name__}")
         self.hierarchy = hierarchy
-        self._geometry = _Geometry(hierarchy)
+        self._geometry = cache_geometry(hierarchy)
         self.reset()
+
+    @property
+    def geometry(self) -> K.CacheGeometry:
+        """The hierarchy's parameters as the compiled kernels take them."""
+        return self._geometry
+
+    @property
+    def arrays(self) -> K.CacheArrays:
+        """``tags``, ``stamps`` and ``counts`` as one bundle for the kernels
+        of :mod:`cachesim.kernels` (views: the kernels update this state)."""
+        return K.CacheArrays(self.tags, self.stamps, self.counts)
 
     def reset(self) -> None:
         """Empty every level and zero the counters."""
         n_levels = len(self.hierarchy.levels)
-        self.tags = np.full(self._geometry.total_ways, -1, dtype=np.int64)
-        self.stamps = np.zeros(self._geometry.total_ways, dtype=np.int64)
+        total_ways = int(np.sum(self._geometry.n_sets * self._geometry.ways))
+        self.tags = np.full(total_ways, -1, dtype=np.int64)
+        self.stamps = np.zeros(total_ways, dtype=np.int64)
         self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
         self.clock = 0
 
@@ -253,9 +260,8 @@ def simulate(addresses, hierarchy: Hierarchy | CacheState, *, return_levels: boo
     _check_line_range(addresses, state.hierarchy)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
     before = state.counts.copy()
-    state.clock = int(K.simulate_stream(
-        addresses, *state._geometry.args(), state.tags, state.stamps, state._geometry.seeds, state.counts,
-        state.clock, served_by, return_levels))
+    state.clock = int(K.simulate_stream(addresses, state.geometry, state.arrays, state.clock, served_by,
+                                        return_levels))
     return SimulationResult(state.hierarchy, state.counts - before,
                             served_by if return_levels else None, state)
 
@@ -304,8 +310,8 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
     before = counts.copy()
     clocks = np.array([state.clock for state in states], dtype=np.int64)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
-    K.simulate_streams(addresses, starts, *states[0]._geometry.args(), tags, stamps, states[0]._geometry.seeds, counts,
-                       clocks, served_by, return_levels)
+    K.simulate_streams(addresses, starts, states[0].geometry, K.CacheArrays(tags, stamps, counts), clocks,
+                       served_by, return_levels)
     results = []
     for index, state in enumerate(states):
         state.tags, state.stamps = tags[index].copy(), stamps[index].copy()

@@ -31,7 +31,7 @@ import pandas as pd
 from numba import njit
 
 from cachesim import CacheState, Hierarchy
-from cachesim import _kernels as K
+from cachesim import kernels as K
 from coherence.cost import CostModel
 from coherence.layout import PlacedLayout
 from coherence.distribution import Distribution
@@ -166,7 +166,6 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         own_offsets = np.searchsorted(owner[own_tasks], np.arange(n_processes + 1)).astype(np.int64)
 
     state = CacheState(hierarchy)
-    geometry = state._geometry
     n_levels = len(hierarchy.levels)
     tags = np.tile(state.tags, (n_cpus, 1))
     stamps = np.tile(state.stamps, (n_cpus, 1))
@@ -179,7 +178,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
     _run(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
          placed.record_start, placed.record_size, placed.kind_first, line_shift,
-         *geometry.args(), geometry.seeds, tags, stamps, counts, compute, latency,
+         state.geometry, tags, stamps, counts, compute, latency,
          distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
          order, cpu_offsets, distribution.dynamic, float(distribution.dispatch_cycles),
          int(distribution.take_ahead), float(machine.quantum_cycles), float(machine.switch_cycles),
@@ -250,8 +249,7 @@ def _pixel_addresses(records, start, stop, record_start, record_size, kind_first
 
 @njit(cache=True, nogil=True)
 def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shift,
-         shift0, rel_shift, n_sets, set_mask, ways, policy, offset, inclusion, seeds,
-         tags, stamps, counts, compute, latency,
+         geometry, tags, stamps, counts, compute, latency,
          task_offsets, task_pixels, own_offsets, own_tasks, cpu_processes, cpu_offsets,
          dynamic, dispatch_cycles, take_ahead, quantum, switch_cycles, out_cycles, task_owner):
     """The event loop (see the module docstring). Updates ``tags``/``stamps``
@@ -275,8 +273,7 @@ def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shi
     held_count = np.zeros(n_processes, dtype=np.int64)
     next_task = 0
     buffer = np.empty(4096, dtype=np.uint64)
-    work_lines = np.empty(K.CHUNK, dtype=np.int64)
-    work_clocks = np.empty(K.CHUNK, dtype=np.int64)
+    work = K.chunk_buffers()
     served = np.zeros(0, dtype=np.uint8)
     hits_before = np.zeros(n_levels, dtype=np.int64)
     while True:
@@ -350,9 +347,8 @@ def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shi
                 hits_before[level] = process_counts[level, K.HITS]
             misses_before = process_counts[n_levels - 1, K.MISSES]
             cache_clock[cpu] = K.simulate_into(
-                buffer[:n_addresses], shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                inclusion, tables, ages, seeds, process_counts, cache_clock[cpu], served, False,
-                work_lines, work_clocks)
+                buffer[:n_addresses], geometry, K.CacheArrays(tables, ages, process_counts),
+                cache_clock[cpu], served, False, work)
             memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
             for level in range(n_levels):
                 memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]

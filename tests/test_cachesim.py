@@ -269,8 +269,7 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
     # Non-inclusive hierarchies run level by level in chunks; the general path
     # walks each access down. Both must leave identical contents, counts and
     # served_by, across several chunks and with runs of one line.
-    from cachesim import _kernels as K
-    from cachesim.simulate import _Geometry
+    from cachesim import kernels as K
 
     hierarchy = Hierarchy((
         CacheLevel("L1", 256, 16, 2, policies[0]),
@@ -280,16 +279,12 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
     rng = np.random.default_rng(21)
     walk = np.cumsum(rng.integers(-200, 210, 3 * K.CHUNK + 123)) + (1 << 33)
     stream = np.repeat(walk, rng.integers(1, 4, walk.size)).astype(np.uint64)
-    geometry = _Geometry(hierarchy)
     outputs = []
     for kernel in (K._simulate_by_level, K._simulate_by_access):
         state = CacheState(hierarchy)
         served_by = np.zeros(stream.size, dtype=np.uint8)
-        by_level = kernel is K._simulate_by_level
-        args = geometry.args()[:7] + (() if by_level else (K.NON_INCLUSIVE,))
-        buffers = (np.empty(K.CHUNK, np.int64), np.empty(K.CHUNK, np.int64)) if by_level else ()
-        clock = kernel(stream, *args, state.tags, state.stamps, geometry.seeds, state.counts,
-                       5, served_by, True, *buffers)
+        buffers = (K.chunk_buffers(),) if kernel is K._simulate_by_level else ()
+        clock = kernel(stream, state.geometry, state.arrays, 5, served_by, True, *buffers)
         outputs.append((clock, state.tags.copy(), state.counts.copy(), served_by))
     (clock_a, tags_a, counts_a, served_a), (clock_b, tags_b, counts_b, served_b) = outputs
     assert clock_a == clock_b == 5 + stream.size

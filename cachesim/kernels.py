@@ -1,32 +1,139 @@
-"""Compiled cache-simulation kernels. Arguments only: arrays and scalars.
+"""Compiled cache-simulation kernels: the public entry points for compiled code.
 
-State layout for one hierarchy of ``L`` levels (see :mod:`cachesim.state`):
+Python callers use :func:`cachesim.simulate` and :class:`cachesim.CacheState`.
+Other packages' ``@njit`` code that feeds many short streams to one state (a
+schedule simulation replaying one pixel's reads at a time, say) calls these
+kernels directly:
 
-- ``tags`` int64 (total_ways,): the line number held by each way, or -1.
+- :func:`simulate_stream` runs an address array through one state;
+- :func:`simulate_into` does the same with caller-owned work buffers
+  (:class:`ChunkBuffers`, from :func:`chunk_buffers`), so that a loop over
+  many short streams allocates nothing;
+- :func:`simulate_streams` runs independent streams on stacked states in
+  parallel.
+
+Each takes the hierarchy's :class:`CacheGeometry` (from
+:attr:`CacheState.geometry <cachesim.CacheState.geometry>`) and its
+:class:`CacheArrays` (from :attr:`CacheState.arrays
+<cachesim.CacheState.arrays>`), and returns the access clock after the call,
+to be passed to the next one.
+
+State layout of one hierarchy of ``L`` levels (:class:`CacheArrays`):
+
+- ``tags`` int64 (W,): the line number held by each way, or -1.
   Level ``l`` owns ``tags[offset[l] : offset[l] + n_sets[l] * ways[l]]``;
   set ``s`` of that level is the ``ways[l]`` entries from
   ``offset[l] + s * ways[l]``.
-- ``stamps`` int64 (total_ways,): the access clock of the last use (LRU) or
+- ``stamps`` int64 (W,): the access clock of the last use (LRU) or
   of the fill (FIFO); unused for random replacement.
-- ``seeds`` uint64 (L,): per-level seed of random replacement, whose victim
-  is a hash of the seed and the access clock (no generator state).
-- ``counts`` int64 (L, 5): accesses, hits, misses, evictions,
-  back-invalidations per level.
+- ``counts`` int64 (L, N_COUNTERS): columns :data:`ACCESSES`, :data:`HITS`,
+  :data:`MISSES`, :data:`EVICTIONS`, :data:`INVALIDATIONS` per level.
 
 Line numbers are byte addresses shifted right by the first level's line shift
-(``shift0``), then by ``rel_shift[l]`` for level ``l``.
+(``CacheGeometry.line_shift``), then by ``rel_shift[l]`` for level ``l``.
 """
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
 
+# Replacement policies (CacheGeometry.policy).
 LRU, FIFO, RANDOM = 0, 1, 2
+# Inclusion policies (CacheGeometry.inclusion).
 NON_INCLUSIVE, INCLUSIVE, EXCLUSIVE = 0, 1, 2
+# Counter columns of CacheArrays.counts.
 ACCESSES, HITS, MISSES, EVICTIONS, INVALIDATIONS = 0, 1, 2, 3, 4
 N_COUNTERS = 5
+# The level that served an access, in served_by, is its index; memory is L.
+
+# Accesses handled per chunk by the level-by-level path: the chunk's two
+# buffers (256 KB) stay in the host's second-level cache.
+CHUNK = 16384
 
 
+class CacheGeometry(NamedTuple):
+    """A hierarchy's fixed parameters, as the kernels read them.
+
+    Attributes
+    ----------
+    line_shift : int
+        log2 of the first level's line size: byte address to line number.
+    rel_shift : ndarray of int64, shape (L,)
+        log2 of each level's line size relative to the first level's.
+    n_sets : ndarray of int64, shape (L,)
+        Sets per level (any count, not only powers of two).
+    set_mask : ndarray of int64, shape (L,)
+        ``n_sets - 1`` where it is a power of two, else -1 (use a modulo).
+    ways : ndarray of int64, shape (L,)
+        Associativity per level.
+    policy : ndarray of int64, shape (L,)
+        :data:`LRU`, :data:`FIFO` or :data:`RANDOM` per level.
+    offset : ndarray of int64, shape (L,)
+        First way of each level in the state arrays.
+    inclusion : int
+        :data:`NON_INCLUSIVE`, :data:`INCLUSIVE` or :data:`EXCLUSIVE`.
+    seeds : ndarray of uint64, shape (L,)
+        Per-level seed of random replacement, whose victim is a hash of the
+        seed and the access clock (no generator state).
+    """
+
+    line_shift: int
+    rel_shift: np.ndarray
+    n_sets: np.ndarray
+    set_mask: np.ndarray
+    ways: np.ndarray
+    policy: np.ndarray
+    offset: np.ndarray
+    inclusion: int
+    seeds: np.ndarray
+
+
+class CacheArrays(NamedTuple):
+    """The mutable contents and counters of a hierarchy (updated in place).
+
+    Attributes
+    ----------
+    tags : ndarray of int64, shape (W,) or (S, W)
+        Line held by each way, or -1; ``W`` is the total ways of all levels.
+    stamps : ndarray of int64, shape (W,) or (S, W)
+        Access clock of the last use (LRU) or fill (FIFO) of each way.
+    counts : ndarray of int64, shape (L, N_COUNTERS) or (S, L, N_COUNTERS)
+        Cumulative counters per level (columns :data:`ACCESSES` ...).
+
+    The stacked shapes hold ``S`` independent states, for
+    :func:`simulate_streams`.
+    """
+
+    tags: np.ndarray
+    stamps: np.ndarray
+    counts: np.ndarray
+
+
+class ChunkBuffers(NamedTuple):
+    """Work buffers of :func:`simulate_into`.
+
+    Attributes
+    ----------
+    lines, clocks : ndarray of int64, shape (CHUNK,)
+        A chunk's line numbers and their access clocks.
+    """
+
+    lines: np.ndarray
+    clocks: np.ndarray
+
+
+@njit(cache=True)
+def chunk_buffers():
+    """Fresh :class:`ChunkBuffers` (also callable from compiled code)."""
+    return ChunkBuffers(np.empty(CHUNK, dtype=np.int64), np.empty(CHUNK, dtype=np.int64))
+
+
+# The helpers below take the geometry's arrays, not the bundle: a field read
+# from a bundle inside a per-access loop costs a reference-count update each
+# time, so the kernels unpack their bundles once, on entry.
 @njit(cache=True, inline="always")
 def _set_base(line, level, n_sets, set_mask, ways, offset):
+    """First way of the set of ``line`` in ``level``."""
     mask = set_mask[level]
     if mask >= 0:
         set_index = line & mask
@@ -96,62 +203,67 @@ def _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets, set_mask, 
                 counts[upper, INVALIDATIONS] += 1
 
 
-# Accesses handled per chunk by the level-by-level path: the chunk's two
-# buffers (256 KB) stay in the host's second-level cache.
-CHUNK = 16384
+@njit(cache=True)
+def simulate_stream(addresses, geometry, state, clock, served_by, record):
+    """Run a stream of byte addresses through one hierarchy's state.
+
+    Parameters
+    ----------
+    addresses : ndarray of uint64, shape (N,)
+        Byte addresses in access order.
+    geometry : CacheGeometry
+    state : CacheArrays
+        One state (unstacked shapes); updated in place.
+    clock : int
+        Access clock before the call (0 for a fresh state).
+    served_by : ndarray of uint8, shape (N,) or (0,)
+        When ``record`` is true, receives the level that served each access
+        (``L`` for memory).
+    record : bool
+
+    Returns
+    -------
+    int
+        The clock after the last access.
+    """
+    return simulate_into(addresses, geometry, state, clock, served_by, record, chunk_buffers())
 
 
 @njit(cache=True)
-def simulate_stream(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                    inclusion, tags, stamps, seeds, counts, clock, served_by, record):
-    """Run ``addresses`` (uint64, (N,)) through one hierarchy's state.
+def simulate_into(addresses, geometry, state, clock, served_by, record, work):
+    """:func:`simulate_stream` with caller-owned work buffers.
 
-    Returns the clock after the last access. When ``record`` is true,
-    ``served_by[i]`` receives the level that served access ``i`` (``L`` for
-    memory).
+    Parameters are those of :func:`simulate_stream`, plus ``work``
+    (:class:`ChunkBuffers`), reused across calls: the entry point for other
+    packages' compiled code that feeds many short streams (one pixel's reads,
+    say) to one state. Both paths below give identical states and counts for
+    a non-inclusive hierarchy; the level-by-level one is faster.
     """
-    work_lines = np.empty(CHUNK, dtype=np.int64)
-    work_clocks = np.empty(CHUNK, dtype=np.int64)
-    return simulate_into(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                         inclusion, tags, stamps, seeds, counts, clock, served_by, record,
-                         work_lines, work_clocks)
+    if geometry.inclusion == NON_INCLUSIVE:
+        return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
+    return _simulate_by_access(addresses, geometry, state, clock, served_by, record)
 
 
 @njit(cache=True)
-def simulate_into(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                  inclusion, tags, stamps, seeds, counts, clock, served_by, record,
-                  work_lines, work_clocks):
-    """:func:`simulate_stream` with caller-owned work buffers (int64, (CHUNK,)).
+def _level_pass(work, n_in, level, shift, geometry, state, served_by, record, first_clock):
+    """Run ``work.lines[:n_in]`` (with their access clocks) through one level.
 
-    The entry point for other packages' compiled code that feeds many short
-    streams (one pixel's reads, say) to one state. Both paths below give
-    identical states and counts for a non-inclusive hierarchy; the
-    level-by-level one is faster.
+    The misses are compacted in place to the front of ``work.lines`` and
+    ``work.clocks`` (shifted to the next level's line size by ``shift``);
+    returns their number. In a non-inclusive hierarchy a level's contents
+    depend only on the accesses that reach it, so each level can run on the
+    misses of the one above, in order.
     """
-    if inclusion == NON_INCLUSIVE:
-        return _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy,
-                                  offset, tags, stamps, seeds, counts, clock, served_by, record,
-                                  work_lines, work_clocks)
-    return _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                               inclusion, tags, stamps, seeds, counts, clock, served_by, record)
-
-
-@njit(cache=True)
-def _level_pass(lines, clocks, n_in, level, shift, n_sets, set_mask, ways, policy, offset,
-                tags, stamps, seed, counts, served_by, record, first_clock):
-    """Run ``lines[:n_in]`` (with their access clocks) through one level.
-
-    The misses are compacted in place to the front of ``lines``/``clocks``
-    (shifted to the next level's line size by ``shift``); returns their
-    number. In a non-inclusive hierarchy a level's contents depend only on
-    the accesses that reach it, so each level can run on the misses of the
-    one above, in order.
-    """
-    n_ways = ways[level]
-    mask = set_mask[level]
-    sets = n_sets[level]
-    base0 = offset[level]
-    level_policy = policy[level]
+    lines = work.lines
+    clocks = work.clocks
+    tags = state.tags
+    stamps = state.stamps
+    n_ways = geometry.ways[level]
+    mask = geometry.set_mask[level]
+    sets = geometry.n_sets[level]
+    base0 = geometry.offset[level]
+    level_policy = geometry.policy[level]
+    seed = geometry.seeds[level]
     lru = level_policy == LRU
     n_out = 0
     evictions = 0
@@ -215,6 +327,7 @@ def _level_pass(lines, clocks, n_in, level, shift, n_sets, set_mask, ways, polic
             n_out += 1
             if record:
                 served_by[clocks[j] - first_clock] = level + 1
+    counts = state.counts
     counts[level, ACCESSES] += n_in
     counts[level, HITS] += n_in - n_out
     counts[level, MISSES] += n_out
@@ -223,17 +336,20 @@ def _level_pass(lines, clocks, n_in, level, shift, n_sets, set_mask, ways, polic
 
 
 @njit(cache=True)
-def _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                       tags, stamps, seeds, counts, clock, served_by, record, lines, clocks):
+def _simulate_by_level(addresses, geometry, state, clock, served_by, record, work):
     """Non-inclusive hierarchy: each chunk runs through level 0, its misses
     through level 1, and so on. Clocks are the global access clock, so stamps
     and random draws are those of :func:`_simulate_by_access`."""
+    rel_shift = geometry.rel_shift
+    counts = state.counts
+    lines = work.lines
+    clocks = work.clocks
     n_levels = rel_shift.shape[0]
     n = addresses.shape[0]
     shifts = np.zeros(n_levels, dtype=np.int64)
     for level in range(n_levels - 1):
         shifts[level] = rel_shift[level + 1] - rel_shift[level]
-    shift = np.uint64(shift0)
+    shift = np.uint64(geometry.line_shift)
     previous = np.int64(-1)
     chunk = lines.shape[0]
     for start in range(0, n, chunk):
@@ -256,16 +372,25 @@ def _simulate_by_level(addresses, shift0, rel_shift, n_sets, set_mask, ways, pol
         for level in range(n_levels):
             if kept == 0:
                 break
-            kept = _level_pass(lines, clocks, kept, level, shifts[level], n_sets, set_mask, ways,
-                               policy, offset, tags, stamps, seeds[level], counts, served_by,
-                               record, first_clock)
+            kept = _level_pass(work, kept, level, shifts[level], geometry, state, served_by, record,
+                               first_clock)
     return clock + n
 
 
 @njit(cache=True)
-def _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-                        inclusion, tags, stamps, seeds, counts, clock, served_by, record):
+def _simulate_by_access(addresses, geometry, state, clock, served_by, record):
     """Any inclusion policy: every access walks down the levels in turn."""
+    rel_shift = geometry.rel_shift
+    n_sets = geometry.n_sets
+    set_mask = geometry.set_mask
+    ways = geometry.ways
+    policy = geometry.policy
+    offset = geometry.offset
+    seeds = geometry.seeds
+    inclusion = geometry.inclusion
+    tags = state.tags
+    stamps = state.stamps
+    counts = state.counts
     n_levels = rel_shift.shape[0]
     lines = np.empty(n_levels, dtype=np.int64)
     # The first level serves most accesses: keep its geometry in scalars and
@@ -274,7 +399,7 @@ def _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, po
     n_sets0 = n_sets[0]
     ways0 = ways[0]
     track0 = policy[0] == LRU and ways0 > 1  # one way: nothing to order
-    shift = np.uint64(shift0)
+    shift = np.uint64(geometry.line_shift)
     previous = np.int64(-1)
     first_hits = np.int64(0)
     level_hits = np.zeros(n_levels, dtype=np.int64)
@@ -347,18 +472,28 @@ def _simulate_by_access(addresses, shift0, rel_shift, n_sets, set_mask, ways, po
 
 
 @njit(cache=True, parallel=True)
-def simulate_streams(addresses, starts, shift0, rel_shift, n_sets, set_mask, ways, policy,
-                     offset, inclusion, tags, stamps, seeds, counts, clocks, served_by, record):
-    """Run stream ``s`` = ``addresses[starts[s]:starts[s+1]]`` on state row ``s``.
+def simulate_streams(addresses, starts, geometry, states, clocks, served_by, record):
+    """Run stream ``s`` = ``addresses[starts[s]:starts[s+1]]`` on state ``s``.
 
-    ``tags``, ``stamps`` (S, total_ways), ``seeds`` (L,), ``counts`` (S, L, 5),
-    ``clocks`` (S,). Streams are independent, so they run in parallel.
+    Parameters
+    ----------
+    addresses : ndarray of uint64, shape (N,)
+        The streams one after another.
+    starts : ndarray of int64, shape (S + 1,)
+        Where each stream starts, and the end.
+    geometry : CacheGeometry
+    states : CacheArrays
+        ``S`` stacked states (shapes (S, W) and (S, L, N_COUNTERS)).
+    clocks : ndarray of int64, shape (S,)
+        Each state's clock; updated in place.
+    served_by : ndarray of uint8, shape (N,) or (0,)
+    record : bool
+
+    Streams are independent, so they run in parallel.
     """
     for stream in prange(starts.shape[0] - 1):
         start = starts[stream]
         stop = starts[stream + 1]
         out = served_by[start:stop] if record else served_by[:0]
-        clocks[stream] = simulate_stream(
-            addresses[start:stop], shift0, rel_shift, n_sets, set_mask, ways, policy, offset,
-            inclusion, tags[stream], stamps[stream], seeds, counts[stream],
-            clocks[stream], out, record)
+        state = CacheArrays(states.tags[stream], states.stamps[stream], states.counts[stream])
+        clocks[stream] = simulate_stream(addresses[start:stop], geometry, state, clocks[stream], out, record)
