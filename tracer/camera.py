@@ -7,10 +7,29 @@ convention of SPD's published counts.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from tracer.scene import Scene
+
+
+class CameraFrame(NamedTuple):
+    """The camera as the kernels read it.
+
+    Sample ``(i, j)`` (column, row from the top) looks along
+    ``forward + (i - cx) * pitch * right + (cy - j) * pitch * up`` from ``eye``;
+    sample number ``p`` is ``(p % samples_x, p // samples_x)``.
+    """
+
+    eye: np.ndarray      #: (3,) float64
+    forward: np.ndarray  #: (3,) float64 unit
+    right: np.ndarray    #: (3,) float64 unit
+    up: np.ndarray       #: (3,) float64 unit
+    pitch: float         #: distance between samples on the unit-distance image plane
+    cx: float            #: column of the optical axis
+    cy: float            #: row of the optical axis
+    samples_x: int       #: samples per row
 
 
 def _resolve_size(scene: Scene, size) -> tuple[int, int]:
@@ -23,13 +42,8 @@ def _resolve_size(scene: Scene, size) -> tuple[int, int]:
     return int(size[0]), int(size[1])
 
 
-def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = False) -> np.ndarray:
-    """Camera parameters the kernel uses, as one float64 array (16,).
-
-    ``eye (3), forward (3), right (3), up (3), pitch, cx, cy, samples_x``:
-    sample ``(i, j)`` (column, row from the top) looks along
-    ``forward + (i - cx) * pitch * right + (cy - j) * pitch * up``.
-    """
+def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = False) -> CameraFrame:
+    """The :class:`CameraFrame` of ``scene``'s camera for a ``width`` x ``height`` image."""
     cam = scene.camera
     eye = np.array(cam.eye, dtype=np.float64)
     fwd = np.array(cam.look_at, dtype=np.float64) - eye
@@ -50,7 +64,8 @@ def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = Fals
     else:
         pitch = span / (height - 1) if height > 1 else span
         cx, cy, sx = (width - 1) / 2.0, (height - 1) / 2.0, width
-    return np.concatenate([eye, fwd, right, up, [pitch, cx, cy, sx]]).astype(np.float64)
+    return CameraFrame(eye, fwd, np.ascontiguousarray(right), np.ascontiguousarray(up),
+                       float(pitch), float(cx), float(cy), int(sx))
 
 
 def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -67,8 +82,8 @@ def camera_rays(scene: Scene, size=None, corner_rays: bool = False) -> tuple[np.
     sy = height + 1 if corner_rays else height
     i = np.arange(sx, dtype=np.float64)
     j = np.arange(sy, dtype=np.float64)
-    u = (i - cam[13]) * cam[12]
-    v = (cam[14] - j) * cam[12]
-    d = cam[3:6][None, None, :] + u[None, :, None] * cam[6:9] + v[:, None, None] * cam[9:12]
+    u = (i - cam.cx) * cam.pitch
+    v = (cam.cy - j) * cam.pitch
+    d = cam.forward[None, None, :] + u[None, :, None] * cam.right + v[:, None, None] * cam.up
     d /= np.linalg.norm(d, axis=2, keepdims=True)
-    return cam[0:3].copy(), d
+    return cam.eye.copy(), d

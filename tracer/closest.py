@@ -5,43 +5,70 @@ tests compare the tree against; both use the renderer's intersection code.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, prange
 
-from tracer.geometry import prepare_geometry
+from tracer.geometry import Ray, prepare_geometry
 from tracer.kdtree import KdTree
 from tracer.scene import Scene
-from tracer.records import COUNTER_NAMES, Counter
-from tracer.traverse import _scene_arrays, _tree_arrays, brute_force, traverse
+from tracer.records import N_COUNTERS, Counter
+from tracer.traverse import RecordLog, brute_force, new_stack, traverse, tree_arrays
+
+
+class RayBatch(NamedTuple):
+    """Rays of a closest-hit query: unit directions and search intervals."""
+
+    origins: np.ndarray     #: (R, 3) float64
+    directions: np.ndarray  #: (R, 3) float64 unit vectors
+    tmin: np.ndarray        #: (R,) float64
+    tmax: np.ndarray        #: (R,) float64
+
+
+class HitArrays(NamedTuple):
+    """Per-ray outputs of the closest-hit kernels."""
+
+    t: np.ndarray            #: (R,) float64, ``inf`` on a miss
+    element: np.ndarray      #: (R,) int64, -1 on a miss
+    node_visits: np.ndarray  #: (R,) int64 (kd-tree query only)
+
+
+@njit(cache=True, error_model="numpy")
+def _batch_ray(rays, r):
+    o, d = rays.origins, rays.directions
+    return Ray(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _closest_kernel(orig, dirs, tmin, tmax, nodes, fnodes, pidx, blo, bhi, ekind, eidx, geo,
-                    n_counters, out_t, out_e, out_nodes):
-    dummy = np.empty(0, np.uint32)
-    for r in prange(orig.shape[0]):
-        cnt = np.zeros(n_counters, np.int64)
-        st_node = np.empty(64, np.int64)
-        st_t0 = np.empty(64)
-        st_t1 = np.empty(64)
-        t, e, _ = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
-                           orig[r, 0], orig[r, 1], orig[r, 2], dirs[r, 0], dirs[r, 1], dirs[r, 2],
-                           tmin[r], tmax[r], False, dummy, 0, 0, cnt, st_node, st_t0, st_t1)
+def _closest_kernel(rays, tree, geo, out):
+    # stores go to arrays taken out of ``out`` first, by attribute: numba
+    # drops a prange body's stores into ``bundle.array[i]``, and into arrays
+    # unpacked from the bundle
+    out_t = out.t
+    out_element = out.element
+    out_nodes = out.node_visits
+    no_log = RecordLog(np.empty(0, np.uint32), 0)
+    for r in prange(rays.origins.shape[0]):
+        cnt = np.zeros(N_COUNTERS, np.int64)
+        t, e, _ = traverse(tree, geo, _batch_ray(rays, r), rays.tmin[r], rays.tmax[r], False,
+                           no_log, 0, cnt, new_stack())
         out_t[r] = t
-        out_e[r] = e
+        out_element[r] = e
         out_nodes[r] = cnt[Counter.NODE_VISITS]
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _brute_kernel(orig, dirs, tmin, tmax, ekind, eidx, geo, out_t, out_e):
-    for r in prange(orig.shape[0]):
-        t, e = brute_force(ekind, eidx, geo, orig[r, 0], orig[r, 1], orig[r, 2],
-                           dirs[r, 0], dirs[r, 1], dirs[r, 2], tmin[r], tmax[r])
+def _brute_kernel(rays, geo, out):
+    out_t = out.t
+    out_element = out.element
+    for r in prange(rays.origins.shape[0]):
+        t, e = brute_force(geo, _batch_ray(rays, r), rays.tmin[r], rays.tmax[r])
         out_t[r] = t
-        out_e[r] = e
+        out_element[r] = e
 
 
-def _rays(origins, directions):
+def _ray_batch(origins, directions, tmin, tmax) -> RayBatch:
     o = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 3))
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     if o.shape != d.shape:
@@ -49,12 +76,17 @@ def _rays(origins, directions):
     norm = np.linalg.norm(d, axis=1)
     if np.any(norm == 0.0):
         raise ValueError("directions must be non-zero")
-    return o, np.ascontiguousarray(d / norm[:, None])
+    r = len(o)
+    return RayBatch(o, np.ascontiguousarray(d / norm[:, None]), _bounds(tmin, r), _bounds(tmax, r))
 
 
 def _bounds(value, n):
     a = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
     return np.ascontiguousarray(a)
+
+
+def _hit_arrays(n) -> HitArrays:
+    return HitArrays(np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64))
 
 
 def closest_hit(scene: Scene, tree: KdTree | None, origins, directions, tmin=0.0, tmax=np.inf):
@@ -75,17 +107,11 @@ def closest_hit(scene: Scene, tree: KdTree | None, origins, directions, tmin=0.0
     element : ndarray, shape (R,) int64, -1 on a miss
     node_visits : ndarray, shape (R,) int64
     """
-    o, d = _rays(origins, directions)
-    tree, nodes, fnodes, pidx, blo, bhi = _tree_arrays(scene, tree, None)
-    ekind, eidx, _, _ = _scene_arrays(scene)
-    geo = prepare_geometry(scene)
-    r = len(o)
-    out_t = np.empty(r)
-    out_e = np.empty(r, np.int64)
-    out_n = np.empty(r, np.int64)
-    _closest_kernel(o, d, _bounds(tmin, r), _bounds(tmax, r), nodes, fnodes, pidx,
-                    blo, bhi, ekind, eidx, geo, len(COUNTER_NAMES), out_t, out_e, out_n)
-    return out_t, out_e, out_n
+    rays = _ray_batch(origins, directions, tmin, tmax)
+    _, tree_arr = tree_arrays(scene, tree, None)
+    out = _hit_arrays(len(rays.tmin))
+    _closest_kernel(rays, tree_arr, prepare_geometry(scene), out)
+    return out
 
 
 def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.inf):
@@ -96,11 +122,7 @@ def closest_hit_bruteforce(scene: Scene, origins, directions, tmin=0.0, tmax=np.
     t : ndarray, shape (R,) float64
     element : ndarray, shape (R,) int64
     """
-    o, d = _rays(origins, directions)
-    ekind, eidx, _, _ = _scene_arrays(scene)
-    geo = prepare_geometry(scene)
-    r = len(o)
-    out_t = np.empty(r)
-    out_e = np.empty(r, np.int64)
-    _brute_kernel(o, d, _bounds(tmin, r), _bounds(tmax, r), ekind, eidx, geo, out_t, out_e)
-    return out_t, out_e
+    rays = _ray_batch(origins, directions, tmin, tmax)
+    out = _hit_arrays(len(rays.tmin))
+    _brute_kernel(rays, prepare_geometry(scene), out)
+    return out.t, out.element

@@ -1,9 +1,10 @@
 """Ray/primitive intersection and the flat geometry arrays the kernels read.
 
-:func:`prepare_geometry` turns a :class:`~tracer.scene.Scene` into a tuple of
-arrays (``Geometry``) with per-primitive quantities precomputed once
-(triangle edges, polygon plane normals, cone frames). The compiled functions
-here take that tuple and scalars only, so the kd-tree traversal, the renderer
+:func:`prepare_geometry` turns a :class:`~tracer.scene.Scene` into a
+:class:`Geometry` bundle of arrays with per-primitive quantities precomputed
+once (triangle edges, polygon plane normals, cone frames). The compiled
+functions here take that bundle, a :class:`Ray` and scalars only, so the
+kd-tree traversal, the renderer
 and the brute-force reference in the tests share one intersection routine
 per primitive kind.
 
@@ -19,6 +20,7 @@ Conventions
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -27,26 +29,47 @@ from tracer.scene import ElementKind, Scene
 
 INF = np.inf
 
-# Positions in the ``Geometry`` tuple (documented for readers of kernels).
-GEOMETRY_FIELDS = (
-    "sphere_center",    # (S, 3)
-    "sphere_radius",    # (S,)  |r|
-    "triangle_v0e1e2",  # (T, 3, 3): v0, v1 - v0, v2 - v0
-    "triangle_normal",  # (T, 3) unit, (v1 - v0) x (v2 - v0)
-    "polygon_offsets",  # (P + 1,) int64
-    "polygon_vertices", # (V, 3)
-    "polygon_normal",   # (P, 3) unit Newell normal (counter-clockwise front)
-    "patch_offsets",    # (Q + 1,) int64
-    "patch_vertices",   # (W, 3)
-    "patch_vnormals",   # (W, 3) unit vertex normals
-    "patch_normal",     # (Q, 3) unit Newell plane normal
-    "cone_base",        # (C, 3)
-    "cone_axis",        # (C, 3) unit, base -> apex
-    "cone_height",      # (C,)
-    "cone_r0",          # (C,) |base radius|
-    "cone_r1",          # (C,) |apex radius|
-    "cone_sign",        # (C,) +1 (outside visible) or -1 (inside visible)
-)
+class Geometry(NamedTuple):
+    """The element table and per-primitive arrays the kernels read (see :func:`prepare_geometry`).
+
+    C-contiguous; float64 but where noted; n elements, S spheres, T
+    triangles, P polygons of V vertices, Q patches of W vertices, C cones.
+    """
+
+    element_kind: np.ndarray      #: (n,) uint8 ElementKind values
+    element_index: np.ndarray     #: (n,) int64 row in that kind's arrays
+    sphere_center: np.ndarray     #: (S, 3)
+    sphere_radius: np.ndarray     #: (S,) ``|r|``
+    triangle_v0e1e2: np.ndarray   #: (T, 3, 3): v0, v1 - v0, v2 - v0
+    triangle_normal: np.ndarray   #: (T, 3) unit, (v1 - v0) x (v2 - v0)
+    polygon_offsets: np.ndarray   #: (P + 1,) int64
+    polygon_vertices: np.ndarray  #: (V, 3)
+    polygon_normal: np.ndarray    #: (P, 3) unit Newell normal (counter-clockwise front)
+    patch_offsets: np.ndarray     #: (Q + 1,) int64
+    patch_vertices: np.ndarray    #: (W, 3)
+    patch_vnormals: np.ndarray    #: (W, 3) unit vertex normals
+    patch_normal: np.ndarray      #: (Q, 3) unit Newell plane normal
+    cone_base: np.ndarray         #: (C, 3)
+    cone_axis: np.ndarray         #: (C, 3) unit, base -> apex
+    cone_height: np.ndarray       #: (C,)
+    cone_r0: np.ndarray           #: (C,) ``|base radius|``
+    cone_r1: np.ndarray           #: (C,) ``|apex radius|``
+    cone_sign: np.ndarray         #: (C,) +1 (outside visible) or -1 (inside visible)
+
+
+class Ray(NamedTuple):
+    """A ray as the kernels take it: origin and unit direction (floats).
+
+    ``t`` along it is a distance; the interval ``(tmin, tmax)`` searched
+    travels separately because the traversal narrows it as it finds hits.
+    """
+
+    ox: float
+    oy: float
+    oz: float
+    dx: float
+    dy: float
+    dz: float
 
 
 def _unit_rows(v: np.ndarray, what: str) -> np.ndarray:
@@ -78,8 +101,8 @@ def _newell(offsets: np.ndarray, vertices: np.ndarray, what: str) -> np.ndarray:
     return _unit_rows(normals, what)
 
 
-def prepare_geometry(scene: Scene) -> tuple:
-    """Precompute the per-primitive arrays the kernels read.
+def prepare_geometry(scene: Scene) -> Geometry:
+    """Check the element table and precompute the per-primitive arrays the kernels read.
 
     Parameters
     ----------
@@ -87,15 +110,21 @@ def prepare_geometry(scene: Scene) -> tuple:
 
     Returns
     -------
-    tuple of ndarray
-        In the order of :data:`GEOMETRY_FIELDS`, all C-contiguous float64
-        (offsets int64).
+    Geometry
 
     Raises
     ------
     ValueError
-        If a triangle, polygon or cone is degenerate (naming the field).
+        If the element table is inconsistent or a triangle, polygon or cone
+        is degenerate (naming the field).
     """
+    n = scene.n_elements
+    if scene.element_index.shape != (n,):
+        raise ValueError(f"Scene.element_index must have shape ({n},)")
+    ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
+    eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
+    if n and ekind.max() > max(ElementKind):
+        raise ValueError(f"Scene.element_kind holds a value outside ElementKind (0..{int(max(ElementKind))})")
     f = lambda a, shape: np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
     sc = f(scene.sphere_center, (-1, 3))
     sr = np.abs(f(scene.sphere_radius, (-1,)))
@@ -124,9 +153,9 @@ def prepare_geometry(scene: Scene) -> tuple:
     r0 = f(scene.cone_base_radius, (-1,))
     r1 = f(scene.cone_apex_radius, (-1,))
     sign = np.where((r0 < 0) | ((r0 == 0) & (r1 < 0)), -1.0, 1.0)
-    return (sc, sr, tri, tn, po, pv, pn, qo, qv, qvn, qn,
-            np.ascontiguousarray(cb), np.ascontiguousarray(axis), np.ascontiguousarray(height),
-            np.abs(r0), np.abs(r1), sign)
+    return Geometry(ekind, eidx, sc, sr, tri, tn, po, pv, pn, qo, qv, qvn, qn,
+                    np.ascontiguousarray(cb), np.ascontiguousarray(axis), np.ascontiguousarray(height),
+                    np.abs(r0), np.abs(r1), sign)
 
 
 def element_bounds(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -217,8 +246,10 @@ def element_clip_shapes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarra
 # --------------------------------------------------------------------------
 
 @njit(cache=True, error_model="numpy")
-def hit_sphere(cx, cy, cz, r, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Nearest ``t`` in ``(tmin, tmax)`` of a unit-direction ray and a sphere."""
+def hit_sphere(center, radius, i, ray, tmin, tmax):
+    """Nearest ``t`` in ``(tmin, tmax)`` of ``ray`` and sphere ``i`` (``center`` (S, 3), ``radius`` (S,))."""
+    cx, cy, cz, r = center[i, 0], center[i, 1], center[i, 2], radius[i]
+    ox, oy, oz, dx, dy, dz = ray
     px, py, pz = ox - cx, oy - cy, oz - cz
     b = px * dx + py * dy + pz * dz
     c = px * px + py * py + pz * pz - r * r
@@ -236,8 +267,9 @@ def hit_sphere(cx, cy, cz, r, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, error_model="numpy")
-def hit_triangle(tri, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Moller-Trumbore test of triangle ``i`` of ``tri`` (T, 3, 3) = v0, e1, e2."""
+def hit_triangle(tri, i, ray, tmin, tmax):
+    """Moller-Trumbore test of ``ray`` and triangle ``i`` of ``tri`` (T, 3, 3) = v0, e1, e2."""
+    ox, oy, oz, dx, dy, dz = ray
     e1x, e1y, e1z = tri[i, 1, 0], tri[i, 1, 1], tri[i, 1, 2]
     e2x, e2y, e2z = tri[i, 2, 0], tri[i, 2, 1], tri[i, 2, 2]
     px = dy * e2z - dz * e2y
@@ -264,8 +296,9 @@ def hit_triangle(tri, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, error_model="numpy")
-def hit_convex(offsets, vertices, normal, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Test convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal``)."""
+def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
+    """Test ``ray`` and convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal`` (P, 3))."""
+    ox, oy, oz, dx, dy, dz = ray
     nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
     denom = nx * dx + ny * dy + nz * dz
     if denom == 0.0:
@@ -292,8 +325,10 @@ def hit_convex(offsets, vertices, normal, i, ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
 @njit(cache=True, error_model="numpy")
-def hit_cone(base, axis, height, r0s, r1s, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Test the lateral surface of truncated cone ``i`` (no caps)."""
+def hit_cone(geo, i, ray, tmin, tmax):
+    """Test ``ray`` and the lateral surface of truncated cone ``i`` of ``geo`` (no caps)."""
+    base, axis, height, r0s, r1s = geo.cone_base, geo.cone_axis, geo.cone_height, geo.cone_r0, geo.cone_r1
+    ox, oy, oz, dx, dy, dz = ray
     ax, ay, az = axis[i, 0], axis[i, 1], axis[i, 2]
     h = height[i]
     r0 = r0s[i]
@@ -334,18 +369,21 @@ def hit_cone(base, axis, height, r0s, r1s, i, ox, oy, oz, dx, dy, dz, tmin, tmax
 
 
 @njit(cache=True, error_model="numpy")
-def hit_element(kind, idx, geo, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Nearest ``t`` of element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``."""
-    if kind == 0:
-        c = geo[0]
-        return hit_sphere(c[idx, 0], c[idx, 1], c[idx, 2], geo[1][idx], ox, oy, oz, dx, dy, dz, tmin, tmax)
-    if kind == 1:
-        return hit_triangle(geo[2], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
-    if kind == 2:
-        return hit_convex(geo[4], geo[5], geo[6], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
-    if kind == 3:
-        return hit_convex(geo[7], geo[8], geo[10], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
-    return hit_cone(geo[11], geo[12], geo[13], geo[14], geo[15], idx, ox, oy, oz, dx, dy, dz, tmin, tmax)
+def hit_element(kind, idx, geo, ray, tmin, tmax):
+    """Nearest ``t`` of ``ray`` and element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``.
+
+    ``kind`` is an :class:`~tracer.scene.ElementKind` value, ``idx`` the row
+    in that kind's arrays of ``geo`` (:class:`Geometry`).
+    """
+    if kind == ElementKind.SPHERE:
+        return hit_sphere(geo.sphere_center, geo.sphere_radius, idx, ray, tmin, tmax)
+    if kind == ElementKind.TRIANGLE:
+        return hit_triangle(geo.triangle_v0e1e2, idx, ray, tmin, tmax)
+    if kind == ElementKind.POLYGON:
+        return hit_convex(geo.polygon_offsets, geo.polygon_vertices, geo.polygon_normal, idx, ray, tmin, tmax)
+    if kind == ElementKind.PATCH:
+        return hit_convex(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, idx, ray, tmin, tmax)
+    return hit_cone(geo, idx, ray, tmin, tmax)
 
 
 @njit(cache=True, error_model="numpy")
@@ -391,22 +429,23 @@ def _patch_normal(offsets, vertices, vnormals, plane, i, hx, hy, hz):
 @njit(cache=True, error_model="numpy")
 def element_normal(kind, idx, geo, hx, hy, hz):
     """Unit shading normal (one-sided, see module notes) at hit point ``h``."""
-    if kind == 0:
-        c = geo[0]
-        r = geo[1][idx]
+    if kind == ElementKind.SPHERE:
+        c = geo.sphere_center
+        r = geo.sphere_radius[idx]
         return (hx - c[idx, 0]) / r, (hy - c[idx, 1]) / r, (hz - c[idx, 2]) / r
-    if kind == 1:
-        n = geo[3]
+    if kind == ElementKind.TRIANGLE:
+        n = geo.triangle_normal
         return n[idx, 0], n[idx, 1], n[idx, 2]
-    if kind == 2:
-        n = geo[6]
+    if kind == ElementKind.POLYGON:
+        n = geo.polygon_normal
         return n[idx, 0], n[idx, 1], n[idx, 2]
-    if kind == 3:
-        return _patch_normal(geo[7], geo[8], geo[9], geo[10], idx, hx, hy, hz)
-    base = geo[11]
-    axis = geo[12]
-    h = geo[13][idx]
-    k = (geo[15][idx] - geo[14][idx]) / h
+    if kind == ElementKind.PATCH:
+        return _patch_normal(geo.patch_offsets, geo.patch_vertices, geo.patch_vnormals, geo.patch_normal,
+                             idx, hx, hy, hz)
+    base = geo.cone_base
+    axis = geo.cone_axis
+    h = geo.cone_height[idx]
+    k = (geo.cone_r1[idx] - geo.cone_r0[idx]) / h
     ax, ay, az = axis[idx, 0], axis[idx, 1], axis[idx, 2]
     qx, qy, qz = hx - base[idx, 0], hy - base[idx, 1], hz - base[idx, 2]
     z = qx * ax + qy * ay + qz * az
@@ -417,5 +456,5 @@ def element_normal(kind, idx, geo, hx, hy, hz):
     # gradient of |w| - (r0 + k z): w/|w| - k a
     nx, ny, nz = wx / lw - k * ax, wy / lw - k * ay, wz / lw - k * az
     ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    s = geo[16][idx] / ln
+    s = geo.cone_sign[idx] / ln
     return nx * s, ny * s, nz * s

@@ -32,24 +32,24 @@ not depend on logging (same arithmetic, bit for bit).
 """
 from __future__ import annotations
 
+import enum
 import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import njit, prange
 
-from tracer.geometry import element_normal, prepare_geometry
+from tracer.camera import CameraFrame, _resolve_size, camera_frame
+from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
-from tracer.camera import _resolve_size, camera_frame
-from tracer.traverse import _scene_arrays, _tree_arrays, traverse
-from tracer.records import Counter, RecordKind, make_record
+from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record
 from tracer.scene import Scene
-from tracer.trace import COUNTER_NAMES, AccessTrace, TraceWriter, package_versions
-
-N_COUNTERS = len(COUNTER_NAMES)
+from tracer.trace import AccessTrace, TraceWriter, package_versions
+from tracer.traverse import RecordLog, TraversalStack, new_stack, traverse, tree_arrays
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
 #: (Havran 1999; ``reference/spd/README.md``): the reference tracer ignored
@@ -110,77 +110,186 @@ class RenderResult:
 # kernels
 # --------------------------------------------------------------------------
 
-@njit(cache=True, error_model="numpy")
-def _push_ray(rays, n, ox, oy, oz, dx, dy, dz, wr, wg, wb, depth, typ):
-    # put a secondary ray (direction normalised here) on the ray stack
+class RayType(enum.IntEnum):
+    """Kinds of rays on the ray stack (shadow rays are traced at once, never stacked)."""
+
+    PRIMARY = 0
+    REFLECTION = 1
+    REFRACTION = 2
+
+
+class RayColumn(enum.IntEnum):
+    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`_trace_sample`."""
+
+    ORIGIN = 0     # x; y and z follow
+    DIRECTION = 3  # x, unit; y and z follow
+    WEIGHT = 6     # red; green and blue follow
+    DEPTH = 9      # primary = 1
+    TYPE = 10      # a RayType value
+
+
+N_RAY_COLUMNS = 11
+
+
+class MaterialColumn(enum.IntEnum):
+    """Columns of :attr:`Shading.materials` (M, N_MATERIAL_COLUMNS)."""
+
+    COLOR = 0  # red; green and blue follow
+    KD = 3
+    KS = 4
+    SHINE = 5
+    TRANSMIT = 6
+    IOR = 7
+
+
+class LightColumn(enum.IntEnum):
+    """Columns of :attr:`Shading.lights` (L, N_LIGHT_COLUMNS)."""
+
+    POSITION = 0  # x; y and z follow
+    COLOR = 3  # red, scaled like the ambient level (Shading.ambient); green and blue follow
+
+
+N_MATERIAL_COLUMNS = 8
+N_LIGHT_COLUMNS = 6
+
+
+class Shading(NamedTuple):
+    """What shading reads: materials per element, and the lights (see :func:`_shading`)."""
+
+    element_material: np.ndarray  #: (n,) int64 row of ``materials`` of each element
+    materials: np.ndarray         #: (M, N_MATERIAL_COLUMNS) float64, columns MaterialColumn
+    lights: np.ndarray            #: (L, N_LIGHT_COLUMNS) float64, columns LightColumn
+    ambient: float                #: ambient level, SPD's ``sqrt(L) / (2 L)`` (0.5 without lights)
+    background: np.ndarray        #: (3,) float64 colour of rays that hit nothing
+
+
+class RenderParams(NamedTuple):
+    """Per-render scalars, as the kernels read them."""
+
+    n_samples: int    #: samples in the image (W x H, or (W + 1) x (H + 1) with corner rays)
+    hither: float     #: primary rays ignore hits closer than this
+    epsilon: float    #: secondary and shadow rays ignore hits closer than this
+    max_depth: int    #: ray-tree depth (primary = 1)
+
+
+class SampleOutputs(NamedTuple):
+    """Per-sample outputs of the render kernels."""
+
+    image: np.ndarray     #: (n_samples, 3) float64 linear RGB
+    counters: np.ndarray  #: (n_samples, N_COUNTERS) int64
+    counts: np.ndarray    #: (n_samples,) int64 records produced
+
+
+class WorkItems(NamedTuple):
+    """Parallel work items of :func:`_render_kernel`: ``CHUNK`` samples each.
+
+    Item ``k`` covers samples ``start[k] .. start[k] + CHUNK`` (fewer at the
+    end) and logs them into ``records[base[k] : base[k] + capacity[k]]``;
+    ``used[k]`` is how many records it produced (more than ``capacity[k]``:
+    the slot overflowed, nothing past it stored).
+    """
+
+    start: np.ndarray     #: (K,) int64 first sample
+    base: np.ndarray      #: (K,) int64 first record position of the slot
+    capacity: np.ndarray  #: (K,) int64 slot size
+    used: np.ndarray      #: (K,) int64 output
+
+
+class SampleScratch(NamedTuple):
+    """Per-thread scratch of :func:`_trace_sample` (allocated once per work item)."""
+
+    counters: np.ndarray  #: (N_COUNTERS,) int64 of the sample being traced
+    stack: TraversalStack
+    rays: np.ndarray      #: (2 max_depth + 2, N_RAY_COLUMNS) float64 ray stack
+
+
+@njit(cache=True, inline="always")
+def _ray_counters(typ):
+    # the (rays, hits) counters of a stacked ray's type
+    if typ == RayType.PRIMARY:
+        return Counter.PRIMARY_RAYS, Counter.PRIMARY_HITS
+    if typ == RayType.REFLECTION:
+        return Counter.REFLECTION_RAYS, Counter.REFLECTION_HITS
+    return Counter.REFRACTION_RAYS, Counter.REFRACTION_HITS
+
+
+@njit(cache=True, inline="always")
+def _normalized(ray):
+    # the ray with its direction scaled to unit length
+    ox, oy, oz, dx, dy, dz = ray
     ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-    rays[n, 0] = ox
-    rays[n, 1] = oy
-    rays[n, 2] = oz
-    rays[n, 3] = dx / ln
-    rays[n, 4] = dy / ln
-    rays[n, 5] = dz / ln
-    rays[n, 6] = wr
-    rays[n, 7] = wg
-    rays[n, 8] = wb
-    rays[n, 9] = depth
-    rays[n, 10] = typ
+    return Ray(ox, oy, oz, dx / ln, dy / ln, dz / ln)
+
+
+@njit(cache=True, error_model="numpy")
+def _push_ray(rays, n, ray, weight, depth, typ):
+    # put a ray of colour weight (r, g, b) on the ray stack; returns the new
+    # stack size
+    ox, oy, oz, dx, dy, dz = ray
+    rays[n, RayColumn.ORIGIN] = ox
+    rays[n, RayColumn.ORIGIN + 1] = oy
+    rays[n, RayColumn.ORIGIN + 2] = oz
+    rays[n, RayColumn.DIRECTION] = dx
+    rays[n, RayColumn.DIRECTION + 1] = dy
+    rays[n, RayColumn.DIRECTION + 2] = dz
+    rays[n, RayColumn.WEIGHT] = weight[0]
+    rays[n, RayColumn.WEIGHT + 1] = weight[1]
+    rays[n, RayColumn.WEIGHT + 2] = weight[2]
+    rays[n, RayColumn.DEPTH] = depth
+    rays[n, RayColumn.TYPE] = np.int64(typ)
     return n + 1
 
 
 @njit(cache=True, error_model="numpy")
-def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
-                  nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                  mats, lights, ambient, background,
-                  rec, pos, limit, cnt, st_node, st_t0, st_t1, rays):
-    # Whitted ray tree, depth first with an explicit stack (rays: (S, 11) =
-    # origin, direction, weight rgb, depth, type); pushing refraction before
+def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
+    # Whitted ray tree of one primary ray, depth first with an explicit
+    # stack (scratch.rays, columns RayColumn); pushing refraction before
     # reflection reproduces the recursive order (reflection subtree first).
+    # Returns the colour and the position after the sample's last record.
+    rec, limit = log
+    cnt = scratch.counters
+    rays = scratch.rays
+    eps = params.epsilon
+    mats = shading.materials
+    lights = shading.lights
+    ambient = shading.ambient
+    background = shading.background
     cr = 0.0
     cg = 0.0
     cb = 0.0
-    rays[0, 0] = ox
-    rays[0, 1] = oy
-    rays[0, 2] = oz
-    rays[0, 3] = dx
-    rays[0, 4] = dy
-    rays[0, 5] = dz
-    rays[0, 6] = 1.0
-    rays[0, 7] = 1.0
-    rays[0, 8] = 1.0
-    rays[0, 9] = 1.0
-    rays[0, 10] = 0.0
-    n = 1
+    n = _push_ray(rays, 0, primary, (1.0, 1.0, 1.0), 1.0, RayType.PRIMARY)
     n_lights = lights.shape[0]
     while n > 0:
         n -= 1
-        rox, roy, roz = rays[n, 0], rays[n, 1], rays[n, 2]
-        rdx, rdy, rdz = rays[n, 3], rays[n, 4], rays[n, 5]
-        wr, wg, wb = rays[n, 6], rays[n, 7], rays[n, 8]
-        depth = np.int64(rays[n, 9])
-        typ = np.int64(rays[n, 10])  # 0 primary, 1 reflection, 2 refraction
-        tmin = hither if typ == 0 else eps
-        ray_col = 0 if typ == 0 else (4 if typ == 1 else 6)
-        cnt[ray_col] += 1
-        t, e, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
-                             rox, roy, roz, rdx, rdy, rdz, tmin, np.inf, False,
-                             rec, pos, limit, cnt, st_node, st_t0, st_t1)
+        rox, roy, roz = rays[n, RayColumn.ORIGIN], rays[n, RayColumn.ORIGIN + 1], rays[n, RayColumn.ORIGIN + 2]
+        rdx = rays[n, RayColumn.DIRECTION]
+        rdy = rays[n, RayColumn.DIRECTION + 1]
+        rdz = rays[n, RayColumn.DIRECTION + 2]
+        wr, wg, wb = rays[n, RayColumn.WEIGHT], rays[n, RayColumn.WEIGHT + 1], rays[n, RayColumn.WEIGHT + 2]
+        depth = np.int64(rays[n, RayColumn.DEPTH])
+        typ = np.int64(rays[n, RayColumn.TYPE])
+        tmin = params.hither if typ == RayType.PRIMARY else eps
+        rays_counter, hits_counter = _ray_counters(typ)
+        cnt[rays_counter] += 1
+        t, e, pos = traverse(tree, geo, Ray(rox, roy, roz, rdx, rdy, rdz), tmin, np.inf, False,
+                             log, pos, cnt, scratch.stack)
         if e < 0:
             cr += wr * background[0]
             cg += wg * background[1]
             cb += wb * background[2]
             continue
-        cnt[ray_col + 1] += 1
+        cnt[hits_counter] += 1
         hx, hy, hz = rox + t * rdx, roy + t * rdy, roz + t * rdz
-        k = np.int64(ekind[e])
-        nx, ny, nz = element_normal(k, eidx[e], geo, hx, hy, hz)
-        m = emat[e]
+        k = np.int64(geo.element_kind[e])
+        nx, ny, nz = element_normal(k, geo.element_index[e], geo, hx, hy, hz)
+        m = shading.element_material[e]
         if pos < limit:
             rec[pos] = make_record(RecordKind.MATERIAL, m)
         pos += 1
         cnt[Counter.SHADING] += 1
-        mr, mg, mb = mats[m, 0], mats[m, 1], mats[m, 2]
-        kd, ks, shine, tr, ior = mats[m, 3], mats[m, 4], mats[m, 5], mats[m, 6], mats[m, 7]
+        mr, mg, mb = mats[m, MaterialColumn.COLOR], mats[m, MaterialColumn.COLOR + 1], mats[m, MaterialColumn.COLOR + 2]
+        kd, ks = mats[m, MaterialColumn.KD], mats[m, MaterialColumn.KS]
+        shine, tr, ior = mats[m, MaterialColumn.SHINE], mats[m, MaterialColumn.TRANSMIT], mats[m, MaterialColumn.IOR]
         lr = ambient * kd * mr
         lg = ambient * kd * mg
         lb = ambient * kd * mb
@@ -189,7 +298,9 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
                 rec[pos] = make_record(RecordKind.LIGHT, li)
             pos += 1
             cnt[Counter.LIGHT_READS] += 1
-            lx, ly, lz = lights[li, 0] - hx, lights[li, 1] - hy, lights[li, 2] - hz
+            lx = lights[li, LightColumn.POSITION] - hx
+            ly = lights[li, LightColumn.POSITION + 1] - hy
+            lz = lights[li, LightColumn.POSITION + 2] - hz
             dist = math.sqrt(lx * lx + ly * ly + lz * lz)
             if dist == 0.0:
                 continue
@@ -198,9 +309,8 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
             if ndl <= 0.0:
                 continue
             cnt[Counter.SHADOW_RAYS] += 1
-            ts, es, pos = traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
-                                   hx, hy, hz, lx, ly, lz, eps, dist, True,
-                                   rec, pos, limit, cnt, st_node, st_t0, st_t1)
+            ts, es, pos = traverse(tree, geo, Ray(hx, hy, hz, lx, ly, lz), eps, dist, True,
+                                   log, pos, cnt, scratch.stack)
             if es >= 0:
                 cnt[Counter.SHADOW_BLOCKED] += 1
                 continue
@@ -211,13 +321,13 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
                 rv = -((2.0 * ndl * nx - lx) * rdx + (2.0 * ndl * ny - ly) * rdy + (2.0 * ndl * nz - lz) * rdz)
                 if rv > 0.0:
                     spec = ks * rv ** shine
-            lr += lights[li, 3] * (diff * mr + spec)
-            lg += lights[li, 4] * (diff * mg + spec)
-            lb += lights[li, 5] * (diff * mb + spec)
+            lr += lights[li, LightColumn.COLOR] * (diff * mr + spec)
+            lg += lights[li, LightColumn.COLOR + 1] * (diff * mg + spec)
+            lb += lights[li, LightColumn.COLOR + 2] * (diff * mb + spec)
         cr += wr * lr
         cg += wg * lg
         cb += wb * lb
-        if depth >= max_depth:
+        if depth >= params.max_depth:
             continue
         ddn = rdx * nx + rdy * ny + rdz * nz
         if tr > 0.0:
@@ -233,74 +343,88 @@ def _trace_sample(ox, oy, oz, dx, dy, dz, hither, eps, max_depth,
             k2 = 1.0 - eta * eta * (1.0 - cosi * cosi)
             if k2 >= 0.0:
                 c2 = eta * cosi - math.sqrt(k2)
-                n = _push_ray(rays, n, hx, hy, hz, eta * rdx + c2 * fx, eta * rdy + c2 * fy,
-                              eta * rdz + c2 * fz, wr * tr, wg * tr, wb * tr, depth + 1, 2.0)
+                refracted = Ray(hx, hy, hz, eta * rdx + c2 * fx, eta * rdy + c2 * fy, eta * rdz + c2 * fz)
+                n = _push_ray(rays, n, _normalized(refracted),
+                              (wr * tr, wg * tr, wb * tr), depth + 1, RayType.REFRACTION)
         if ks > 0.0:
-            n = _push_ray(rays, n, hx, hy, hz, rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny,
-                          rdz - 2.0 * ddn * nz, wr * ks, wg * ks, wb * ks, depth + 1, 1.0)
+            reflected = Ray(hx, hy, hz, rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny, rdz - 2.0 * ddn * nz)
+            n = _push_ray(rays, n, _normalized(reflected),
+                          (wr * ks, wg * ks, wb * ks), depth + 1, RayType.REFLECTION)
     return cr, cg, cb, pos
 
 
 @njit(cache=True, error_model="numpy")
-def _trace_chunk(p0, p1, pos, limit, cam, hither, eps, max_depth,
-                 nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                 mats, lights, ambient, background,
-                 rec, image, counters, counts):
-    # samples p0..p1 one after another, records from rec[pos] on (stored
-    # while below limit); returns the position after the last record.
-    # (A separate function: inside a prange body numba's copy propagation
-    # merged ``first = pos`` with the updated ``pos``.)
-    cnt = np.zeros(counters.shape[1], np.int64)
-    st_node = np.empty(64, np.int64)
-    st_t0 = np.empty(64)
-    st_t1 = np.empty(64)
-    rays = np.empty((2 * max_depth + 2, 11))
-    sx = np.int64(cam[15])
+def _trace_chunk(p0, p1, log, pos, cam, params, tree, geo, shading, out):
+    # samples p0..p1 one after another, records from log.records[pos] on
+    # (stored while below log.limit); returns the position after the last
+    # record. (A separate function: inside a prange body numba's copy
+    # propagation merged ``first = pos`` with the updated ``pos``.)
+    scratch = SampleScratch(np.zeros(out.counters.shape[1], np.int64), new_stack(),
+                            np.empty((2 * params.max_depth + 2, N_RAY_COLUMNS)))
+    cnt = scratch.counters
+    sx = np.int64(cam.samples_x)
     for p in range(p0, p1):
         i = p % sx
         j = p // sx
-        u = (i - cam[13]) * cam[12]
-        v = (cam[14] - j) * cam[12]
-        dx = cam[3] + u * cam[6] + v * cam[9]
-        dy = cam[4] + u * cam[7] + v * cam[10]
-        dz = cam[5] + u * cam[8] + v * cam[11]
+        u = (i - cam.cx) * cam.pitch
+        v = (cam.cy - j) * cam.pitch
+        dx = cam.forward[0] + u * cam.right[0] + v * cam.up[0]
+        dy = cam.forward[1] + u * cam.right[1] + v * cam.up[1]
+        dz = cam.forward[2] + u * cam.right[2] + v * cam.up[2]
         ln = math.sqrt(dx * dx + dy * dy + dz * dz)
         cnt[:] = 0
         first = pos
-        r, g, b, pos = _trace_sample(cam[0], cam[1], cam[2], dx / ln, dy / ln, dz / ln,
-                                     hither, eps, max_depth,
-                                     nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                                     mats, lights, ambient, background,
-                                     rec, pos, limit, cnt, st_node, st_t0, st_t1, rays)
-        image[p, 0] = r
-        image[p, 1] = g
-        image[p, 2] = b
-        counters[p, :] = cnt
-        counts[p] = pos - first
+        r, g, b, pos = _trace_sample(Ray(cam.eye[0], cam.eye[1], cam.eye[2], dx / ln, dy / ln, dz / ln), params, tree, geo, shading, log, pos, scratch)
+        out.image[p, 0] = r
+        out.image[p, 1] = g
+        out.image[p, 2] = b
+        out.counters[p, :] = cnt
+        out.counts[p] = pos - first
     return pos
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _render_kernel(chunk_start, chunk_base, chunk_cap, n_samples, cam, hither, eps, max_depth,
-                   nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-                   mats, lights, ambient, background,
-                   rec, image, counters, counts, chunk_used):
-    # Work item k covers samples chunk_start[k] .. + CHUNK (fewer at the end)
-    # and logs its records, sample after sample, into rec[chunk_base[k] :
-    # chunk_base[k] + chunk_cap[k]]; chunk_used[k] is how many it produced
-    # (more than chunk_cap[k]: the slot overflowed, nothing past it stored).
-    for k in prange(chunk_start.shape[0]):
-        p0 = chunk_start[k]
-        end = _trace_chunk(p0, min(n_samples, p0 + CHUNK), chunk_base[k], chunk_base[k] + chunk_cap[k],
-                           cam, hither, eps, max_depth, nodes, fnodes, pidx, blo, bhi,
-                           ekind, eidx, emat, geo, mats, lights, ambient, background,
-                           rec, image, counters, counts)
-        chunk_used[k] = end - chunk_base[k]
+def _render_kernel(work, records, cam, params, tree, geo, shading, out):
+    # every work item (see WorkItems) traced into its slot of records.
+    # Writes go to arrays taken out of their bundle first, by attribute:
+    # numba drops a prange body's stores into ``bundle.array[i]``, and into
+    # arrays unpacked from the bundle.
+    used = work.used
+    for k in prange(work.start.shape[0]):
+        p0 = work.start[k]
+        log = RecordLog(records, work.base[k] + work.capacity[k])
+        end = _trace_chunk(p0, min(params.n_samples, p0 + CHUNK), log, work.base[k], cam, params, tree, geo,
+                           shading, out)
+        used[k] = end - work.base[k]
 
 
 # --------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------
+
+
+def _shading(scene: Scene) -> Shading:
+    """Check ``scene``'s materials and gather what shading reads.
+
+    Lights are scaled by SPD's rule (``sqrt(L) / (2 L)`` for ``L`` lights,
+    the ambient level too).
+    """
+    n = scene.n_elements
+    if scene.element_material.shape != (n,):
+        raise ValueError(f"Scene.element_material must have shape ({n},)")
+    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
+    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
+                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
+    mats = np.ascontiguousarray(mats.reshape(-1, N_MATERIAL_COLUMNS))
+    if n and (emat.min() < 0 or emat.max() >= len(mats)):
+        raise ValueError("Scene.element_material refers to a material row that does not exist")
+    n_lights = scene.n_lights
+    scale = math.sqrt(n_lights) / (2.0 * n_lights) if n_lights else 0.5
+    lights = np.ascontiguousarray(np.column_stack([scene.light_position.reshape(-1, 3),
+                                                   scene.light_color.reshape(-1, 3) * scale])
+                                  .reshape(-1, N_LIGHT_COLUMNS))
+    background = np.ascontiguousarray(np.asarray(scene.background, dtype=np.float64).reshape(3))
+    return Shading(emat, mats, lights, scale, background)
 
 
 class _GrowingRecords:
@@ -329,7 +453,7 @@ class _GrowingRecords:
         return self.data
 
 
-def _log_samples(args, image, counters, counts, memory_budget, sink):
+def _log_samples(kernel_inputs, out, memory_budget, sink):
     """Trace every sample once with logging, handing records to ``sink`` in sample order.
 
     ``sink`` receives each batch as a list of arrays (views of a reused
@@ -341,8 +465,7 @@ def _log_samples(args, image, counters, counts, memory_budget, sink):
     that overflows its slot is traced again into a buffer of the exact size
     it reported. Output depends on neither the slot size nor the schedule.
     """
-    n_pix = args[0]
-    chunks = np.arange(0, n_pix, CHUNK, dtype=np.int64)
+    chunks = np.arange(0, len(out.counts), CHUNK, dtype=np.int64)
     # slots stay within the memory budget (and SLOT_BUFFER_BYTES) together
     slot = max(1, min(memory_budget, SLOT_BUFFER_BYTES) // (4 * BATCH_CHUNKS))
     buffer = np.empty(slot * min(BATCH_CHUNKS, len(chunks)), np.uint32)
@@ -352,15 +475,15 @@ def _log_samples(args, image, counters, counts, memory_budget, sink):
         base = np.arange(k, dtype=np.int64) * slot
         used = np.empty(k, np.int64)
         with numba.parallel_chunksize(1):
-            _render_kernel(start, base, np.full(k, slot, np.int64), *args, buffer, image, counters, counts, used)
+            _render_kernel(WorkItems(start, base, np.full(k, slot, np.int64), used), buffer, *kernel_inputs, out)
         pieces = [buffer[base[j]:base[j] + used[j]] for j in range(k)]
         over = np.flatnonzero(used > slot)
         if len(over):
             exact_base = np.concatenate([[0], np.cumsum(used[over])[:-1]]).astype(np.int64)
             exact = np.empty(int(used[over].sum()), np.uint32)
             with numba.parallel_chunksize(1):
-                _render_kernel(start[over], exact_base, used[over], *args, exact,
-                               image, counters, counts, np.empty(len(over), np.int64))
+                _render_kernel(WorkItems(start[over], exact_base, used[over], np.empty(len(over), np.int64)),
+                               exact, *kernel_inputs, out)
             for j, b in zip(over, exact_base):
                 pieces[j] = exact[b:b + used[j]]
         sink(pieces)
@@ -419,15 +542,10 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         raise ValueError(f"epsilon must be a positive finite distance, got {epsilon!r}")
     timings = {}
     t_start = time.perf_counter()
-    tree, nodes, fnodes, pidx, blo, bhi = _tree_arrays(scene, tree, kd_config)
+    tree, tree_arr = tree_arrays(scene, tree, kd_config)
     timings["build"] = time.perf_counter() - t_start
-    ekind, eidx, emat, mats = _scene_arrays(scene)
+    shading = _shading(scene)
     geo = prepare_geometry(scene)
-    n_lights = scene.n_lights
-    scale = math.sqrt(n_lights) / (2.0 * n_lights) if n_lights else 0.5
-    lights = np.ascontiguousarray(np.column_stack([scene.light_position.reshape(-1, 3),
-                                                   scene.light_color.reshape(-1, 3) * scale]).reshape(-1, 6))
-    background = np.ascontiguousarray(np.asarray(scene.background, dtype=np.float64).reshape(3))
     diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
     if epsilon is not None:
         eps = float(epsilon)
@@ -438,20 +556,19 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     sx = width + 1 if corner_rays else width
     sy = height + 1 if corner_rays else height
     n_pix = sx * sy
-    image = np.zeros((n_pix, 3))
-    counters = np.zeros((n_pix, N_COUNTERS), np.int64)
-    counts = np.zeros(n_pix, np.int64)
+    out = SampleOutputs(np.zeros((n_pix, 3)), np.zeros((n_pix, N_COUNTERS), np.int64), np.zeros(n_pix, np.int64))
+    image, counters, counts = out
     offsets = np.zeros(n_pix + 1, np.int64)
-    args = (n_pix, cam, hither, eps, depth, nodes, fnodes, pidx, blo, bhi, ekind, eidx, emat, geo,
-            mats, lights, scale, background)
+    # the render kernel's arguments between the work items and the outputs
+    kernel_inputs = (cam, RenderParams(n_pix, hither, eps, depth), tree_arr, geo, shading)
     trace = None
     t0 = time.perf_counter()
     if not log:
         chunks = np.arange(0, n_pix, CHUNK, dtype=np.int64)
         zeros = np.zeros(len(chunks), np.int64)
         with numba.parallel_chunksize(1):
-            _render_kernel(chunks, zeros, zeros, *args, np.empty(0, np.uint32), image, counters, counts,
-                           np.empty(len(chunks), np.int64))
+            _render_kernel(WorkItems(chunks, zeros, zeros, np.empty(len(chunks), np.int64)),
+                           np.empty(0, np.uint32), *kernel_inputs, out)
         timings["render"] = time.perf_counter() - t0
     else:
         meta = {
@@ -474,12 +591,12 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         meta.update(metadata or {})
         if trace_path is None:
             records = _GrowingRecords(memory_budget)
-            _log_samples(args, image, counters, counts, memory_budget, records.extend)
+            _log_samples(kernel_inputs, out, memory_budget, records.extend)
             np.cumsum(counts, out=offsets[1:])
             trace = AccessTrace(offsets, records.finish(), counters, sx, sy, meta)
         else:
             with TraceWriter(trace_path) as writer:
-                _log_samples(args, image, counters, counts, memory_budget,
+                _log_samples(kernel_inputs, out, memory_budget,
                              lambda pieces: [writer.append(piece) for piece in pieces])
                 np.cumsum(counts, out=offsets[1:])
                 if 4 * int(offsets[-1]) <= memory_budget:

@@ -2,30 +2,87 @@
 
 :func:`traverse` walks the flat tree of :mod:`tracer.kdtree` front to back
 and appends every record it reads to the access log; :func:`brute_force` is
-the slow reference that tests every element. ``_scene_arrays`` and
-``_tree_arrays`` check and prepare the arrays the kernels read.
+the slow reference that tests every element. The kernels take their arrays
+as bundles: :class:`TreeArrays` (the tree, prepared by :func:`tree_arrays`),
+:class:`~tracer.geometry.Geometry` (elements), a
+:class:`~tracer.geometry.Ray`, a :class:`RecordLog` and
+:class:`TraversalStack` scratch.
+
+Bundles passed to a ``parallel=True`` kernel are flat (no bundle inside a
+bundle): numba cannot hand a nested tuple holding arrays to a prange body.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from tracer.geometry import hit_element
+from tracer.kd_nodes import above_child, below_child, is_leaf, leaf_count, leaf_offset, node_axis, split_position
 from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
 from tracer.records import Counter, RecordKind, make_record
 from tracer.scene import Scene
 
+#: entries of a traversal stack: the deepest tree (MAX_TREE_DEPTH) fits
+STACK_DEPTH = 64
+
+
+class TreeArrays(NamedTuple):
+    """A kd-tree as the kernels read it (format in :mod:`tracer.kd_nodes`)."""
+
+    nodes: np.ndarray              #: (N, 2) uint32
+    splits: np.ndarray             #: (N, 2) float32 view of ``nodes`` (interior split planes)
+    primitive_indices: np.ndarray  #: (E,) int32 element ids of the leaves
+    lo: np.ndarray                 #: (3,) float64 root box corner
+    hi: np.ndarray                 #: (3,) float64 root box corner
+
+
+class RecordLog(NamedTuple):
+    """Where a kernel stores records: ``records[pos]`` while ``pos < limit``.
+
+    ``limit = 0`` logs nothing; a writer always advances ``pos``, so a caller
+    whose slot overflows learns the size it needs.
+    """
+
+    records: np.ndarray  #: (R,) uint32 packed records (:mod:`tracer.records`)
+    limit: int
+
+
+class TraversalStack(NamedTuple):
+    """Scratch of :func:`traverse`: nodes still to visit and their ray intervals."""
+
+    node: np.ndarray  #: (STACK_DEPTH,) int64
+    t0: np.ndarray    #: (STACK_DEPTH,) float64
+    t1: np.ndarray    #: (STACK_DEPTH,) float64
+
+
+@njit(cache=True)
+def new_stack():
+    """An empty :class:`TraversalStack` (allocate once per thread, not per ray)."""
+    return TraversalStack(np.empty(STACK_DEPTH, np.int64), np.empty(STACK_DEPTH), np.empty(STACK_DEPTH))
+
 
 @njit(cache=True, error_model="numpy")
-def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
-             ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit,
-             rec, pos, limit, cnt, st_node, st_t0, st_t1):
-    """Closest (or any, with ``anyhit``) hit of a ray in ``(tmin, tmax)``.
+def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
+    """Closest (or any, with ``anyhit``) hit of ``ray`` in ``(tmin, tmax)``.
 
-    Every node visit, leaf index-entry read and primitive test is counted in
-    ``cnt`` and advances ``pos``; its packed record (:mod:`tracer.records`)
-    is stored at ``rec[pos]`` while ``pos < limit`` (``limit = 0`` logs
-    nothing, and a caller whose slot overflows learns the size it needs).
+    Parameters
+    ----------
+    tree : TreeArrays
+    geo : Geometry
+    ray : Ray
+    tmin, tmax : float
+    anyhit : bool
+        Stop at the first hit found (shadow rays).
+    log : RecordLog
+    pos : int
+        Position of the next record in ``log``.
+    cnt : ndarray, shape (K,) int64
+        Counters (:class:`~tracer.records.Counter` columns): every node
+        visit, leaf index-entry read and primitive test is counted and
+        advances ``pos``.
+    stack : TraversalStack
 
     Returns
     -------
@@ -36,6 +93,12 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
     pos : int
         Next free record position.
     """
+    nodes, splits, pidx, blo, bhi = tree
+    ekind = geo.element_kind
+    eidx = geo.element_index
+    rec, limit = log
+    st_node, st_t0, st_t1 = stack
+    ox, oy, oz, dx, dy, dz = ray
     best_t = tmax
     best_e = -1
     # root box: the root record is read (it holds the bounds) even when the
@@ -74,20 +137,18 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             rec[pos] = make_record(RecordKind.KD_NODE, node)
         pos += 1
         cnt[Counter.NODE_VISITS] += 1
-        w1 = nodes[node, 1]
-        flag = w1 & 3
-        if flag != 3:
-            axis = flag
-            split = np.float64(fnodes[node, 0])
+        if not is_leaf(nodes, node):
+            axis = node_axis(nodes, node)
+            split = split_position(splits, node)
             oa = o3[axis]
             da = d3[axis]
             below_first = oa < split or (oa == split and da <= 0.0)
             if below_first:
-                first = node + 1
-                second = np.int64(w1 >> 2)
+                first = below_child(node)
+                second = above_child(nodes, node)
             else:
-                first = np.int64(w1 >> 2)
-                second = node + 1
+                first = above_child(nodes, node)
+                second = below_child(node)
             if da != 0.0:
                 tp = (split - oa) * inv[axis]
             else:
@@ -106,8 +167,8 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             continue
         # leaf
         cnt[Counter.LEAF_VISITS] += 1
-        count = np.int64(w1 >> 2)
-        off = np.int64(nodes[node, 0])
+        count = leaf_count(nodes, node)
+        off = leaf_offset(nodes, node)
         for j in range(off, off + count):
             e = pidx[j]
             k = np.int64(ekind[e])
@@ -120,7 +181,7 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
             pos += 2
             cnt[Counter.INDEX_READS] += 1
             cnt[Counter.TESTS_SPHERE + k] += 1
-            t = hit_element(k, i, geo, ox, oy, oz, dx, dy, dz, tmin, best_t)
+            t = hit_element(k, i, geo, ray, tmin, best_t)
             if t < best_t:
                 best_t = t
                 best_e = e
@@ -140,12 +201,17 @@ def traverse(nodes, fnodes, pidx, ekind, eidx, geo, blo, bhi,
 
 
 @njit(cache=True, error_model="numpy")
-def brute_force(ekind, eidx, geo, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Closest hit over all elements in id order (reference for tests)."""
+def brute_force(geo, ray, tmin, tmax):
+    """Closest hit of ``ray`` over all elements of ``geo`` (Geometry) in id order.
+
+    The reference :func:`traverse` is checked against; returns ``(t, element)``.
+    """
+    ekind = geo.element_kind
+    eidx = geo.element_index
     best_t = tmax
     best_e = -1
     for e in range(ekind.shape[0]):
-        t = hit_element(np.int64(ekind[e]), eidx[e], geo, ox, oy, oz, dx, dy, dz, tmin, best_t)
+        t = hit_element(np.int64(ekind[e]), eidx[e], geo, ray, tmin, best_t)
         if t < best_t:
             best_t = t
             best_e = e
@@ -154,29 +220,12 @@ def brute_force(ekind, eidx, geo, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return best_t, best_e
 
 
-def _scene_arrays(scene: Scene):
-    n = scene.n_elements
-    for name in ("element_index", "element_material"):
-        if getattr(scene, name).shape != (n,):
-            raise ValueError(f"Scene.{name} must have shape ({n},)")
-    ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
-    eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
-    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
-    if n and ekind.max() > 4:
-        raise ValueError("Scene.element_kind holds a value outside ElementKind (0..4)")
-    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
-                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
-    mats = np.ascontiguousarray(mats.reshape(-1, 8))
-    if n and (emat.min() < 0 or emat.max() >= len(mats)):
-        raise ValueError("Scene.element_material refers to a material row that does not exist")
-    return ekind, eidx, emat, mats
-
-
-def _tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | None):
+def tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | None) -> tuple[KdTree, TreeArrays]:
+    """``tree`` (built from ``kd_config`` when None) and its :class:`TreeArrays`."""
     if tree is None:
         tree = build_kdtree(scene, kd_config)
     elif not isinstance(tree, KdTree):
         raise ValueError(f"tree must be a KdTree, got {type(tree).__name__}")
     nodes = np.ascontiguousarray(tree.nodes, dtype=np.uint32)
-    return tree, nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32), \
-        np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1])
+    return tree, TreeArrays(nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32),
+                            np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1]))
