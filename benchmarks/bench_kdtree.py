@@ -5,9 +5,9 @@ For SPD balls (size 2..5), tetra (size 4..8) and the five paper scenes, times
 the builder kernel of each (best of ``--repeats``; the scene arrays both take
 as input are prepared once and timed apart as ``prep``), checks that both
 build the same tree, and prints seconds and nanoseconds per N log2 N, so the
-scaling and the ratio show side by side. "old" is the per-node builder kept
-in :mod:`tracer.kdtree` (``_build_kdtree(..., per_node_sort=True)``), which
-shares the clipping and sweep code with the new one. Both SAH configurations are run:
+scaling and the ratio show side by side. "old" is the per-node builder of
+``tests/naive_kdtree.py`` (imported from there), which shares the clipping
+and sweep code with the new one. Both SAH configurations are run:
 ``clip`` on (the default) and off (no clipping, so the event handling is
 most of the time). The last line printed is one JSON object with every figure.
 
@@ -18,13 +18,19 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from tracer import spd
-from tracer.kdtree import KdTreeConfig, _builder_inputs, _run_builder, default_max_depth
+from tracer.kd_build import _build_sah
+from tracer.kdtree import KdTreeConfig, build_params, builder_inputs, default_max_depth
 from tracer.scenes import PAPER_SCENES, load
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from naive_kdtree import build_per_node_sah_kernel  # noqa: E402  (the test-only peer)
 
 CONFIGS = {"sah": KdTreeConfig(), "sah-noclip": KdTreeConfig(clip=False)}
 
@@ -58,11 +64,11 @@ def main(argv=None):
         ap.error("--repeats must be >= 1")
 
     # compile (or load the numba cache) outside the timings
-    warm = _builder_inputs(spd.balls(1))
+    warm = builder_inputs(spd.balls(1))
     for cfg in CONFIGS.values():
-        cfg = KdTreeConfig(**{**cfg.to_dict(), "max_depth": 8})
-        _run_builder(warm, cfg, per_node_sort=False)
-        _run_builder(warm, cfg, per_node_sort=True)
+        params = build_params(KdTreeConfig(**{**cfg.to_dict(), "max_depth": 8}))
+        _build_sah(warm, params)
+        build_per_node_sah_kernel(warm, params)
 
     rows = []
     print(f"{'scene':<13}{'config':<11}{'N':>7}{'nodes':>8}{'prep s':>8}{'new s':>9}{'old s':>9}"
@@ -70,13 +76,13 @@ def main(argv=None):
     for label, family, scene in _scenes(args.quick):
         n = scene.n_elements
         t0 = time.perf_counter()
-        inputs = _builder_inputs(scene)
+        inputs = builder_inputs(scene)
         prep = time.perf_counter() - t0
         nlogn = n * math.log2(n)
         for cname, cfg in CONFIGS.items():
-            cfg = KdTreeConfig(**{**cfg.to_dict(), "max_depth": default_max_depth(n)})
-            new_s, new = _best_of(args.repeats, lambda: _run_builder(inputs, cfg, per_node_sort=False))
-            old_s, old = _best_of(args.repeats, lambda: _run_builder(inputs, cfg, per_node_sort=True))
+            params = build_params(KdTreeConfig(**{**cfg.to_dict(), "max_depth": default_max_depth(n)}))
+            new_s, new = _best_of(args.repeats, lambda: _build_sah(inputs, params))
+            old_s, old = _best_of(args.repeats, lambda: build_per_node_sah_kernel(inputs, params))
             same = bool(np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1]))
             row = {"scene": label, "family": family, "config": cname, "n": n, "nodes": int(len(new[0])),
                    "prep_seconds": prep, "new_seconds": new_s, "old_seconds": old_s,

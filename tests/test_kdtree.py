@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from scene_factory import KINDS, one_sphere, random_rays, random_scene
-from tracer.kdtree import KdTreeConfig, _build_kdtree, build_kdtree, default_max_depth
+from naive_kdtree import build_per_node_sah
+from tracer.kdtree import KdTreeConfig, build_kdtree, default_max_depth
 from tracer.closest import closest_hit, closest_hit_bruteforce
 from tracer.scene import ElementKind, Material, Scene, SceneBuilder
 
@@ -328,8 +329,8 @@ def test_presorted_events_build_the_per_node_sort_tree(config):
                                   # second clip where the shape reaches the
                                   # split face) changes these two trees
                                   _lattice_scene(11, 40, 1 / 3), _lattice_scene(3, 60, 0.125)]):
-        new = _build_kdtree(scene, config, per_node_sort=False)
-        old = _build_kdtree(scene, config, per_node_sort=True)
-        np.testing.assert_array_equal(new.nodes, old.nodes)
-        np.testing.assert_array_equal(new.primitive_indices, old.primitive_indices)
-        assert new.stats["sah_cost"] == old.stats["sah_cost"]
+        new = build_kdtree(scene, config)
+        old_nodes, old_indices, old_cost = build_per_node_sah(scene, config)
+        np.testing.assert_array_equal(new.nodes, old_nodes)
+        np.testing.assert_array_equal(new.primitive_indices, old_indices)
+        assert new.stats["sah_cost"] == old_cost

@@ -1,55 +1,166 @@
-"""kd-tree builder kernels: the O(N log N) SAH builder and the per-node builder.
+"""kd-tree builder kernels: the O(N log N) SAH builder and the spatial-median builder.
 
 :func:`_build_sah` sorts the events of all three axes once and partitions
-them into the children in order; :func:`_build` clips and sorts per node
-(the spatial-median builder, and the SAH peer the tests and benchmarks
-compare against). Both emit the flat arrays described in :mod:`tracer.kdtree`.
+them into the children in order; :func:`_build_median` halves each node's
+longest axis, clipping the node's primitives to it. Both emit the flat
+arrays described in :mod:`tracer.kd_nodes` and take a
+:class:`~tracer.kd_split.BuildInputs` and a
+:class:`~tracer.kd_split.BuildParams`. The per-node pieces of the median
+builder (:class:`NodeStack`, :func:`_clip_members`, :func:`_partition`,
+:func:`_emit_leaf`) are the ones a per-node SAH builder needs too.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _sah_split,
-                             _sah_sweep, _settle_split)
+from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior, set_leaf
+from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _sah_sweep, _settle_split,
+                             new_clip_scratch)
+
+
+class Events(NamedTuple):
+    """SAH events: plane position, type (0 end, 1 planar, 2 start) and element id."""
+
+    pos: np.ndarray   #: (E,) float64
+    typ: np.ndarray   #: (E,) int8
+    prim: np.ndarray  #: (E,) int32
+
+
+class NodeStack(NamedTuple):
+    """Nodes still to build by a per-node builder: box, depth, parent and members.
+
+    Entry ``i`` holds the members ``work[seg0[i]:seg1[i]]``; ``parent`` is
+    the node to link as the entry's above parent, -1 for a below child.
+    """
+
+    lo: np.ndarray      #: (S, 3) float64
+    hi: np.ndarray      #: (S, 3) float64
+    depth: np.ndarray   #: (S,) int64
+    parent: np.ndarray  #: (S,) int64
+    seg0: np.ndarray    #: (S,) int64
+    seg1: np.ndarray    #: (S,) int64
+
 
 @njit(cache=True)
-def _emit_leaf(nodes, node, pidx, n_pidx, ids, start, m):
-    # leaf node: its m element ids ids[start:start + m] go to pidx[n_pidx:]
-    nodes[node, 0] = np.uint32(n_pidx)
-    nodes[node, 1] = np.uint32((m << 2) | 3)
+def new_node_stack(max_depth):
+    """A :class:`NodeStack` deep enough for trees of ``max_depth`` levels."""
+    size = max_depth + 4
+    return NodeStack(np.empty((size, 3)), np.empty((size, 3)), np.empty(size, np.int64),
+                     np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64))
+
+
+@njit(cache=True)
+def push_node(stack, sp, lo, hi, depth, parent, seg0, seg1):
+    """Put a node to build on ``stack`` at ``sp``; returns the new ``sp``."""
+    stack.lo[sp, :] = lo
+    stack.hi[sp, :] = hi
+    stack.depth[sp] = depth
+    stack.parent[sp] = parent
+    stack.seg0[sp] = seg0
+    stack.seg1[sp] = seg1
+    return sp + 1
+
+
+@njit(cache=True)
+def open_node(stack, sp, lo, hi, nodes, n_nodes):
+    """Take the top of ``stack`` (``sp`` entries) as node ``n_nodes``, linked to its parent.
+
+    Copies its box into ``lo``/``hi``; returns ``(nodes, node, depth, seg0, seg1)``.
+    """
+    lo[:] = stack.lo[sp - 1]
+    hi[:] = stack.hi[sp - 1]
+    node = n_nodes
+    nodes = _grow_nodes(nodes, n_nodes + 1)
+    if stack.parent[sp - 1] >= 0:
+        set_above_child(nodes, stack.parent[sp - 1], node)
+    return nodes, node, stack.depth[sp - 1], stack.seg0[sp - 1], stack.seg1[sp - 1]
+
+
+@njit(cache=True)
+def _emit_leaf(nodes, node, pidx, n_pidx, members):
+    # leaf node: the element ids ``members`` go to pidx[n_pidx:]
+    m = members.shape[0]
+    set_leaf(nodes, node, n_pidx, m)
     pidx = _grow_1d(pidx, n_pidx + m)
     for j in range(m):
-        pidx[n_pidx + j] = ids[start + j]
+        pidx[n_pidx + j] = members[j]
     return pidx, n_pidx + m
 
 
 @njit(cache=True)
-def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
-           median, max_depth, leaf_size, ct, ci, eb, clip, force):
-    n = prim_lo.shape[0]
-    nodes = np.zeros((max(16, 2 * n + 1), 2), np.uint32)
+def _clip_members(work, seg0, seg1, inputs, lo, hi, clip, boxes, scratch):
+    # keeps, from seg0 on, the elements of work[seg0:seg1] that the box
+    # lo/hi holds (clipped with ``clip``), with their clipped boxes in
+    # boxes = (clo, chi) (m, 3) rows 0..m; returns m
+    clo, chi = boxes
+    m = 0
+    for j in range(seg1 - seg0):
+        p = work[seg0 + j]
+        if _clipped_bounds(p, inputs, lo, hi, clip, scratch.out_lo, scratch.out_hi):
+            work[seg0 + m] = p
+            clo[m, :] = scratch.out_lo
+            chi[m, :] = scratch.out_hi
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _partition(work, seg0, m, boxes, axis, split, planar_left):
+    # The members work[seg0:seg0 + m] (clipped boxes ``boxes``) of a node
+    # split at ``split`` on ``axis``: the right list then the left list,
+    # written after the segment and moved down to seg0 (the segment is on
+    # top of the work stack). Returns (work, maybe grown; nl; nr).
+    clo, chi = boxes
+    nl = 0
+    nr = 0
+    for j in range(m):
+        a = clo[j, axis]
+        b = chi[j, axis]
+        on_plane = a == b and a == split
+        if a < split or (on_plane and planar_left):
+            nl += 1
+        if b > split or (on_plane and not planar_left):
+            nr += 1
+    work = _grow_1d(work, seg0 + m + nl + nr)
+    w = seg0 + m
+    for right in (True, False):
+        for j in range(m):
+            a = clo[j, axis]
+            b = chi[j, axis]
+            on_plane = a == b and a == split
+            if right:
+                side = b > split or (on_plane and not planar_left)
+            else:
+                side = a < split or (on_plane and planar_left)
+            if side:
+                work[w] = work[seg0 + j]
+                w += 1
+    for j in range(nl + nr):
+        work[seg0 + j] = work[seg0 + m + j]
+    return work, nl, nr
+
+
+@njit(cache=True)
+def _build_median(inputs, params):
+    # Per-node build: each node's primitives are clipped to it, and its
+    # longest axis halved (the first of equal ones); a node becomes a leaf at
+    # leaf_size primitives, at max_depth, or where a split separates nothing.
+    n = inputs.prim_lo.shape[0]
+    nn = max(n, 1)
+    ci = params.intersection_cost
+    nodes = np.zeros((max(16, 2 * n + 1), NODE_WORDS), np.uint32)
     n_nodes = 0
     pidx = np.empty(max(16, 2 * n), np.int32)
     n_pidx = 0
     work = np.empty(max(16, 4 * n), np.int32)
     for j in range(n):
         work[j] = j
-    S = max_depth + 4
-    s_lo = np.empty((S, 3))
-    s_hi = np.empty((S, 3))
-    s_depth = np.empty(S, np.int64)
-    s_parent = np.empty(S, np.int64)
-    s_seg0 = np.empty(S, np.int64)
-    s_seg1 = np.empty(S, np.int64)
-    sp = 0
-    s_lo[0, :] = root_lo
-    s_hi[0, :] = root_hi
-    s_depth[0] = 0
-    s_parent[0] = -1
-    s_seg0[0] = 0
-    s_seg1[0] = n
-    sp = 1
+    stack = new_node_stack(params.max_depth)
+    sp = push_node(stack, 0, inputs.root_lo, inputs.root_hi, 0, -1, 0, n)
+    root_lo, root_hi = inputs.root_lo, inputs.root_hi
     root_area = _area(root_hi[0] - root_lo[0], root_hi[1] - root_lo[1], root_hi[2] - root_lo[2])
     if root_area <= 0.0:
         root_area = 1.0
@@ -59,138 +170,47 @@ def _build(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     sah_cost = 0.0
     lo = np.empty(3)
     hi = np.empty(3)
-    tlo = np.empty(3)
-    thi = np.empty(3)
-    blo = np.empty(3)
-    bhi = np.empty(3)
-    clo = np.empty((max(n, 1), 3))
-    chi = np.empty((max(n, 1), 3))
+    boxes = (np.empty((nn, 3)), np.empty((nn, 3)))
+    scratch = new_clip_scratch()
     split32 = np.empty(1, np.float32)
-    rows = np.arange(max(n, 1))
-    tpos = np.empty(2 * max(n, 1))
-    ttyp = np.empty(2 * max(n, 1), np.int8)
-    tprim = np.empty(2 * max(n, 1), np.int32)
-    ev_pos = np.empty(6 * max(n, 1))
-    ev_typ = np.empty(6 * max(n, 1), np.int8)
-    counts = np.zeros(3, np.int64)
     while sp > 0:
+        nodes, node, depth, seg0, seg1 = open_node(stack, sp, lo, hi, nodes, n_nodes)
         sp -= 1
-        lo[:] = s_lo[sp]
-        hi[:] = s_hi[sp]
-        depth = s_depth[sp]
-        parent = s_parent[sp]
-        seg0 = s_seg0[sp]
-        seg1 = s_seg1[sp]
-        node = n_nodes
         n_nodes += 1
-        nodes = _grow_nodes(nodes, n_nodes)
-        if parent >= 0:
-            nodes[parent, 1] |= np.uint32(node << 2)
-        m = 0
-        for j in range(seg1 - seg0):
-            p = work[seg0 + j]
-            if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, clip, tlo, thi):
-                work[seg0 + m] = p
-                clo[m, :] = tlo
-                chi[m, :] = thi
-                m += 1
+        m = _clip_members(work, seg0, seg1, inputs, lo, hi, params.clip, boxes, scratch)
         area_frac = _area(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / root_area
         axis = -1
-        pos = 0.0
-        planar_left = True
-        if m > leaf_size and depth < max_depth:
-            if median:
-                d0 = hi[0] - lo[0]
-                d1 = hi[1] - lo[1]
-                d2 = hi[2] - lo[2]
-                axis = 0
-                if d1 > d0 and d1 >= d2:
-                    axis = 1
-                elif d2 > d0 and d2 > d1:
-                    axis = 2
-                pos = 0.5 * (lo[axis] + hi[axis])
-            else:
-                cost, axis, pos, planar_left = _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp,
-                                                         tprim, ev_pos, ev_typ, counts)
-                axis, pos, planar_left = _settle_split(
-                    cost, axis, pos, planar_left, work, seg0, m, prim_lo, prim_hi, clip_off, clip_v,
-                    spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi)
-        split = 0.0
-        nl = 0
-        nr = 0
+        if m > params.leaf_size and depth < params.max_depth:
+            d0 = hi[0] - lo[0]
+            d1 = hi[1] - lo[1]
+            d2 = hi[2] - lo[2]
+            axis = 0
+            if d1 > d0 and d1 >= d2:
+                axis = 1
+            elif d2 > d0 and d2 > d1:
+                axis = 2
+            split32[0] = 0.5 * (lo[axis] + hi[axis])
+            if not (split32[0] > lo[axis] and split32[0] < hi[axis]):
+                axis = -1
+        nl = nr = m
         if axis >= 0:
-            split32[0] = pos
             split = np.float64(split32[0])
-            if not (split > lo[axis] and split < hi[axis]):
-                axis = -1
-        if axis >= 0:
-            for j in range(m):
-                a = clo[j, axis]
-                b = chi[j, axis]
-                if a == b and a == split:
-                    if planar_left:
-                        nl += 1
-                    else:
-                        nr += 1
-                else:
-                    if a < split:
-                        nl += 1
-                    if b > split:
-                        nr += 1
-            if median and nl == m and nr == m:
-                axis = -1
-        if axis < 0:
-            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, work, seg0, m)
+            work, nl, nr = _partition(work, seg0, m, boxes, axis, split, True)
+        if axis < 0 or (nl == m and nr == m):
+            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, work[seg0:seg0 + m])
             leaves += 1
             if m == 0:
                 empty_leaves += 1
             deepest = max(deepest, depth)
             sah_cost += ci * m * area_frac
             continue
-        sah_cost += ct * area_frac
-        nodes[node, 0] = split32.view(np.uint32)[0]
-        nodes[node, 1] = np.uint32(axis)
-        # right list first, then left list, written after this segment and
-        # moved down to seg0 (the segment is on top of the work stack)
-        need = seg0 + m + nl + nr
-        if need > work.shape[0] or seg0 + 2 * m > work.shape[0]:
-            grown = np.empty(max(2 * work.shape[0], seg0 + 2 * m + 16), np.int32)
-            grown[:work.shape[0]] = work
-            work = grown
-        w = seg0 + m
-        for j in range(m):
-            a = clo[j, axis]
-            b = chi[j, axis]
-            right = b > split or (a == b and a == split and not planar_left)
-            if right:
-                work[w] = work[seg0 + j]
-                w += 1
-        for j in range(m):
-            a = clo[j, axis]
-            b = chi[j, axis]
-            left = a < split or (a == b and a == split and planar_left)
-            if left:
-                work[w] = work[seg0 + j]
-                w += 1
-        for j in range(nl + nr):
-            work[seg0 + j] = work[seg0 + m + j]
-        # push above (right) child, then below (left) child
-        s_lo[sp, :] = lo
-        s_hi[sp, :] = hi
-        s_lo[sp, axis] = split
-        s_depth[sp] = depth + 1
-        s_parent[sp] = node
-        s_seg0[sp] = seg0
-        s_seg1[sp] = seg0 + nr
-        sp += 1
-        s_lo[sp, :] = lo
-        s_hi[sp, :] = hi
-        s_hi[sp, axis] = split
-        s_depth[sp] = depth + 1
-        s_parent[sp] = -1
-        s_seg0[sp] = seg0 + nr
-        s_seg1[sp] = seg0 + nr + nl
-        sp += 1
+        sah_cost += params.traversal_cost * area_frac
+        set_interior(nodes, node, split32.view(np.uint32)[0], axis)
+        # above (right) child first, then below (left) child on top
+        sp = push_node(stack, sp, lo, hi, depth + 1, node, seg0, seg0 + nr)
+        stack.lo[sp - 1, axis] = split
+        sp = push_node(stack, sp, lo, hi, depth + 1, -1, seg0 + nr, seg0 + nr + nl)
+        stack.hi[sp - 1, axis] = split
     return nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), leaves, empty_leaves, deepest, sah_cost
 
 
@@ -218,11 +238,13 @@ def _sort_events(pos, typ, prim, k, order):
 
 
 @njit(cache=True)
-def _merge_events(ev_pos, ev_typ, ev_prim, q0, nq, side, keep, tpos, ttyp, tprim, order, k,
-                  out_pos, out_typ, out_prim, w):
-    # Writes, from out[w], the events ev[q0:q0+nq] of primitives with
-    # side == keep merged with the k events t[order[:k]]; both inputs and the
-    # output are in (position, type, primitive) order. Returns the new w.
+def _merge_events(events, q0, nq, side, keep, new, order, k, w):
+    # Writes, from events[w] on, the events[q0:q0+nq] of primitives with
+    # side == keep merged with the k events new[order[:k]] (w > q0 + nq,
+    # or w <= q0 for the output not to overtake the input); both inputs and
+    # the output are in (position, type, primitive) order. Returns the new w.
+    ev_pos, ev_typ, ev_prim = events.pos, events.typ, events.prim
+    tpos, ttyp, tprim = new.pos, new.typ, new.prim
     i = q0
     end = q0 + nq
     j = 0
@@ -242,23 +264,22 @@ def _merge_events(ev_pos, ev_typ, ev_prim, q0, nq, side, keep, tpos, ttyp, tprim
         else:
             break
         if take_old:
-            out_pos[w] = ev_pos[i]
-            out_typ[w] = ev_typ[i]
-            out_prim[w] = ev_prim[i]
+            ev_pos[w] = ev_pos[i]
+            ev_typ[w] = ev_typ[i]
+            ev_prim[w] = ev_prim[i]
             i += 1
         else:
             o = order[j]
-            out_pos[w] = tpos[o]
-            out_typ[w] = ttyp[o]
-            out_prim[w] = tprim[o]
+            ev_pos[w] = tpos[o]
+            ev_typ[w] = ttyp[o]
+            ev_prim[w] = tprim[o]
             j += 1
         w += 1
     return w
 
 
 @njit(cache=True)
-def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
-               max_depth, leaf_size, ct, ci, eb, clip, force):
+def _build_sah(inputs, params):
     # SAH build with events sorted once (Wald & Havran 2006). A node owns a
     # segment of ``ids`` (its primitives, ascending) with their node-clipped
     # boxes in ``box_lo``/``box_hi``, and a segment of the event arrays (axis
@@ -270,9 +291,17 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     # box a second clip changes, see below): few, sorted on their own, merged
     # with the kept ones. Children's segments replace the parent's (right
     # then left), so the node being split is always on top.
+    prim_lo = inputs.prim_lo
+    prim_hi = inputs.prim_hi
+    root_lo = inputs.root_lo.copy()
+    root_hi = inputs.root_hi.copy()
+    max_depth = params.max_depth
+    ct = params.traversal_cost
+    ci = params.intersection_cost
+    clip = params.clip
     n = prim_lo.shape[0]
     nn = max(n, 1)
-    nodes = np.zeros((max(16, 2 * n + 1), 2), np.uint32)
+    nodes = np.zeros((max(16, 2 * n + 1), NODE_WORDS), np.uint32)
     n_nodes = 0
     pidx = np.empty(max(16, 2 * n), np.int32)
     n_pidx = 0
@@ -297,10 +326,9 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     new_r = np.empty(nn, np.int32)
     lo = np.empty(3)
     hi = np.empty(3)
-    tlo = np.empty(3)
-    thi = np.empty(3)
-    blo = np.empty(3)
-    bhi = np.empty(3)
+    scratch = new_clip_scratch()
+    tlo = scratch.out_lo
+    thi = scratch.out_hi
     llo = np.empty(3)
     lhi = np.empty(3)
     rlo = np.empty(3)
@@ -314,7 +342,7 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
     # and the one sort of all events
     m0 = 0
     for p in range(n):
-        if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi, clip, tlo, thi):
+        if _clipped_bounds(p, inputs, root_lo, root_hi, clip, tlo, thi):
             ids[m0] = p
             box_lo[m0, :] = tlo
             box_hi[m0, :] = thi
@@ -371,16 +399,14 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
         n_nodes += 1
         nodes = _grow_nodes(nodes, n_nodes)
         if parent >= 0:
-            nodes[parent, 1] |= np.uint32(node << 2)
+            set_above_child(nodes, parent, node)
         area_frac = _area(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / root_area
         axis = -1
         pos = 0.0
         planar_left = True
-        if m > leaf_size and depth < max_depth:
-            cost, axis, pos, planar_left = _sah_sweep(ev_pos, ev_typ, e0, cnt, m, lo, hi, ct, ci, eb)
-            axis, pos, planar_left = _settle_split(
-                cost, axis, pos, planar_left, ids, i0, m, prim_lo, prim_hi, clip_off, clip_v,
-                spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi)
+        if m > params.leaf_size and depth < max_depth:
+            best = _sah_sweep(ev_pos, ev_typ, e0, cnt, m, lo, hi, params)
+            axis, pos, planar_left = _settle_split(best, ids[i0:i0 + m], inputs, lo, hi, params, scratch)
         split = 0.0
         if axis >= 0:
             split32[0] = pos
@@ -388,7 +414,7 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             if not (split > lo[axis] and split < hi[axis]):
                 axis = -1
         if axis < 0:
-            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, ids, i0, m)
+            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, ids[i0:i0 + m])
             leaves += 1
             if m == 0:
                 empty_leaves += 1
@@ -396,8 +422,7 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             sah_cost += ci * m * area_frac
             continue
         sah_cost += ct * area_frac
-        nodes[node, 0] = split32.view(np.uint32)[0]
-        nodes[node, 1] = np.uint32(axis)
+        set_interior(nodes, node, split32.view(np.uint32)[0], axis)
 
         llo[:] = lo
         lhi[:] = hi
@@ -421,13 +446,13 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
             right = b > split or (on_plane and not planar_left)
             if left and right:
                 s = 4
-                if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi, clip, tlo, thi):
+                if _clipped_bounds(p, inputs, llo, lhi, clip, tlo, thi):
                     lbox_lo[p, :] = tlo
                     lbox_hi[p, :] = thi
                     new_l[k_l] = p
                     k_l += 1
                     s |= 1
-                if _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi, clip, tlo, thi):
+                if _clipped_bounds(p, inputs, rlo, rhi, clip, tlo, thi):
                     rbox_lo[p, :] = tlo
                     rbox_hi[p, :] = thi
                     new_r[k_r] = p
@@ -453,10 +478,10 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
                     reach = prim_lo[p, axis] - margin <= split
                 if clip and reach:
                     if left:
-                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi,
+                        kept = _clipped_bounds(p, inputs, llo, lhi,
                                                True, tlo, thi)
                     else:
-                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi,
+                        kept = _clipped_bounds(p, inputs, rlo, rhi,
                                                True, tlo, thi)
                     same = kept
                     for c in range(3):
@@ -536,8 +561,8 @@ def _build_sah(prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi,
                 else:
                     k = _axis_events(lbox_lo, lbox_hi, new_l, k_l, a, tpos, ttyp, tprim)
                 _sort_events(tpos, ttyp, tprim, k, order)
-                w = _merge_events(ev_pos, ev_typ, ev_prim, q, cnt[a], side, keep, tpos, ttyp, tprim,
-                                  order, k, ev_pos, ev_typ, ev_prim, w)
+                w = _merge_events(Events(ev_pos, ev_typ, ev_prim), q, cnt[a], side, keep,
+                                  Events(tpos, ttyp, tprim), order, k, w)
                 q += cnt[a]
                 if child == 0:
                     cnt_r[a] = w - w0

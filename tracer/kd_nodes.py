@@ -23,6 +23,8 @@ SPLIT_WORD = 0
 OFFSET_WORD = 0
 #: word holding the axis or leaf flag (low bits) and a child or count (high bits)
 LINK_WORD = 1
+#: uint32 words per node
+NODE_WORDS = 2
 #: low bits of :data:`LINK_WORD` that hold the axis or :data:`LEAF_FLAG`
 FLAG_BITS = 2
 FLAG_MASK = (1 << FLAG_BITS) - 1

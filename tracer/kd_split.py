@@ -1,12 +1,65 @@
 """kd-tree split kernels: primitives clipped to a node, SAH event sweeps and costs.
 
-Shared by both SAH builders of :mod:`tracer.kd_build`; see :mod:`tracer.kdtree`
-for the node format and the rules.
+Used by the builders of :mod:`tracer.kd_build` (and the per-node SAH peer in
+``tests/naive_kdtree.py``); see :mod:`tracer.kdtree` for the rules. The
+kernels take the scene as :class:`BuildInputs`, the configuration as
+:class:`BuildParams` and (3,) boxes to clip into as :class:`ClipScratch`.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+
+from tracer.kd_nodes import LINK_WORD
+
+# SAH event types, in the order the sweep takes events at one position
+EVENT_END = 0     # a box ends there
+EVENT_PLANAR = 1  # a flat box lies there
+EVENT_START = 2   # a box starts there
+
+
+class BuildInputs(NamedTuple):
+    """What the builders read of a scene (see :func:`tracer.kdtree.builder_inputs`).
+
+    n elements; float64 but where noted.
+    """
+
+    prim_lo: np.ndarray        #: (n, 3) element box corners
+    prim_hi: np.ndarray        #: (n, 3)
+    clip_offsets: np.ndarray   #: (n + 1,) int64 CSR offsets into ``clip_vertices`` (planar elements)
+    clip_vertices: np.ndarray  #: (V, 3)
+    spheres: np.ndarray        #: (n, 4) centre and radius of spheres, radius -1 for other kinds
+    root_lo: np.ndarray        #: (3,) root box corners
+    root_hi: np.ndarray        #: (3,)
+
+
+class BuildParams(NamedTuple):
+    """A :class:`~tracer.kdtree.KdTreeConfig` as the builders read it (``max_depth`` resolved)."""
+
+    max_depth: int
+    leaf_size: int
+    traversal_cost: float
+    intersection_cost: float
+    empty_bonus: float
+    clip: bool
+    force_split: int  #: ``2**62`` when off
+
+
+class ClipScratch(NamedTuple):
+    """(3,) float64 boxes the split kernels clip into."""
+
+    out_lo: np.ndarray
+    out_hi: np.ndarray
+    child_lo: np.ndarray
+    child_hi: np.ndarray
+
+
+@njit(cache=True)
+def new_clip_scratch():
+    """A :class:`ClipScratch`."""
+    return ClipScratch(np.empty(3), np.empty(3), np.empty(3), np.empty(3))
 
 @njit(cache=True)
 def _clip_polygon_bounds(verts, a, b, lo, hi, out_lo, out_hi):
@@ -60,7 +113,12 @@ def _clip_polygon_bounds(verts, a, b, lo, hi, out_lo, out_hi):
 
 
 @njit(cache=True)
-def _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, clip, out_lo, out_hi):
+def _clipped_bounds(p, inputs, lo, hi, clip, out_lo, out_hi):
+    # the box of element p clipped to the box lo/hi (its shape clipped with
+    # ``clip``) into out_lo/out_hi; False when nothing of it is left there
+    prim_lo = inputs.prim_lo
+    prim_hi = inputs.prim_hi
+    spheres = inputs.spheres
     inside = True
     for c in range(3):
         a = max(prim_lo[p, c], lo[c])
@@ -92,10 +150,10 @@ def _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, clip
         if far < r * r:
             return False  # box strictly inside the ball: no surface here
         return True
-    a = clip_off[p]
-    b = clip_off[p + 1]
+    a = inputs.clip_offsets[p]
+    b = inputs.clip_offsets[p + 1]
     if b - a >= 3:
-        return _clip_polygon_bounds(clip_v, a, b, lo, hi, out_lo, out_hi)
+        return _clip_polygon_bounds(inputs.clip_vertices, a, b, lo, hi, out_lo, out_hi)
     return True
 
 
@@ -108,7 +166,7 @@ def _area(dx, dy, dz):
 def _grow_nodes(a, need):
     if need <= a.shape[0]:
         return a
-    b = np.zeros((max(need, 2 * a.shape[0]), 2), np.uint32)
+    b = np.zeros((max(need, 2 * a.shape[0]), LINK_WORD + 1), np.uint32)
     b[:a.shape[0]] = a
     return b
 
@@ -129,16 +187,16 @@ def _axis_events(box_lo, box_hi, ids, k, axis, pos, typ, prim):
     # and by ids order within a type, so that a stable sort by position
     # gives the sweep order (position, type, then ids order). Returns the count.
     ne = 0
-    for t in range(3):
+    for t in (EVENT_END, EVENT_PLANAR, EVENT_START):
         for j in range(k):
             p = ids[j]
             a = box_lo[p, axis]
             b = box_hi[p, axis]
-            if t == 0 and a != b:
+            if t == EVENT_END and a != b:
                 pos[ne] = b
-            elif t == 1 and a == b:
+            elif t == EVENT_PLANAR and a == b:
                 pos[ne] = a
-            elif t == 2 and a != b:
+            elif t == EVENT_START and a != b:
                 pos[ne] = a
             else:
                 continue
@@ -149,13 +207,16 @@ def _axis_events(box_lo, box_hi, ids, k, axis, pos, typ, prim):
 
 
 @njit(cache=True)
-def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, ct, ci, eb):
+def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, params):
     # Best split (cost, axis, position, planar_left) of a node holding m
     # primitives, from its events: counts[a] events of axis a, the axes one
     # after the other from e0, each sorted by position with end (type 0) <
     # planar (1) < start (2) at equal positions. Cost inf when no valid plane
     # exists; among equal costs the first in (axis, position, planar side)
     # order wins.
+    ct = params.traversal_cost
+    ci = params.intersection_cost
+    eb = params.empty_bonus
     d0 = hi[0] - lo[0]
     d1 = hi[1] - lo[1]
     d2 = hi[2] - lo[2]
@@ -190,13 +251,13 @@ def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, ct, ci, eb):
             pe = 0
             pp = 0
             ps = 0
-            while i < end and ev_pos[i] == p and ev_typ[i] == 0:
+            while i < end and ev_pos[i] == p and ev_typ[i] == EVENT_END:
                 pe += 1
                 i += 1
-            while i < end and ev_pos[i] == p and ev_typ[i] == 1:
+            while i < end and ev_pos[i] == p and ev_typ[i] == EVENT_PLANAR:
                 pp += 1
                 i += 1
-            while i < end and ev_pos[i] == p and ev_typ[i] == 2:
+            while i < end and ev_pos[i] == p and ev_typ[i] == EVENT_START:
                 ps += 1
                 i += 1
             nr -= pp + pe
@@ -227,46 +288,26 @@ def _sah_sweep(ev_pos, ev_typ, e0, counts, m, lo, hi, ct, ci, eb):
 
 
 @njit(cache=True)
-def _sah_split(clo, chi, m, lo, hi, ct, ci, eb, rows, tpos, ttyp, tprim, pos, typ, counts):
-    # The per-node sort the presorted builder replaced (O(m log m) in every
-    # node, O(N log^2 N) in all): events of the node-clipped boxes clo/chi
-    # (m, 3), sorted here, then swept. ``rows`` is 0, 1, ...; the other
-    # arrays are scratch of at least 2 m (t*) and 6 m (pos, typ) entries.
-    # Used by _build for the comparison with _build_sah (tests, benchmarks).
-    w = 0
-    for axis in range(3):
-        ne = _axis_events(clo, chi, rows, m, axis, tpos, ttyp, tprim)
-        order = np.argsort(tpos[:ne], kind="mergesort")
-        for i in range(ne):
-            pos[w] = tpos[order[i]]
-            typ[w] = ttyp[order[i]]
-            w += 1
-        counts[axis] = ne
-    return _sah_sweep(pos, typ, 0, counts, m, lo, hi, ct, ci, eb)
-
-
-@njit(cache=True)
-def _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
-                      axis, split, above, tlo, thi, clo_buf, chi_buf):
-    # primitives left in the child below (or above) the plane after clipping
-    # them to it, and the child's surface area
-    clo_buf[:] = lo
-    chi_buf[:] = hi
+def _child_count_area(members, inputs, lo, hi, axis, split, above, scratch):
+    # elements of ``members`` left in the child below (or above) the plane
+    # after clipping them to it, and the child's surface area
+    clo = scratch.child_lo
+    chi = scratch.child_hi
+    clo[:] = lo
+    chi[:] = hi
     if above:
-        clo_buf[axis] = split
+        clo[axis] = split
     else:
-        chi_buf[axis] = split
+        chi[axis] = split
     n = 0
-    for j in range(m):
-        if _clipped_bounds(work[seg0 + j], prim_lo, prim_hi, clip_off, clip_v, spheres,
-                           clo_buf, chi_buf, True, tlo, thi):
+    for j in range(members.shape[0]):
+        if _clipped_bounds(members[j], inputs, clo, chi, True, scratch.out_lo, scratch.out_hi):
             n += 1
-    return n, _area(chi_buf[0] - clo_buf[0], chi_buf[1] - clo_buf[1], chi_buf[2] - clo_buf[2])
+    return n, _area(chi[0] - clo[0], chi[1] - clo[1], chi[2] - clo[2])
 
 
 @njit(cache=True)
-def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
-                axis, split, ct, ci, eb, tlo, thi, clo_buf, chi_buf):
+def _exact_cost(members, inputs, lo, hi, axis, split, params, scratch):
     # SAH cost of a split with primitives clipped to each child, which the
     # event sweep (node-clipped boxes only) cannot see: a sphere enclosing a
     # child is dropped from it.
@@ -276,38 +317,38 @@ def _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, 
     area = _area(d0, d1, d2)
     if area <= 0.0 or not (split > lo[axis] and split < hi[axis]):
         return np.inf
-    nl, al = _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
-                               axis, split, False, tlo, thi, clo_buf, chi_buf)
-    nr, ar = _child_count_area(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi,
-                               axis, split, True, tlo, thi, clo_buf, chi_buf)
+    nl, al = _child_count_area(members, inputs, lo, hi, axis, split, False, scratch)
+    nr, ar = _child_count_area(members, inputs, lo, hi, axis, split, True, scratch)
     c = (al * nl + ar * nr) / area
     if nl == 0 or nr == 0:
-        c *= 1.0 - eb
-    return ct + ci * c
+        c *= 1.0 - params.empty_bonus
+    return params.traversal_cost + params.intersection_cost * c
 
 
 @njit(cache=True)
-def _settle_split(cost, axis, pos, planar_left, work, seg0, m, prim_lo, prim_hi, clip_off, clip_v,
-                  spheres, lo, hi, ct, ci, eb, clip, force, tlo, thi, blo, bhi):
-    # From the sweep's best plane to the plane used, or axis -1 for a leaf.
-    if clip and m >= 8 and not cost < ci * m:
+def _settle_split(best, members, inputs, lo, hi, params, scratch):
+    # From the sweep's best plane ``best`` = (cost, axis, position,
+    # planar_left) of a node holding ``members`` to the plane used:
+    # (axis, position, planar_left), axis -1 for a leaf.
+    cost, axis, pos, planar_left = best
+    m = members.shape[0]
+    ci = params.intersection_cost
+    if params.clip and m >= 8 and not cost < ci * m:
         # the sweep sees node-clipped boxes only; where it gives up on many
         # primitives, judge the midplanes (and its own best plane) with
         # primitives clipped to the children
-        best = np.inf
+        exact = np.inf
         if axis >= 0:
-            best = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
-                               lo, hi, axis, pos, ct, ci, eb, tlo, thi, blo, bhi)
+            exact = _exact_cost(members, inputs, lo, hi, axis, pos, params, scratch)
         for a in range(3):
             mid = np.float64(np.float32(0.5 * (lo[a] + hi[a])))
-            c = _exact_cost(work, seg0, m, prim_lo, prim_hi, clip_off, clip_v, spheres,
-                            lo, hi, a, mid, ct, ci, eb, tlo, thi, blo, bhi)
-            if c < best:
-                best = c
+            c = _exact_cost(members, inputs, lo, hi, a, mid, params, scratch)
+            if c < exact:
+                exact = c
                 axis = a
                 pos = mid
                 planar_left = True
-        cost = best
-    if not cost < ci * m and not (m > force and cost < np.inf):
+        cost = exact
+    if not cost < ci * m and not (m > params.force_split and cost < np.inf):
         axis = -1
     return axis, pos, planar_left

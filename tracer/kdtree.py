@@ -1,6 +1,7 @@
 """kd-tree (the study's "BSP"): SAH and spatial-median builders, flat arrays.
 
-Node layout (pbrt style, 8 bytes): ``nodes`` is (N, 2) uint32.
+Node layout (pbrt style, 8 bytes): ``nodes`` is (N, 2) uint32, the words and
+bits named in :mod:`tracer.kd_nodes`.
 
 * interior node: ``word0`` = the split position as float32 bits, ``word1`` =
   ``above_child << 2 | axis`` (axis 0, 1, 2); the below child is the next
@@ -32,8 +33,8 @@ Builders (``KdTreeConfig.builder``):
   primitives, the midplanes are also judged with the primitives clipped to
   each child.
   The trees are those of the earlier builder, which clipped every primitive
-  to every node and sorted events per node (O(N log^2 N)); it is kept as
-  the peer in tests and benchmarks. A one-sided primitive's box lies within
+  to every node and sorted events per node (O(N log^2 N)); it lives on as
+  the peer in ``tests/naive_kdtree.py``, for the tests and benchmarks. A one-sided primitive's box lies within
   the child, so clipping it again would give it back in exact arithmetic; in
   floating point, Sutherland-Hodgman against the child's faces can end a
   last bit off, so a shape reaching the split face is clipped again and a
@@ -46,15 +47,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from tracer.geometry import element_bounds, element_clip_shapes
-from tracer.kd_build import _build, _build_sah
+from tracer.kd_build import _build_median, _build_sah
+from tracer.kd_split import BuildInputs, BuildParams
 from tracer.scene import Scene
 
-LEAF_FLAG = 3
 BUILDERS = ("sah", "median")
 MAX_TREE_DEPTH = 60  # the traversal stack holds 64 entries
 
@@ -176,34 +177,12 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
     -------
     KdTree
     """
-    return _build_kdtree(scene, config, per_node_sort=False)
-
-
-def _build_kdtree(scene: Scene, config: KdTreeConfig | None, per_node_sort: bool) -> KdTree:
-    """:func:`build_kdtree` with a choice of SAH builder.
-
-    ``per_node_sort=True`` selects the earlier SAH builder, which re-clips
-    every primitive to every node and sorts the node's events there
-    (O(N log^2 N)); it builds the same trees and is kept as the peer of the
-    presorted builder in the tests and ``benchmarks/bench_kdtree.py``. The
-    median builder ignores it.
-    """
-    if config is None:
-        config = KdTreeConfig()
-    if not isinstance(config, KdTreeConfig):
-        raise ValueError(f"config must be a KdTreeConfig, got {type(config).__name__}")
-    n = scene.n_elements
-    if n >= 2**30:
-        raise ValueError(f"Scene.element_kind: too many elements for the kd-tree ({n})")
-    max_depth = config.max_depth if config.max_depth is not None else default_max_depth(n)
-    if config.max_depth is None:
-        from dataclasses import replace
-        config = replace(config, max_depth=max_depth)
+    config = resolve_config(config, scene.n_elements)
     start = time.perf_counter()
-    inputs = _builder_inputs(scene)
-    nodes, pidx, leaves, empty, deepest, cost = _run_builder(inputs, config, per_node_sort)
+    inputs = builder_inputs(scene)
+    builder = _build_sah if config.builder == "sah" else _build_median
+    nodes, pidx, leaves, empty, deepest, cost = builder(inputs, build_params(config))
     seconds = time.perf_counter() - start
-    root_lo, root_hi = inputs[5], inputs[6]
     filled = leaves - empty
     stats = {
         "nodes": int(len(nodes)),
@@ -216,19 +195,43 @@ def _build_kdtree(scene: Scene, config: KdTreeConfig | None, per_node_sort: bool
         "build_seconds": float(seconds),
     }
     return KdTree(nodes=nodes, primitive_indices=pidx,
-                  bounds=np.stack([root_lo, root_hi]).astype(np.float64),
+                  bounds=np.stack([inputs.root_lo, inputs.root_hi]).astype(np.float64),
                   config=config, stats=stats)
 
 
-def _builder_inputs(scene: Scene) -> tuple:
-    """The builder kernels' scene arrays.
+def resolve_config(config: KdTreeConfig | None, n_elements: int) -> KdTreeConfig:
+    """``config`` (default ``KdTreeConfig()``) with ``max_depth`` resolved for ``n_elements``.
 
-    Returns
-    -------
-    tuple
-        ``(lo, hi, clip_offsets, clip_vertices, spheres, root_lo, root_hi)``:
-        element boxes (N, 3) float64, the clip shapes of
-        :func:`tracer.geometry.element_clip_shapes`, and the root box (3,).
+    Raises
+    ------
+    ValueError
+        If ``config`` is not a :class:`KdTreeConfig` or the scene has too
+        many elements for the tree's 30-bit counts.
+    """
+    if config is None:
+        config = KdTreeConfig()
+    if not isinstance(config, KdTreeConfig):
+        raise ValueError(f"config must be a KdTreeConfig, got {type(config).__name__}")
+    if n_elements >= 2**30:
+        raise ValueError(f"Scene.element_kind: too many elements for the kd-tree ({n_elements})")
+    if config.max_depth is None:
+        config = replace(config, max_depth=default_max_depth(n_elements))
+    return config
+
+
+def build_params(config: KdTreeConfig) -> BuildParams:
+    """The builder kernels' parameters of a resolved ``config`` (see :func:`resolve_config`)."""
+    return BuildParams(config.max_depth, config.leaf_size, config.traversal_cost, config.intersection_cost,
+                       config.empty_bonus, config.clip, config.force_split)
+
+
+def builder_inputs(scene: Scene) -> BuildInputs:
+    """The builder kernels' scene arrays: element boxes, clip shapes and the root box.
+
+    Raises
+    ------
+    ValueError
+        If the scene's coordinates are not finite.
     """
     lo, hi = element_bounds(scene)
     if scene.n_elements:
@@ -238,22 +241,4 @@ def _builder_inputs(scene: Scene) -> tuple:
     if not (np.all(np.isfinite(root_lo)) and np.all(np.isfinite(root_hi))):
         raise ValueError("Scene geometry has non-finite coordinates")
     clip_off, clip_v, spheres = element_clip_shapes(scene)
-    return lo, hi, clip_off, clip_v, spheres, root_lo, root_hi
-
-
-def _run_builder(inputs: tuple, config: KdTreeConfig, per_node_sort: bool = False) -> tuple:
-    """Run the builder kernel of ``config`` (``max_depth`` resolved) on ``inputs``.
-
-    Returns ``(nodes, primitive_indices, leaves, empty_leaves, deepest,
-    sah_cost)``; see :func:`_build_kdtree` for ``per_node_sort``.
-    """
-    lo, hi, clip_off, clip_v, spheres, root_lo, root_hi = inputs
-    if config.builder == "sah" and not per_node_sort:
-        return _build_sah(lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
-                          config.max_depth, config.leaf_size, config.traversal_cost,
-                          config.intersection_cost, config.empty_bonus, config.clip,
-                          config.force_split)
-    return _build(lo, hi, clip_off, clip_v, spheres, root_lo.copy(), root_hi.copy(),
-                  config.builder == "median", config.max_depth, config.leaf_size,
-                  config.traversal_cost, config.intersection_cost, config.empty_bonus,
-                  config.clip, config.force_split)
+    return BuildInputs(lo, hi, clip_off, clip_v, spheres, root_lo, root_hi)
