@@ -33,6 +33,7 @@ Alpha, not the study's code (which is not public).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -157,6 +158,22 @@ class MemoryLayout:
         return PlacedLayout(self, np.concatenate(starts), np.concatenate(sizes), kind_first, address)
 
 
+class RecordPlacement(NamedTuple):
+    """Where every record lives, as compiled code reads it (see :class:`PlacedLayout`).
+
+    Attributes
+    ----------
+    record_start, record_size : ndarray of int64, shape (R,)
+        Address and size of every record, kinds one after another.
+    kind_first : ndarray of int64, shape (K + 1,)
+        Records of kind ``k`` are rows ``kind_first[k]:kind_first[k + 1]``.
+    """
+
+    record_start: np.ndarray
+    record_size: np.ndarray
+    kind_first: np.ndarray
+
+
 @dataclass(frozen=True)
 class PlacedLayout:
     """A layout placed for one scene.
@@ -177,6 +194,11 @@ class PlacedLayout:
     record_size: np.ndarray
     kind_first: np.ndarray
     end: int
+
+    @property
+    def placement(self) -> RecordPlacement:
+        """The record addresses as one bundle for compiled code (:func:`record_lines`)."""
+        return RecordPlacement(self.record_start, self.record_size, self.kind_first)
 
     @property
     def scene_bytes(self) -> int:
@@ -211,10 +233,11 @@ class PlacedLayout:
             raise ValueError(f"line_size must be a power of two, got {line_size}")
         self.check_records(records)
         shift = line_size.bit_length() - 1
-        n_lines = _lines_touched(records, self.record_start, self.record_size, self.kind_first, shift)
-        out = np.empty(int(n_lines.sum()), dtype=np.uint64)
-        _fill_addresses(records, self.record_start, self.record_size, self.kind_first, shift, out)
-        return out
+        n_lines = int(_lines_touched(records, self.placement, shift).sum())
+        # Sized exactly, so never replaced (at least one slot: growth doubles).
+        out, _ = record_lines(records, 0, records.shape[0], self.placement, shift,
+                              np.empty(max(n_lines, 1), dtype=np.uint64))
+        return out[:n_lines]
 
 
 def record_counts_of(trace) -> dict:
@@ -254,26 +277,78 @@ def _round_up(value: int, align: int) -> int:
     return (value + align - 1) // align * align
 
 
+@njit(cache=True, inline="always")
+def record_line_span(record, record_start, record_size, kind_first, line_shift):
+    """First and last line a record's bytes span (the one record-to-line rule).
+
+    Parameters
+    ----------
+    record : uint32
+        A packed (kind, index) record of an access trace.
+    record_start, record_size, kind_first : ndarray of int64
+        The fields of a :class:`RecordPlacement`, passed as arrays so that a
+        per-record loop reads no bundle field.
+    line_shift : int
+        log2 of the line size.
+
+    Returns
+    -------
+    first, last : int
+        Line numbers (address >> line_shift), ``first <= last``.
+    """
+    row = kind_first[record_kind(record)] + record_id(record)
+    start = record_start[row]
+    return start >> line_shift, (start + record_size[row] - 1) >> line_shift
+
+
 @njit(cache=True, nogil=True)
-def _lines_touched(records, record_start, record_size, kind_first, shift):
+def record_lines(records, start, stop, placement, line_shift, buffer):
+    """Byte addresses of the lines that ``records[start:stop]`` touch, in order.
+
+    Parameters
+    ----------
+    records : ndarray of uint32, shape (N,)
+    start, stop : int
+        The records to read (one pixel's, say).
+    placement : RecordPlacement
+    line_shift : int
+        log2 of the line size.
+    buffer : ndarray of uint64, shape (M,), M >= 1
+        Receives the addresses; replaced by one twice as long when full.
+
+    Returns
+    -------
+    buffer : ndarray of uint64
+        ``buffer`` or its replacement, with the addresses at the front.
+    count : int
+        Addresses written.
+    """
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    k = 0
+    for i in range(start, stop):
+        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+        for line in range(first, last + 1):
+            if k == buffer.shape[0]:
+                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
+                grown[:k] = buffer
+                buffer = grown
+            buffer[k] = np.uint64(line << line_shift)
+            k += 1
+    return buffer, k
+
+
+@njit(cache=True, nogil=True)
+def _lines_touched(records, placement, line_shift):
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
     out = np.empty(records.shape[0], dtype=np.int64)
     for i in range(records.shape[0]):
-        row = kind_first[record_kind(records[i])] + record_id(records[i])
-        start = record_start[row]
-        out[i] = ((start + record_size[row] - 1) >> shift) - (start >> shift) + 1
+        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+        out[i] = last - first + 1
     return out
-
-
-@njit(cache=True, nogil=True)
-def _fill_addresses(records, record_start, record_size, kind_first, shift, out):
-    k = 0
-    for i in range(records.shape[0]):
-        row = kind_first[record_kind(records[i])] + record_id(records[i])
-        start = record_start[row]
-        for line in range(start >> shift, ((start + record_size[row] - 1) >> shift) + 1):
-            out[k] = np.uint64(line << shift)
-            k += 1
-    return k
 
 
 def _compact() -> MemoryLayout:

@@ -25,6 +25,7 @@ processes are not simulated in the caches.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -33,11 +34,14 @@ from numba import njit
 from cachesim import CacheState, Hierarchy
 from cachesim import kernels as K
 from coherence.cost import CostModel
-from coherence.layout import PlacedLayout
+from coherence.layout import PlacedLayout, RecordPlacement, record_lines
 from coherence.distribution import Distribution
-from tracer.records import record_id, record_kind
 
 PLACEMENTS = ("round-robin", "neighbours")
+
+# Columns of the per-process cycle totals the event loop writes.
+COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
+N_CYCLE_COLUMNS = 4
 
 
 @dataclass(frozen=True)
@@ -86,6 +90,93 @@ class Machine:
             return processes % self.n_cpus
         per_cpu = -(-n_processes // self.n_cpus)
         return processes // per_cpu
+
+
+class PixelReads(NamedTuple):
+    """What every pixel reads, and where it lives in memory.
+
+    Attributes
+    ----------
+    pixel_offsets : ndarray of int64, shape (P + 1,)
+        Pixel ``p`` reads ``records[pixel_offsets[p]:pixel_offsets[p + 1]]``.
+    records : ndarray of uint32, shape (N,)
+        Packed (kind, index) records of the trace.
+    placement : RecordPlacement
+        Address and size of every record.
+    line_shift : int
+        log2 of the hierarchy's smallest line size: a record read becomes one
+        access per line of that size it spans.
+    """
+
+    pixel_offsets: np.ndarray
+    records: np.ndarray
+    placement: RecordPlacement
+    line_shift: int
+
+
+class PixelCost(NamedTuple):
+    """Cycles of a pixel: its compute, plus a latency per access.
+
+    Attributes
+    ----------
+    compute : ndarray of float64, shape (P,)
+        Compute cycles of each pixel (cost model).
+    latency : ndarray of float64, shape (L + 1,)
+        Cycles of an access served by each level; the last entry is memory.
+    """
+
+    compute: np.ndarray
+    latency: np.ndarray
+
+
+class Schedule(NamedTuple):
+    """The tasks and how they are handed to processes.
+
+    Attributes
+    ----------
+    task_offsets : ndarray of int64, shape (T + 1,)
+        Task ``t`` is ``task_pixels[task_offsets[t]:task_offsets[t + 1]]``.
+    task_pixels : ndarray of int64, shape (P,)
+    own_offsets : ndarray of int64, shape (n + 1,)
+        Static: process ``p`` renders ``own_tasks[own_offsets[p]:own_offsets[p + 1]]``
+        in order (all zero when dynamic).
+    own_tasks : ndarray of int64, shape (T,), or (0,) when dynamic
+    dynamic : bool
+        Tasks go, in order, to whichever process asks first.
+    dispatch_cycles : float
+        Waiting cycles of one dynamic hand-out.
+    take_ahead : int
+        Tasks a dynamic process takes beyond the one it renders.
+    """
+
+    task_offsets: np.ndarray
+    task_pixels: np.ndarray
+    own_offsets: np.ndarray
+    own_tasks: np.ndarray
+    dynamic: bool
+    dispatch_cycles: float
+    take_ahead: int
+
+
+class CpuSharing(NamedTuple):
+    """Which processes share each CPU, and how.
+
+    Attributes
+    ----------
+    cpu_processes : ndarray of int64, shape (n,)
+        Processes grouped by CPU.
+    cpu_offsets : ndarray of int64, shape (C + 1,)
+        CPU ``c`` runs ``cpu_processes[cpu_offsets[c]:cpu_offsets[c + 1]]``.
+    quantum : float
+        Time slice in cycles (``0``: each runs to completion).
+    switch_cycles : float
+        Cost of switching between two of our processes.
+    """
+
+    cpu_processes: np.ndarray
+    cpu_offsets: np.ndarray
+    quantum: float
+    switch_cycles: float
 
 
 @dataclass(frozen=True)
@@ -167,21 +258,22 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
 
     state = CacheState(hierarchy)
     n_levels = len(hierarchy.levels)
-    tags = np.tile(state.tags, (n_cpus, 1))
-    stamps = np.tile(state.stamps, (n_cpus, 1))
-    counts = np.zeros((n_processes, n_levels, K.N_COUNTERS), dtype=np.int64)
+    # Caches per CPU, counters per process.
+    caches = K.CacheArrays(np.tile(state.tags, (n_cpus, 1)), np.tile(state.stamps, (n_cpus, 1)),
+                           np.zeros((n_processes, n_levels, K.N_COUNTERS), dtype=np.int64))
+    counts = caches.counts
     latency = np.array([level.latency for level in hierarchy.levels] + [hierarchy.memory_latency],
                        dtype=np.float64)
     line_shift = min(level.line_size for level in hierarchy.levels).bit_length() - 1
 
-    out_cycles = np.zeros((n_processes, 4), dtype=np.float64)  # compute, memory, dispatch, finish
+    out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
-    _run(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
-         placed.record_start, placed.record_size, placed.kind_first, line_shift,
-         state.geometry, tags, stamps, counts, compute, latency,
-         distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
-         order, cpu_offsets, distribution.dynamic, float(distribution.dispatch_cycles),
-         int(distribution.take_ahead), float(machine.quantum_cycles), float(machine.switch_cycles),
+    _run(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
+                    placed.placement, line_shift),
+         state.geometry, caches, PixelCost(compute, latency),
+         Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
+                  distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
+         CpuSharing(order, cpu_offsets, float(machine.quantum_cycles), float(machine.switch_cycles)),
          out_cycles, task_owner)
 
     pixel_owner = np.empty(n_pixels, dtype=np.int64)
@@ -201,12 +293,13 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         frame[f"{level.name}_hits"] = counts[:, index, K.HITS]
         frame[f"{level.name}_misses"] = counts[:, index, K.MISSES]
     frame["memory_accesses"] = counts[:, -1, K.MISSES]
-    frame["compute_cycles"] = out_cycles[:, 0]
-    frame["memory_cycles"] = out_cycles[:, 1]
-    frame["dispatch_cycles"] = out_cycles[:, 2]
-    frame["user_cycles"] = out_cycles[:, 0] + out_cycles[:, 1] + out_cycles[:, 2]
+    frame["compute_cycles"] = out_cycles[:, COMPUTE_CYCLES]
+    frame["memory_cycles"] = out_cycles[:, MEMORY_CYCLES]
+    frame["dispatch_cycles"] = out_cycles[:, DISPATCH_CYCLES]
+    frame["user_cycles"] = (out_cycles[:, COMPUTE_CYCLES] + out_cycles[:, MEMORY_CYCLES]
+                            + out_cycles[:, DISPATCH_CYCLES])
     frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
-    frame["finish_cycles"] = out_cycles[:, 3]
+    frame["finish_cycles"] = out_cycles[:, FINISH_CYCLES]
     processes = pd.DataFrame(frame)
     real = processor_sharing_time(processes["user_cycles"].to_numpy(), machine.n_cpus, machine.background_load)
     return Run(processes, task_owner, real)
@@ -229,35 +322,46 @@ def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> fl
     return wall
 
 
-@njit(cache=True)
-def _pixel_addresses(records, start, stop, record_start, record_size, kind_first, shift, buffer):
-    """Line addresses of records[start:stop] into ``buffer`` (grown if needed)."""
-    k = 0
-    for i in range(start, stop):
-        row = kind_first[record_kind(records[i])] + record_id(records[i])
-        first = record_start[row]
-        last = first + record_size[row] - 1
-        for line in range(first >> shift, (last >> shift) + 1):
-            if k == buffer.shape[0]:
-                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
-                grown[:k] = buffer
-                buffer = grown
-            buffer[k] = np.uint64(line << shift)
-            k += 1
-    return buffer, k
-
-
 @njit(cache=True, nogil=True)
-def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shift,
-         geometry, tags, stamps, counts, compute, latency,
-         task_offsets, task_pixels, own_offsets, own_tasks, cpu_processes, cpu_offsets,
-         dynamic, dispatch_cycles, take_ahead, quantum, switch_cycles, out_cycles, task_owner):
-    """The event loop (see the module docstring). Updates ``tags``/``stamps``
-    (C, W), ``counts`` (n, L, 5), ``out_cycles`` (n, 4) and ``task_owner``."""
+def _run(reads, geometry, caches, cost, schedule, cpus, out_cycles, task_owner):
+    """The event loop (see the module docstring).
+
+    Parameters
+    ----------
+    reads : PixelReads
+    geometry : cachesim.kernels.CacheGeometry
+    caches : cachesim.kernels.CacheArrays
+        ``tags``/``stamps`` (C, W): one state per CPU; ``counts``
+        (n, L, N_COUNTERS): counters per process. Updated in place.
+    cost : PixelCost
+    schedule : Schedule
+    cpus : CpuSharing
+    out_cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
+        Receives compute, memory, dispatch and finish cycles per process.
+    task_owner : ndarray of int64, shape (T,)
+        Receives the process that rendered each task.
+    """
+    # Bundle fields are read once here: a read inside the per-pixel loop
+    # would cost a reference-count update each time.
+    counts = caches.counts
+    tags = caches.tags
+    stamps = caches.stamps
+    records = reads.records
+    pixel_offsets = reads.pixel_offsets
+    placement = reads.placement
+    line_shift = reads.line_shift
+    compute = cost.compute
+    latency = cost.latency
+    task_offsets = schedule.task_offsets
+    task_pixels = schedule.task_pixels
+    own_offsets = schedule.own_offsets
+    dynamic = schedule.dynamic
+    cpu_processes = cpus.cpu_processes
+    cpu_offsets = cpus.cpu_offsets
+    quantum = cpus.quantum
     n_processes = counts.shape[0]
     n_cpus = cpu_offsets.shape[0] - 1
     n_levels = counts.shape[1]
-    n_tasks = task_offsets.shape[0] - 1
     cpu_clock = np.zeros(n_cpus)
     cache_clock = np.zeros(n_cpus, dtype=np.int64)
     cpu_current = cpu_offsets[:n_cpus].copy()  # index into cpu_processes
@@ -268,40 +372,30 @@ def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shi
     # The task each process renders (-1: none) and where it is in it.
     current_task = np.full(n_processes, -1, dtype=np.int64)
     position = np.zeros(n_processes, dtype=np.int64)
-    # Dynamic take-ahead: tasks held, a small ring per process.
-    held = np.full((n_processes, max(take_ahead, 1)), -1, dtype=np.int64)
+    # Dynamic take-ahead: tasks held, a small ring per process; and the
+    # global queue's next task (an array, so that _take_task can advance it).
+    held = np.full((n_processes, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
     held_count = np.zeros(n_processes, dtype=np.int64)
-    next_task = 0
+    next_task = np.zeros(1, dtype=np.int64)
     buffer = np.empty(4096, dtype=np.uint64)
     work = K.chunk_buffers()
     served = np.zeros(0, dtype=np.uint8)
     hits_before = np.zeros(n_levels, dtype=np.int64)
     while True:
-        cpu = -1
-        for c in range(n_cpus):
-            if cpu_live[c] > 0 and (cpu < 0 or cpu_clock[c] < cpu_clock[cpu]):
-                cpu = c
+        cpu = _lowest_clock_cpu(cpu_clock, cpu_live)
         if cpu < 0:
             break
         clock = cpu_clock[cpu]
-        first = cpu_offsets[cpu]
-        count = cpu_offsets[cpu + 1] - first
         slot = cpu_current[cpu]
         process = cpu_processes[slot]
         if done[process] or (quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1):
-            # Round robin to the next live process on this CPU.
-            for step in range(1, count + 1):
-                candidate = first + (slot - first + step) % count
-                if not done[cpu_processes[candidate]]:
-                    break
-            if cpu_processes[candidate] != process:
-                clock += switch_cycles
-            slot = candidate
+            slot = _next_live_slot(cpu_processes, cpu_offsets[cpu], cpu_offsets[cpu + 1], slot, done)
+            if cpu_processes[slot] != process:
+                clock += cpus.switch_cycles
             process = cpu_processes[slot]
             cpu_current[cpu] = slot
             slice_used[cpu] = 0.0
-        tables = tags[cpu]
-        ages = stamps[cpu]
+        cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
         process_counts = counts[process]
         while True:
             task = current_task[process]
@@ -309,62 +403,110 @@ def _run(pixel_offsets, records, record_start, record_size, kind_first, line_shi
                 if task >= 0 and dynamic:
                     current_task[process] = -1
                     break  # back to the event loop: the next hand-out in time order
-                # Take the next task.
-                task = -1
-                if dynamic:
-                    if held_count[process] > 0:
-                        task = held[process, 0]
-                        for h in range(held_count[process] - 1):
-                            held[process, h] = held[process, h + 1]
-                        held_count[process] -= 1
-                    elif next_task < n_tasks:
-                        task = next_task
-                        next_task += 1
-                        clock += dispatch_cycles
-                        out_cycles[process, 2] += dispatch_cycles
-                        slice_used[cpu] += dispatch_cycles
-                    while task >= 0 and held_count[process] < take_ahead and next_task < n_tasks:
-                        held[process, held_count[process]] = next_task
-                        task_owner[next_task] = process
-                        held_count[process] += 1
-                        next_task += 1
-                elif own_next[process] < own_offsets[process + 1]:
-                    task = own_tasks[own_next[process]]
-                    own_next[process] += 1
+                task, waited = _take_task(process, schedule, own_next, held, held_count, next_task, task_owner)
+                clock += waited
+                out_cycles[process, DISPATCH_CYCLES] += waited
+                slice_used[cpu] += waited
                 if task < 0:
-                    done[process] = True
-                    cpu_live[cpu] -= 1
-                    out_cycles[process, 3] = clock
+                    _retire(process, cpu, clock, done, cpu_live, out_cycles)
                     break
                 task_owner[task] = process
                 current_task[process] = task
                 position[process] = task_offsets[task]
             pixel = task_pixels[position[process]]
             position[process] += 1
-            buffer, n_addresses = _pixel_addresses(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
-                                                   record_start, record_size, kind_first, line_shift, buffer)
+            buffer, n_addresses = record_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
+                                               placement, line_shift, buffer)
             for level in range(n_levels):
                 hits_before[level] = process_counts[level, K.HITS]
             misses_before = process_counts[n_levels - 1, K.MISSES]
-            cache_clock[cpu] = K.simulate_into(
-                buffer[:n_addresses], geometry, K.CacheArrays(tables, ages, process_counts),
-                cache_clock[cpu], served, False, work)
-            memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
-            for level in range(n_levels):
-                memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
+            cache_clock[cpu] = K.simulate_into(buffer[:n_addresses], geometry, cache, cache_clock[cpu],
+                                               served, False, work)
+            memory = _memory_cycles(process_counts, hits_before, misses_before, latency)
             cycles = compute[pixel] + memory
-            out_cycles[process, 0] += compute[pixel]
-            out_cycles[process, 1] += memory
+            out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
+            out_cycles[process, MEMORY_CYCLES] += memory
             clock += cycles
             slice_used[cpu] += cycles
             if (not dynamic and position[process] == task_offsets[task + 1]
                     and own_next[process] == own_offsets[process + 1]):
                 # A static process is done with its last pixel, not when it
                 # next gets the CPU.
-                done[process] = True
-                cpu_live[cpu] -= 1
-                out_cycles[process, 3] = clock
+                _retire(process, cpu, clock, done, cpu_live, out_cycles)
                 break
             if quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1:
                 break
         cpu_clock[cpu] = clock
+
+
+@njit(cache=True, inline="always")
+def _lowest_clock_cpu(cpu_clock, cpu_live):
+    """The CPU with live processes whose clock is lowest (-1: all done)."""
+    cpu = -1
+    for c in range(cpu_clock.shape[0]):
+        if cpu_live[c] > 0 and (cpu < 0 or cpu_clock[c] < cpu_clock[cpu]):
+            cpu = c
+    return cpu
+
+
+@njit(cache=True, inline="always")
+def _next_live_slot(cpu_processes, first, stop, slot, done):
+    """Round robin: the slot of the next live process of a CPU after ``slot``."""
+    count = stop - first
+    for step in range(1, count + 1):
+        candidate = first + (slot - first + step) % count
+        if not done[cpu_processes[candidate]]:
+            break
+    return candidate
+
+
+@njit(cache=True, inline="always")
+def _retire(process, cpu, clock, done, cpu_live, out_cycles):
+    """``process`` has no work left: it finished at ``clock``."""
+    done[process] = True
+    cpu_live[cpu] -= 1
+    out_cycles[process, FINISH_CYCLES] = clock
+
+
+@njit(cache=True, nogil=True)
+def _take_task(process, schedule, own_next, held, held_count, next_task, task_owner):
+    """The next task of ``process`` (-1: none left) and the cycles it waited for it.
+
+    Static: the process's next own task (``own_next`` advances). Dynamic: a
+    held take-ahead task, else a hand-out from the global queue
+    (``next_task[0]`` advances; costs ``dispatch_cycles``); then the
+    take-ahead is refilled from the queue, its tasks owned at once.
+    """
+    task = -1
+    waited = 0.0
+    if schedule.dynamic:
+        n_tasks = schedule.task_offsets.shape[0] - 1
+        if held_count[process] > 0:
+            task = held[process, 0]
+            for h in range(held_count[process] - 1):
+                held[process, h] = held[process, h + 1]
+            held_count[process] -= 1
+        elif next_task[0] < n_tasks:
+            task = next_task[0]
+            next_task[0] += 1
+            waited = schedule.dispatch_cycles
+        while task >= 0 and held_count[process] < schedule.take_ahead and next_task[0] < n_tasks:
+            held[process, held_count[process]] = next_task[0]
+            task_owner[next_task[0]] = process
+            held_count[process] += 1
+            next_task[0] += 1
+    elif own_next[process] < schedule.own_offsets[process + 1]:
+        task = schedule.own_tasks[own_next[process]]
+        own_next[process] += 1
+    return task, waited
+
+
+@njit(cache=True, inline="always")
+def _memory_cycles(process_counts, hits_before, misses_before, latency):
+    """Latency of the accesses counted since the snapshot: each level's new
+    hits at its latency, the last level's new misses at memory's."""
+    n_levels = process_counts.shape[0]
+    memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
+    for level in range(n_levels):
+        memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
+    return memory
