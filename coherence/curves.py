@@ -67,7 +67,13 @@ def _check_size(width, height) -> tuple[int, int]:
 
 @njit(cache=True)
 def _sign(v):
-    return (v > 0) - (v < 0)
+    # Not ``(v > 0) - (v < 0)``: numpy refuses to subtract booleans, which
+    # breaks the kernel when it runs as plain Python (NUMBA_DISABLE_JIT=1).
+    if v > 0:
+        return 1
+    if v < 0:
+        return -1
+    return 0
 
 
 @njit(cache=True)

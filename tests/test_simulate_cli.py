@@ -7,7 +7,7 @@ import pytest
 from analyses.cli import main
 from coherence.simulation import Machine
 from coherence.studies import study
-from test_simulation import random_trace
+from trace_factory import random_trace
 
 
 @pytest.fixture(scope="module")

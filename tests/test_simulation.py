@@ -2,26 +2,14 @@
 import numpy as np
 import pytest
 
-from cachesim import CacheLevel, CacheState, Hierarchy, alpha21164, simulate
+from cachesim import CacheState, Hierarchy, alpha21164, simulate
 from coherence.cost import CostModel
 from coherence.layout import get_layout
 from coherence.distribution import Distribution
 from coherence.simulation import Machine, processor_sharing_time, simulate_run
-from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace import COUNTER_NAMES, RecordKind
 
-SMALL = Hierarchy((CacheLevel("L1", 512, 32, 1, latency=2), CacheLevel("L2", 3072, 64, 3, latency=9)),
-                  memory_latency=50)
-
-
-def random_trace(width=8, height=6, seed=0):
-    rng = np.random.default_rng(seed)
-    lengths = rng.integers(0, 40, width * height)
-    kinds = rng.choice([RecordKind.KD_NODE, RecordKind.INDEX_ENTRY, RecordKind.SPHERE, RecordKind.TRIANGLE,
-                        RecordKind.MATERIAL, RecordKind.LIGHT], lengths.sum())
-    records = pack(kinds, rng.integers(0, 60, kinds.size))
-    counters = rng.integers(0, 50, (width * height, len(COUNTER_NAMES)))
-    offsets = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
-    return AccessTrace(offsets, records, counters.astype(np.int64), width, height, {})
+from trace_factory import SMALL, random_trace
 
 
 def placed_for(trace):

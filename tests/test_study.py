@@ -4,7 +4,7 @@ import pytest
 
 from coherence.simulation import Machine
 from coherence.studies import study
-from test_simulation import SMALL, random_trace
+from trace_factory import SMALL, random_trace
 from tracer.trace import COUNTER_NAMES
 
 
