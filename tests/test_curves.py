@@ -144,6 +144,7 @@ def test_hilbert_steps_are_four_neighbours_for_all_small_sizes():
     assert {k: v for k, v in bad.items() if v} == {}
 
 
+@pytest.mark.jit_only  # the small sizes above cover the same code
 @pytest.mark.parametrize("width,height", [(512, 512), (511, 512), (512, 511), (513, 257), (1000, 3), (3, 1000), (640, 480), (97, 89)])
 def test_hilbert_steps_are_four_neighbours_for_large_sizes(width, height):
     order = hilbert_order(width, height)

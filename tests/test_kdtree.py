@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from jit_mode import shrink
 from scene_factory import KINDS, one_sphere, random_rays, random_scene
 from naive_kdtree import build_per_node_sah
 from tracer.kdtree import KdTreeConfig, build_kdtree, default_max_depth
@@ -35,7 +36,7 @@ def _assert_same_hits(scene, tree, o, d, **kw):
 def test_closest_hit_matches_brute_force(kind, config):
     scene = random_scene((kind,), n=80, seed=KINDS.index(kind))
     tree = build_kdtree(scene, CONFIGS[config])
-    o, d = random_rays(3000, seed=7)
+    o, d = random_rays(shrink(3000), seed=7)
     hit_rate = _assert_same_hits(scene, tree, o, d)
     assert hit_rate > 0.1  # the test exercises hits, not only misses
 
@@ -44,7 +45,7 @@ def test_closest_hit_matches_brute_force(kind, config):
 def test_mixed_scene_with_ray_intervals(config):
     scene = random_scene(KINDS, n=300, seed=11, size=0.8)
     tree = build_kdtree(scene, CONFIGS[config])
-    o, d = random_rays(4000, seed=3)
+    o, d = random_rays(shrink(4000), seed=3)
     rng = np.random.default_rng(5)
     tmin = rng.uniform(0, 2, len(o))
     tmax = tmin + rng.uniform(0, 10, len(o))
@@ -56,8 +57,8 @@ def test_rays_from_inside_overlapping_spheres():
     rng = np.random.default_rng(2)
     scene = random_scene(("sphere",), n=200, seed=4, extent=1.0, size=1.5)
     tree = build_kdtree(scene)
-    o = rng.uniform(-1, 1, (3000, 3))
-    d = rng.normal(size=(3000, 3))
+    o = rng.uniform(-1, 1, (shrink(3000), 3))
+    d = rng.normal(size=(shrink(3000), 3))
     _assert_same_hits(scene, tree, o, d)
 
 

@@ -45,6 +45,7 @@ def test_render_help_has_examples(capsys):
     assert "examples:" in capsys.readouterr().out
 
 
+@pytest.mark.jit_only  # two kd-tree builds of balls (7,381 elements)
 def test_render_epsilon_option(capsys):
     from tracer.render import SPD_EPSILON
     assert main(["render", "balls", "--size", "8", "--no-log", "--epsilon", "spd", "--json"]) == 0
