@@ -72,11 +72,11 @@ class _CompileTimes:
             known = len(dispatcher.overloads)
             hits = sum(dispatcher._cache_hits.values())
             stack.append(0.0)
-            start = time.perf_counter()
+            start = time.process_time()
             try:
                 return original(dispatcher, sig)
             finally:
-                elapsed = time.perf_counter() - start
+                elapsed = time.process_time() - start
                 inner = stack.pop()
                 if stack:
                     stack[-1] += elapsed
@@ -97,7 +97,7 @@ class _CompileTimes:
 
     def pytest_terminal_summary(self, terminalreporter):
         write = terminalreporter.write_line
-        terminalreporter.section("numba compile times (callees excluded)")
+        terminalreporter.section("numba compile times, CPU seconds (callees excluded)")
         total = sum(row[0] for row in self.rows.values())
         write(f"{'seconds':>8} {'compiled':>8} {'loaded':>6}  kernel")
         for name, (seconds, compiled, loaded) in sorted(self.rows.items(), key=lambda kv: -kv[1][0]):
