@@ -245,17 +245,15 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
 
 
 @njit(cache=True)
-def _level_pass(work, n_in, level, shift, geometry, state, served_by, record, first_clock):
-    """Run ``work.lines[:n_in]`` (with their access clocks) through one level.
+def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, record, first_clock):
+    """Run ``lines[:n_in]`` (with their access clocks) through one level.
 
-    The misses are compacted in place to the front of ``work.lines`` and
-    ``work.clocks`` (shifted to the next level's line size by ``shift``);
+    The misses are compacted in place to the front of ``lines`` and
+    ``clocks`` (shifted to the next level's line size by ``shift``);
     returns their number. In a non-inclusive hierarchy a level's contents
     depend only on the accesses that reach it, so each level can run on the
     misses of the one above, in order.
     """
-    lines = work.lines
-    clocks = work.clocks
     tags = state.tags
     stamps = state.stamps
     n_ways = geometry.ways[level]
@@ -372,8 +370,8 @@ def _simulate_by_level(addresses, geometry, state, clock, served_by, record, wor
         for level in range(n_levels):
             if kept == 0:
                 break
-            kept = _level_pass(work, kept, level, shifts[level], geometry, state, served_by, record,
-                               first_clock)
+            kept = _level_pass(lines, clocks, kept, level, shifts[level], geometry, state, served_by,
+                               record, first_clock)
     return clock + n
 
 
