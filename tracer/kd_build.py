@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior, set_leaf
-from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _sah_sweep, _settle_split,
+from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _overlap_bounds, _grow_1d, _grow_nodes, _sah_sweep, _settle_split,
                              new_clip_scratch)
 
 
@@ -96,10 +96,17 @@ def _clip_members(work, seg0, seg1, inputs, lo, hi, clip, boxes, scratch):
     # lo/hi holds (clipped with ``clip``), with their clipped boxes in
     # boxes = (clo, chi) (m, 3) rows 0..m; returns m
     clo, chi = boxes
+    prim_lo, prim_hi, spheres = inputs.prim_lo, inputs.prim_hi, inputs.spheres
+    clip_off, clip_v = inputs.clip_offsets, inputs.clip_vertices
     m = 0
     for j in range(seg1 - seg0):
         p = work[seg0 + j]
-        if _clipped_bounds(p, inputs, lo, hi, clip, scratch.out_lo, scratch.out_hi):
+        if clip:
+            kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, scratch.out_lo,
+                                   scratch.out_hi)
+        else:
+            kept = _overlap_bounds(p, prim_lo, prim_hi, lo, hi, scratch.out_lo, scratch.out_hi)[0]
+        if kept:
             work[seg0 + m] = p
             clo[m, :] = scratch.out_lo
             chi[m, :] = scratch.out_hi
@@ -291,8 +298,13 @@ def _build_sah(inputs, params):
     # box a second clip changes, see below): few, sorted on their own, merged
     # with the kept ones. Children's segments replace the parent's (right
     # then left), so the node being split is always on top.
+    # arrays taken out of the bundle once: the hot calls below take them
+    # one by one (see _clipped_bounds)
     prim_lo = inputs.prim_lo
     prim_hi = inputs.prim_hi
+    clip_off = inputs.clip_offsets
+    clip_v = inputs.clip_vertices
+    spheres = inputs.spheres
     root_lo = inputs.root_lo.copy()
     root_hi = inputs.root_hi.copy()
     max_depth = params.max_depth
@@ -342,7 +354,11 @@ def _build_sah(inputs, params):
     # and the one sort of all events
     m0 = 0
     for p in range(n):
-        if _clipped_bounds(p, inputs, root_lo, root_hi, clip, tlo, thi):
+        if clip:
+            kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, root_lo, root_hi, tlo, thi)
+        else:
+            kept = _overlap_bounds(p, prim_lo, prim_hi, root_lo, root_hi, tlo, thi)[0]
+        if kept:
             ids[m0] = p
             box_lo[m0, :] = tlo
             box_hi[m0, :] = thi
@@ -446,13 +462,21 @@ def _build_sah(inputs, params):
             right = b > split or (on_plane and not planar_left)
             if left and right:
                 s = 4
-                if _clipped_bounds(p, inputs, llo, lhi, clip, tlo, thi):
+                if clip:
+                    in_l = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi, tlo, thi)
+                else:
+                    in_l = _overlap_bounds(p, prim_lo, prim_hi, llo, lhi, tlo, thi)[0]
+                if in_l:
                     lbox_lo[p, :] = tlo
                     lbox_hi[p, :] = thi
                     new_l[k_l] = p
                     k_l += 1
                     s |= 1
-                if _clipped_bounds(p, inputs, rlo, rhi, clip, tlo, thi):
+                if clip:
+                    in_r = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi, tlo, thi)
+                else:
+                    in_r = _overlap_bounds(p, prim_lo, prim_hi, rlo, rhi, tlo, thi)[0]
+                if in_r:
                     rbox_lo[p, :] = tlo
                     rbox_hi[p, :] = thi
                     new_r[k_r] = p
@@ -478,11 +502,9 @@ def _build_sah(inputs, params):
                     reach = prim_lo[p, axis] - margin <= split
                 if clip and reach:
                     if left:
-                        kept = _clipped_bounds(p, inputs, llo, lhi,
-                                               True, tlo, thi)
+                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, llo, lhi, tlo, thi)
                     else:
-                        kept = _clipped_bounds(p, inputs, rlo, rhi,
-                                               True, tlo, thi)
+                        kept = _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, rlo, rhi, tlo, thi)
                     same = kept
                     for c in range(3):
                         same = same and tlo[c] == box_lo[i0 + j, c] and thi[c] == box_hi[i0 + j, c]
@@ -550,6 +572,8 @@ def _build_sah(inputs, params):
         ttyp = _grow_1d(ttyp, kt)
         tprim = _grow_1d(tprim, kt)
         order = _grow_1d(order, kt)
+        events = Events(ev_pos, ev_typ, ev_prim)
+        new_events = Events(tpos, ttyp, tprim)
         w = e0 + ne
         for child in range(2):
             keep = 2 if child == 0 else 1
@@ -561,8 +585,7 @@ def _build_sah(inputs, params):
                 else:
                     k = _axis_events(lbox_lo, lbox_hi, new_l, k_l, a, tpos, ttyp, tprim)
                 _sort_events(tpos, ttyp, tprim, k, order)
-                w = _merge_events(Events(ev_pos, ev_typ, ev_prim), q, cnt[a], side, keep,
-                                  Events(tpos, ttyp, tprim), order, k, w)
+                w = _merge_events(events, q, cnt[a], side, keep, new_events, order, k, w)
                 q += cnt[a]
                 if child == 0:
                     cnt_r[a] = w - w0

@@ -113,23 +113,32 @@ def _clip_polygon_bounds(verts, a, b, lo, hi, out_lo, out_hi):
 
 
 @njit(cache=True)
-def _clipped_bounds(p, inputs, lo, hi, clip, out_lo, out_hi):
-    # the box of element p clipped to the box lo/hi (its shape clipped with
-    # ``clip``) into out_lo/out_hi; False when nothing of it is left there
-    prim_lo = inputs.prim_lo
-    prim_hi = inputs.prim_hi
-    spheres = inputs.spheres
+def _overlap_bounds(p, prim_lo, prim_hi, lo, hi, out_lo, out_hi):
+    # the box of element p cut to the box lo/hi into out_lo/out_hi; returns
+    # (whether they overlap, whether the element's box lies inside lo/hi)
     inside = True
     for c in range(3):
         a = max(prim_lo[p, c], lo[c])
         b = min(prim_hi[p, c], hi[c])
         if a > b:
-            return False
+            return False, False
         if prim_lo[p, c] < lo[c] or prim_hi[p, c] > hi[c]:
             inside = False
         out_lo[c] = a
         out_hi[c] = b
-    if not clip or inside:
+    return True, inside
+
+
+@njit(cache=True)
+def _clipped_bounds(p, prim_lo, prim_hi, clip_off, clip_v, spheres, lo, hi, out_lo, out_hi):
+    # the bounds of element p's shape clipped to the box lo/hi into
+    # out_lo/out_hi; False when nothing of it is left there. Hot: the
+    # arrays come one by one (a bundle would be taken apart, with reference
+    # counting, on every call; BuildInputs callers unpack it once).
+    overlaps, inside = _overlap_bounds(p, prim_lo, prim_hi, lo, hi, out_lo, out_hi)
+    if not overlaps:
+        return False
+    if inside:
         return True
     r = spheres[p, 3]
     if r >= 0.0:
@@ -150,10 +159,10 @@ def _clipped_bounds(p, inputs, lo, hi, clip, out_lo, out_hi):
         if far < r * r:
             return False  # box strictly inside the ball: no surface here
         return True
-    a = inputs.clip_offsets[p]
-    b = inputs.clip_offsets[p + 1]
+    a = clip_off[p]
+    b = clip_off[p + 1]
     if b - a >= 3:
-        return _clip_polygon_bounds(inputs.clip_vertices, a, b, lo, hi, out_lo, out_hi)
+        return _clip_polygon_bounds(clip_v, a, b, lo, hi, out_lo, out_hi)
     return True
 
 
@@ -300,8 +309,11 @@ def _child_count_area(members, inputs, lo, hi, axis, split, above, scratch):
     else:
         chi[axis] = split
     n = 0
+    prim_lo, prim_hi, spheres = inputs.prim_lo, inputs.prim_hi, inputs.spheres
+    clip_off, clip_v = inputs.clip_offsets, inputs.clip_vertices
+    out_lo, out_hi = scratch.out_lo, scratch.out_hi
     for j in range(members.shape[0]):
-        if _clipped_bounds(members[j], inputs, clo, chi, True, scratch.out_lo, scratch.out_hi):
+        if _clipped_bounds(members[j], prim_lo, prim_hi, clip_off, clip_v, spheres, clo, chi, out_lo, out_hi):
             n += 1
     return n, _area(chi[0] - clo[0], chi[1] - clo[1], chi[2] - clo[2])
 
