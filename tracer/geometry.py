@@ -368,9 +368,13 @@ def hit_cone(geo, i, ray, tmin, tmax):
     return INF
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def hit_element(kind, idx, geo, ray, tmin, tmax):
     """Nearest ``t`` of ``ray`` and element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``.
+
+    Inlined into the traversal (numba IR): called once per test, it would
+    otherwise take the ``Geometry`` bundle apart, with reference counting,
+    on every call (the renderer ran 3% slower than with positional arrays).
 
     ``kind`` is an :class:`~tracer.scene.ElementKind` value, ``idx`` the row
     in that kind's arrays of ``geo`` (:class:`Geometry`).
