@@ -38,3 +38,20 @@ def test_counter_names_follow_the_enum():
     assert COUNTER_NAMES[Counter.NODE_VISITS] == "node_visits"
     assert COUNTER_NAMES[Counter.TESTS_SPHERE + 4] == "tests_cone"
     assert len(COUNTER_NAMES) == 18
+
+
+def test_write_flag_round_trips_and_leaves_kind_and_id_alone():
+    from tracer.records import WRITE_FLAG, make_write_record, record_is_write
+
+    kinds = np.array([0, 3, 8, 8])
+    ids = np.array([0, 5, INDEX_MASK, 12])
+    writes = np.array([False, True, True, False])
+    packed = pack(kinds, ids, writes)
+    assert np.array_equal((packed & np.uint32(WRITE_FLAG)) != 0, writes)
+    back_kinds, back_ids = unpack(packed)
+    assert np.array_equal(back_kinds, kinds) and np.array_equal(back_ids, ids)
+    for record, kind, index, write in zip(packed, kinds, ids, writes):
+        assert record_kind(record) == kind and record_id(record) == index
+        assert record_is_write(record) == write
+    assert make_write_record(3, 5) == packed[1]
+    assert make_record(3, 5) == pack(3, 5)

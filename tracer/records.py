@@ -1,7 +1,9 @@
 """The trace format's contract: record kinds, record packing and counters.
 
-A *record* is one read of one scene record, packed into a uint32 as
-``kind << KIND_SHIFT | index`` (4-bit :class:`RecordKind`, 28-bit index).
+A *record* is one access to one scene record, packed into a uint32 as
+``kind << KIND_SHIFT | write << WRITE_SHIFT | index`` (4-bit
+:class:`RecordKind`, a write flag, 27-bit index). Records are reads unless
+the write flag is set.
 Writers (the tracer's kernels) and readers (layouts, simulation) use the
 names here, never bare shifts, masks or counter positions: the compiled
 helpers :func:`make_record`, :func:`record_kind` and :func:`record_id` inline
@@ -20,8 +22,19 @@ import numpy as np
 from numba import njit
 
 KIND_SHIFT = 28
-INDEX_MASK = (1 << KIND_SHIFT) - 1
+WRITE_SHIFT = 27
+WRITE_FLAG = 1 << WRITE_SHIFT
+INDEX_MASK = WRITE_FLAG - 1
 FORMAT_VERSION = 1
+
+# The budget of the 16 record kinds (4 bits), planned once for every workload:
+#   0-8   in use: kd node, index entry, five primitive kinds, material, light;
+#   9-12  the study-era tracer's own data (issue 12): ray-stack entry, hit
+#         record, shading temporaries, frame-buffer pixel;
+#   13-14 textures (issue 15): texel (a global texel offset across every
+#         texture and mip level, 27 bits = 128 M texels) and texture header;
+#   15    spare.
+# A kind is added to RecordKind when its writer lands, with its counter.
 
 
 class RecordKind(enum.IntEnum):
@@ -95,19 +108,31 @@ def record_kind(record):
 
 
 @njit(cache=True, inline="always")
+def record_is_write(record):
+    """Whether a packed record is a write (its write flag is set)."""
+    return (np.int64(record) & WRITE_FLAG) != 0
+
+
+@njit(cache=True, inline="always")
+def make_write_record(kind, index):
+    """The packed uint32 record of a write to ``index`` of ``kind``."""
+    return np.uint32((np.int64(kind) << KIND_SHIFT) | WRITE_FLAG | np.int64(index))
+
+
+@njit(cache=True, inline="always")
 def record_id(record):
     """The index part of a packed record, as an int64."""
     return np.int64(record & INDEX_MASK)
 
 
-def pack(kind, index) -> np.ndarray:
-    """Pack ``kind`` and ``index`` (scalars or arrays) into uint32 records.
+def pack(kind, index, write=False) -> np.ndarray:
+    """Pack ``kind``, ``index`` and the write flag (scalars or arrays) into uint32 records.
 
     Raises
     ------
     ValueError
         If a kind is not a :class:`RecordKind` or an index is outside
-        ``0 .. 2**28 - 1``.
+        ``0 .. 2**27 - 1``.
     """
     kind = np.asarray(kind, dtype=np.int64)
     index = np.asarray(index, dtype=np.int64)
@@ -115,10 +140,11 @@ def pack(kind, index) -> np.ndarray:
         raise ValueError(f"pack: kind must be a RecordKind value (0..{int(max(RecordKind))})")
     if np.any((index < 0) | (index > INDEX_MASK)):
         raise ValueError(f"pack: index must be in 0..{INDEX_MASK}")
-    return ((kind << KIND_SHIFT) | index).astype(np.uint32)
+    flag = np.where(np.asarray(write, dtype=bool), WRITE_FLAG, 0)
+    return ((kind << KIND_SHIFT) | flag | index).astype(np.uint32)
 
 
 def unpack(records) -> tuple[np.ndarray, np.ndarray]:
-    """Split uint32 records into ``(kind, index)`` arrays (uint8, uint32)."""
+    """Split uint32 records into ``(kind, index)`` arrays (uint8, uint32), dropping the write flag."""
     records = np.asarray(records, dtype=np.uint32)
     return (records >> KIND_SHIFT).astype(np.uint8), records & np.uint32(INDEX_MASK)

@@ -1,7 +1,7 @@
 """Per-pixel access logs: record packing, counters and :class:`AccessTrace`.
 
 A *record* is one read of one scene record, packed into a uint32 as
-described in :mod:`tracer.records` (4-bit kind, 28-bit index):
+described in :mod:`tracer.records` (4-bit kind, write flag, 27-bit index):
 
 =============  ===============================================================
 KD_NODE        kd-tree node ``index`` (row of ``KdTree.nodes``), each visit;
