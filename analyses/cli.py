@@ -53,8 +53,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings as ``coherence: warning: ...``, one line each (no source line under it)."""
+    stream = file if file is not None else sys.stderr
+    try:
+        stream.write(f"coherence: warning: {message}\n")
+    except (OSError, ValueError):
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; return its exit status (2 for a user error, printed in one line)."""
+    """Run one subcommand; return its exit status.
+
+    2 for a user error (printed in one line), 130 after Ctrl-C (one line),
+    141 (128 + SIGPIPE, as a C tool killed by it) without a word when the
+    reader of the output went away (a closed pipe: ``| head``).
+    """
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -66,11 +82,43 @@ def main(argv: list[str] | None = None) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
+    warnings.showwarning = _one_line_warning
     try:
-        return int(args.func(args) or 0)
-    except (UserError, ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as error:
-        print(f"coherence {args.command}: error: {error}", file=sys.stderr)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # inside the try: a closed pipe shows up here, not at exit
+        return status
+    except (UserError, ValueError, OSError) as error:
+        if isinstance(error, BrokenPipeError):
+            return _quiet_broken_pipe()
+        print(f"coherence {args.command}: error: {_error_text(error)}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print(f"coherence {args.command}: error: out of memory; try a smaller --size", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"coherence {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _error_text(error: Exception) -> str:
+    """One line: the message, or for a bare OS error its reason and the file it names."""
+    if isinstance(error, OSError) and error.strerror and error.filename:
+        return f"{error.filename}: {error.strerror}"
+    text = str(error).strip() or type(error).__name__
+    return " ".join(text.splitlines())
+
+
+def _quiet_broken_pipe() -> int:
+    # The reader closed the pipe: say nothing, and keep Python from complaining at exit when it
+    # flushes stdout into the same closed pipe.
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 141
 
 
 if __name__ == "__main__":

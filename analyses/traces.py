@@ -12,18 +12,26 @@ trace by everything that decides its content:
   ``tracer`` package's source files (an editable checkout changes the
   renderer without changing the version).
 
-Layout of the cache folder (default ``~/.cache/raytrace-coherence/traces``,
-overridden by the ``COHERENCE_CACHE`` environment variable or ``cache_dir``)::
+The cache folder is ``cache_dir`` when given (the CLI's ``--cache``), else
+the ``COHERENCE_CACHE`` environment variable, else
+``~/.cache/raytrace-coherence``; whichever names it, its layout is the same::
 
-    <cache>/<scene>-<size>-<kd>-d<depth>-<hash>/
-        trace/         the AccessTrace (pixel_offsets.npy, records.npy, ...)
+    <cache>/traces/<scene>-<size>-<kd>-d<depth>-<hash>/
+        trace/         the AccessTrace (pixel_offsets.npy, records.npy, ...,
+                       meta.json with a checksum of every array)
         image.png      the rendered image
         render.json    tree statistics, kd-tree config, counter totals,
-                       timings of the render, and the key's ingredients
+                       timings of the render, the key's ingredients and the
+                       image's checksum
+    <cache>/scenes/    NFF files generated for what-if scene sizes
 
 An entry is written into a temporary sibling folder and renamed into place,
 so readers never see half an entry; two processes racing for one key both
-render, and the first rename wins.
+render, and the first rename wins. Every load verifies the checksums: a
+damaged entry is reported in one line (a warning), evicted and rendered
+again. Temporary folders of runs that died are removed by the next run. A
+cache folder that cannot be written is read from, and new traces are
+rendered into a temporary folder for this process only, with a warning.
 
 >>> scene, trace, info = cached_trace("tetra", 64)        # doctest: +SKIP
 >>> info["cached"]                                         # doctest: +SKIP
@@ -31,6 +39,7 @@ False
 """
 from __future__ import annotations
 
+import atexit
 import hashlib
 import json
 import os
@@ -38,26 +47,76 @@ import shutil
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
+import xxhash
+
+from rtcommon.files import make_temp_dir, remove_stale_temporaries
 from rtcommon.jsonio import json_default
 from rtcommon.validate import require_int
 
-__all__ = ["cached_trace", "default_cache_dir", "trace_key", "CACHE_ENV"]
+__all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir", "trace_key", "CACHE_ENV"]
 
 #: Environment variable naming the cache folder (holding ``traces/``).
 CACHE_ENV = "COHERENCE_CACHE"
 
 _INFO = "render.json"
 _KD_BUILDERS = ("sah", "median")
+_PRIVATE_CACHES: dict = {}  # read-only cache root -> this process's temporary stand-in
+
+
+def cache_root(cache_dir=None) -> Path:
+    """The cache folder: ``cache_dir``, else ``$COHERENCE_CACHE``, else ``~/.cache/raytrace-coherence``."""
+    if cache_dir is not None and os.fspath(cache_dir) != "":
+        return Path(cache_dir).expanduser()
+    root = os.environ.get(CACHE_ENV)
+    if root:
+        return Path(root).expanduser()
+    return Path.home() / ".cache" / "raytrace-coherence"
 
 
 def default_cache_dir() -> Path:
-    """``$COHERENCE_CACHE/traces`` or ``~/.cache/raytrace-coherence/traces``."""
-    root = os.environ.get(CACHE_ENV)
-    if root:
-        return Path(root).expanduser() / "traces"
-    return Path.home() / ".cache" / "raytrace-coherence" / "traces"
+    """Folder of trace entries: ``<cache_root()>/traces``."""
+    return cache_root() / "traces"
+
+
+def check_cache_dir(cache_dir=None) -> Path:
+    """The cache root, refused up front when it (or a parent on its path) is a file.
+
+    Raises
+    ------
+    NotADirectoryError
+        Naming where the path came from (``--cache`` or ``$COHERENCE_CACHE``).
+    """
+    root = cache_root(cache_dir)
+    origin = "cache folder" if cache_dir is not None else (f"${CACHE_ENV}" if os.environ.get(CACHE_ENV)
+                                                          else "cache folder")
+    for path in (root / "traces", root / "scenes", root, *root.parents):
+        if path.exists():
+            if not path.is_dir():
+                raise NotADirectoryError(f"{origin} {str(root)!r}: {str(path)!r} is a file, not a folder")
+            if path != root / "traces" and path != root / "scenes":
+                break
+    return root
+
+
+def _writable_traces_folder(root: Path) -> Path:
+    """``root/traces``, or a temporary stand-in (with a warning) when the cache cannot be written."""
+    folder = root / "traces"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = make_temp_dir(folder / "probe")
+        probe.rmdir()
+        return folder
+    except OSError as error:
+        if root not in _PRIVATE_CACHES:
+            stand_in = Path(tempfile.mkdtemp(prefix="coherence-cache-"))
+            atexit.register(shutil.rmtree, stand_in, ignore_errors=True)
+            _PRIVATE_CACHES[root] = stand_in
+            warnings.warn(f"trace cache {str(root)!r} is not writable ({error.strerror or error}); "
+                          "rendering without caching", stacklevel=3)
+        return _PRIVATE_CACHES[root]
 
 
 def _source_digest() -> str:
@@ -154,21 +213,29 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
     from tracer.scenes import load
     from tracer.trace import AccessTrace
 
+    from tracer.trace import TraceIntegrityError
+
     size = require_int("size", size, 1)
     if kd not in _KD_BUILDERS:
         raise ValueError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
+    root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth)
-    root = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
-    entry = root / key
+    entry = root / "traces" / key
     info = _read_entry(entry)
     if info is not None:
         try:
             trace = AccessTrace.load(entry / "trace", mmap=True)
-        except (FileNotFoundError, ValueError):  # damaged entry: render it again
+            _check_image(entry, info)
+        except (FileNotFoundError, TraceIntegrityError) as error:  # damaged entry: evict, render again
+            warnings.warn(f"damaged trace cache entry {key}: {str(error).rsplit(': ', 1)[-1]}; "
+                          "evicting it and rendering again", stacklevel=2)
             shutil.rmtree(entry, ignore_errors=True)
             info = None
     if info is None:
+        folder = _writable_traces_folder(root)
+        remove_stale_temporaries(folder)
+        entry = folder / key
         _render_entry(scene, size, kd, key, entry, progress)
         info = _read_entry(entry)
         if info is None:
@@ -182,10 +249,20 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
     return scene, trace, info
 
 
+def _check_image(entry: Path, info: dict) -> None:
+    from tracer.trace import TraceIntegrityError
+
+    expected = info.get("image_checksum")
+    if expected is not None and xxhash.xxh3_64_hexdigest((entry / "image.png").read_bytes()) != expected:
+        raise TraceIntegrityError("image.png does not match its checksum")
+
+
 def _read_entry(entry: Path) -> dict | None:
     try:
         info = json.loads((entry / _INFO).read_text())
-    except (FileNotFoundError, NotADirectoryError, json.JSONDecodeError):
+    except (FileNotFoundError, NotADirectoryError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if not isinstance(info, dict):
         return None
     if not (entry / "image.png").is_file() or not (entry / "trace" / "meta.json").is_file():
         return None
@@ -198,8 +275,7 @@ def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bo
     from tracer.kdtree import KdTreeConfig
     from tracer.render import render, save_png
 
-    entry.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{key}.", suffix=".tmp", dir=entry.parent))
+    tmp = make_temp_dir(entry)
     try:
         bar = tqdm(total=1, desc=f"rendering {scene.name} {size}x{size} (logging accesses)", unit="image",
                    disable=not progress, leave=False, file=sys.stderr)
@@ -214,6 +290,7 @@ def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bo
             "key": key, "scene": scene.name, "size": size, "kd": kd, "max_depth": int(scene.max_depth),
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
+            "image_checksum": xxhash.xxh3_64_hexdigest((tmp / "image.png").read_bytes()),
         }
         (tmp / _INFO).write_text(json.dumps(info, indent=1, default=json_default) + "\n")
         del result

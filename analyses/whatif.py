@@ -400,7 +400,7 @@ def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
 
 def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     """An NFF file of an SPD scene at another size factor (in the cache folder)."""
-    from analyses.traces import default_cache_dir
+    from analyses.traces import cache_root
     from tracer import spd
     from tracer.nff import write_nff
     from tracer.study import PAPER_DEPTH, canonical_scene_name
@@ -412,8 +412,14 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     size_factor = require_int("scene_size (an SPD size factor)", size_factor, 1)
     scene = generators[key](size_factor)
     scene.max_depth = PAPER_DEPTH[key]
-    folder = Path(cache_dir) if cache_dir else default_cache_dir().parent / "scenes"
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = cache_root(cache_dir) / "scenes"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except PermissionError:  # a read-only cache: generate the scene for this process only
+        import tempfile
+
+        folder = Path(tempfile.gettempdir()) / f"coherence-scenes-{os.getuid()}"
+        folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}-size{size_factor}.nff"
     if not path.exists():
         write_nff(scene, path)

@@ -1,9 +1,86 @@
-"""Atomic file writing: a reader sees the old file or the whole new one, never half."""
+"""Atomic file writing: a reader sees the old file or the whole new one, never half.
+
+Temporary files and folders are named ``.<name>~<host>~<pid>~<random>.tmp``
+beside their target, so that a later run can tell whose they are: one whose
+process is gone from this host is stale (:func:`remove_stale_temporaries`),
+one of a live process (a concurrent run) is never touched.
+"""
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import signal
+import socket
 import tempfile
 from pathlib import Path
+
+#: What every temporary name ends with.
+TEMP_SUFFIX = ".tmp"
+_TEMP_NAME = re.compile(r"^\.(?P<name>.+)~(?P<host>[A-Za-z0-9_-]+)~(?P<pid>\d+)~[^~]*\.tmp$")
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname() or "host")[:64] or "host"
+
+
+def temp_prefix(name: str) -> str:
+    """Prefix of a temporary file or folder standing in for ``name`` (host and PID inside)."""
+    return f".{name}~{_host()}~{os.getpid()}~"
+
+
+def make_temp_dir(target: str | os.PathLike) -> Path:
+    """A new empty folder beside ``target`` (parents created) named by :func:`temp_prefix`."""
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=temp_prefix(target.name), suffix=TEMP_SUFFIX, dir=target.parent))
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):  # someone else's live process, or nonsense: keep
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Delete temporaries in ``folder`` left by processes of this host that no longer run.
+
+    Only names of the :func:`temp_prefix` form are considered; those of other
+    hosts (a shared file system) and of live processes are kept.
+
+    Returns
+    -------
+    list of pathlib.Path
+        What was removed.
+    """
+    folder = Path(folder)
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    host = _host()
+    for entry in entries:
+        match = _TEMP_NAME.match(entry.name)
+        if not match or match["host"] != host:
+            continue
+        pid = int(match["pid"])
+        if pid == os.getpid() or _process_alive(pid):
+            continue
+        path = Path(entry.path)
+        try:
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+            removed.append(path)
+        except OSError:
+            pass  # another run cleaned it, or we may not: leave it
+    return removed
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
@@ -12,20 +89,66 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     The file gets the permissions a plain ``open`` would give (0666 less the
     umask), not the private 0600 of a temporary file.
     """
-    path = Path(path)
-    handle, temporary = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    if isinstance(data, str):
+        raise TypeError("write_bytes_atomic needs bytes, not str (use write_text_atomic)")
+    write_files_atomic({path: data})
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8, newlines kept as ``\\n``) atomically; see :func:`write_bytes_atomic`."""
     write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def write_files_atomic(files: dict) -> None:
+    """Write several files as one unit: every one to a temporary name first, then all renamed.
+
+    Nothing is renamed until every temporary is complete, and Ctrl-C is held
+    off during the renames, so an interrupted run leaves the old set of files
+    or the new one, never a mixture.
+
+    Parameters
+    ----------
+    files : dict of path to bytes or str
+        Contents by target path (``str`` is written as UTF-8).
+    """
+    umask = os.umask(0)
+    os.umask(umask)
+    temporaries = []
+    try:
+        for path, data in files.items():
+            path = Path(path)
+            handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=temp_prefix(path.name), suffix=TEMP_SUFFIX)
+            temporaries.append((temporary, path))
+            with os.fdopen(handle, "wb") as stream:
+                stream.write(data.encode("utf-8") if isinstance(data, str) else data)
+            os.chmod(temporary, 0o666 & ~umask)
+        with _interrupts_deferred():
+            for temporary, path in temporaries:
+                os.replace(temporary, path)
+    except BaseException:
+        for temporary, _ in temporaries:
+            Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+class _interrupts_deferred:
+    """Hold SIGINT until the block ends (main thread only; elsewhere a no-op)."""
+
+    def __enter__(self):
+        self.pending = False
+        self.previous = None
+        try:
+            self.previous = signal.signal(signal.SIGINT, self._hold)
+        except ValueError:  # not the main thread
+            self.previous = None
+        return self
+
+    def _hold(self, signum, frame):
+        self.pending = True
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+            if self.pending:
+                raise KeyboardInterrupt
+        return False

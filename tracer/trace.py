@@ -23,17 +23,28 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import xxhash
+from numba import njit
 
+from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
 from rtcommon.jsonio import json_default
 from tracer.records import (  # noqa: F401  (re-exported: the format's names)
     COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
-    Counter, RecordKind, pack, unpack,
+    Counter, RecordKind, pack, record_id, record_kind, unpack,
 )
+
+#: The hash recorded for each array in ``meta.json`` (xxHash's XXH3, 64 bits).
+CHECKSUM_ALGORITHM = "xxh3_64"
+_ARRAYS = ("pixel_offsets", "records", "counters")
+_CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
+
+
+class TraceIntegrityError(ValueError):
+    """A trace's files are damaged: a checksum differs, or the arrays break the format's rules."""
 
 
 def package_versions() -> dict:
@@ -125,9 +136,10 @@ class AccessTrace:
         """Write the trace to ``directory`` atomically.
 
         Files: ``pixel_offsets.npy``, ``records.npy``, ``counters.npy`` and
-        ``meta.json``. They are written to a temporary sibling directory that
-        is renamed into place, so a reader never sees a half-written trace.
-        Records are copied in chunks (a memmapped trace is not loaded).
+        ``meta.json`` (which holds a checksum of each array). They are
+        written to a temporary sibling directory that is renamed into place,
+        so a reader never sees a half-written trace. Records are copied in
+        chunks (a memmapped trace is not loaded).
 
         Returns
         -------
@@ -136,16 +148,22 @@ class AccessTrace:
         directory = Path(directory)
         tmp = _temp_sibling(directory)
         try:
-            np.save(tmp / "pixel_offsets.npy", np.asarray(self.pixel_offsets, dtype=np.int64))
-            np.save(tmp / "counters.npy", np.asarray(self.counters, dtype=np.int64))
+            checksums = {}
+            for name, array in (("pixel_offsets", self.pixel_offsets), ("counters", self.counters)):
+                array = np.ascontiguousarray(array, dtype=np.int64)
+                np.save(tmp / f"{name}.npy", array)
+                checksums[name] = array_checksum(array)
             out = np.lib.format.open_memmap(tmp / "records.npy", mode="w+", dtype=np.uint32,
                                             shape=(self.n_records,))
-            step = 1 << 24
-            for a in range(0, self.n_records, step):
-                out[a:a + step] = self.records[a:a + step]
+            hasher = xxhash.xxh3_64()
+            for a in range(0, self.n_records, _CHUNK):
+                piece = np.ascontiguousarray(self.records[a:a + _CHUNK], dtype=np.uint32)
+                out[a:a + _CHUNK] = piece
+                hasher.update(piece)
             out.flush()
             del out
-            _write_meta(tmp, self.width, self.height, self.n_records, self.metadata)
+            checksums["records"] = hasher.hexdigest()
+            _write_meta(tmp, self.width, self.height, self.n_records, self.metadata, checksums)
             _publish(tmp, directory)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -154,42 +172,183 @@ class AccessTrace:
 
     @classmethod
     def load(cls, directory, *, mmap: bool = True) -> "AccessTrace":
-        """Read a trace written by :meth:`save` (records memory-mapped by default).
+        """Read a trace written by :meth:`save`, checking every byte (records memory-mapped by default).
+
+        Each array is hashed and compared with the checksum in ``meta.json``;
+        the offsets must rise from 0 to the record count, and every record
+        must name a known kind and an index below that kind's record count
+        (``metadata["record_counts"]``, the scene's and tree's sizes), so no
+        later kernel can index out of range. Traces written before
+        checksums existed get the structural checks only.
 
         Raises
         ------
         FileNotFoundError
             If the directory or one of its files is missing.
-        ValueError
-            If the files are inconsistent.
+        TraceIntegrityError
+            (a ValueError) If a file is damaged or the files are inconsistent;
+            the message names the trace and the file.
         """
         directory = Path(directory)
         if not directory.is_dir():
+            if directory.exists():
+                raise NotADirectoryError(f"trace {str(directory)!r} is a file, not a trace folder")
             raise FileNotFoundError(f"no such trace directory: {str(directory)!r}")
         for name in ("meta.json", "pixel_offsets.npy", "records.npy", "counters.npy"):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"trace {str(directory)!r} lacks {name}")
-        meta = json.loads((directory / "meta.json").read_text())
-        if meta.get("format_version") != FORMAT_VERSION:
-            raise ValueError(f"trace {str(directory)!r}: unsupported format_version {meta.get('format_version')!r}")
-        records = np.load(directory / "records.npy", mmap_mode="r" if mmap else None)
-        return cls(pixel_offsets=np.load(directory / "pixel_offsets.npy"),
-                   records=records,
-                   counters=np.load(directory / "counters.npy"),
-                   width=int(meta["width"]), height=int(meta["height"]),
-                   metadata=meta.get("metadata", {}))
+        meta = _read_meta(directory)
+        arrays = {}
+        for name in _ARRAYS:
+            try:
+                arrays[name] = np.load(directory / f"{name}.npy",
+                                       mmap_mode="r" if (mmap and name == "records") else None,
+                                       allow_pickle=False)
+            except (ValueError, OSError, EOFError) as error:
+                raise TraceIntegrityError(f"trace {str(directory)!r}: {name}.npy is damaged ({error})") from None
+        where = f"trace {str(directory)!r}"
+        checksums = meta.get("checksums")
+        _check_small_arrays(arrays, checksums, where)  # before the shape checks, so the message names the file
+        try:
+            width, height = int(meta["width"]), int(meta["height"])
+            trace = cls(pixel_offsets=arrays["pixel_offsets"], records=arrays["records"],
+                        counters=arrays["counters"], width=width, height=height,
+                        metadata=meta.get("metadata", {}))
+        except (KeyError, TypeError, ValueError) as error:
+            raise TraceIntegrityError(f"trace {str(directory)!r}: inconsistent files ({error})") from None
+        _verify_records(trace, checksums, where)
+        return trace
+
+
+def array_checksum(array: np.ndarray) -> str:
+    """XXH3-64 of an array's bytes in C order, as 16 hex digits (streamed in chunks)."""
+    hasher = xxhash.xxh3_64()
+    flat = array.reshape(-1) if array.flags.c_contiguous else np.ascontiguousarray(array).reshape(-1)
+    step = _CHUNK * 4 // max(flat.itemsize, 1)
+    for a in range(0, flat.size, step):
+        hasher.update(np.ascontiguousarray(flat[a:a + step]))
+    return hasher.hexdigest()
+
+
+def verify_trace(trace: AccessTrace, checksums: dict | None = None, *, where: str = "trace") -> None:
+    """Check a trace's arrays against their checksums and the format's rules, in one pass over the records.
+
+    Parameters
+    ----------
+    trace : AccessTrace
+    checksums : dict, optional
+        ``{"algorithm": "xxh3_64", "pixel_offsets": hex, "records": hex,
+        "counters": hex}`` as stored in ``meta.json``; None skips the hashes.
+    where : str
+        How messages name the trace.
+
+    Raises
+    ------
+    TraceIntegrityError
+        Naming the first rule broken: a checksum, the offsets, a record's
+        kind or index, a negative counter.
+    """
+    _check_small_arrays({name: getattr(trace, name) for name in ("pixel_offsets", "counters")}, checksums, where)
+    _verify_records(trace, checksums, where)
+
+
+def _check_small_arrays(arrays: dict, checksums: dict | None, where: str) -> None:
+    if checksums is None:
+        return
+    if not isinstance(checksums, dict) or checksums.get("algorithm") != CHECKSUM_ALGORITHM:
+        raise TraceIntegrityError(f"{where}: unknown checksum algorithm in meta.json")
+    for name in ("pixel_offsets", "counters"):
+        if array_checksum(np.asarray(arrays[name])) != checksums.get(name):
+            raise TraceIntegrityError(f"{where}: {name}.npy does not match its checksum (file damaged)")
+
+
+def _verify_records(trace: AccessTrace, checksums: dict | None, where: str) -> None:
+    """The offsets' and counters' rules, and one pass over the records: hash, kinds and indices."""
+    offsets = np.asarray(trace.pixel_offsets)
+    if offsets[0] != 0 or np.any(offsets[1:] < offsets[:-1]):
+        raise TraceIntegrityError(f"{where}: pixel_offsets must rise from 0 to the record count")
+    if np.any(np.asarray(trace.counters) < 0):
+        raise TraceIntegrityError(f"{where}: counters must not be negative")
+    limits = _index_limits(trace.metadata)
+    hasher = xxhash.xxh3_64()
+    records = trace.records
+    for a in range(0, trace.n_records, _CHUNK):
+        piece = np.ascontiguousarray(records[a:a + _CHUNK])
+        hasher.update(piece)
+        bad = _first_record_out_of_range(piece, limits)
+        if bad >= 0:
+            record = int(piece[bad])
+            kind, index = record >> KIND_SHIFT, record & INDEX_MASK
+            what = RecordKind(kind).name.lower() if kind < N_KINDS else f"unknown kind {kind}"
+            raise TraceIntegrityError(f"{where}: record {a + bad} reads {what} {index}, "
+                                      f"beyond the {int(limits[kind])} records the scene holds (file damaged?)")
+    if checksums is not None and hasher.hexdigest() != checksums.get("records"):
+        raise TraceIntegrityError(f"{where}: records.npy does not match its checksum (file damaged)")
+
+
+@njit(cache=True, nogil=True)
+def _first_record_out_of_range(records, index_limits):
+    """Position of the first record whose index is not below its kind's limit, or -1.
+
+    Parameters
+    ----------
+    records : ndarray of uint32, shape (N,)
+    index_limits : ndarray of int64, shape (16,)
+        One past the largest valid index of each kind (0: no such kind).
+    """
+    for position in range(records.shape[0]):
+        record = records[position]
+        if record_id(record) >= index_limits[record_kind(record)]:
+            return position
+    return -1
+
+
+def _index_limits(metadata: dict) -> np.ndarray:
+    """Per kind (16 slots), one past the largest valid record index; 0 for kinds that do not exist."""
+    limits = np.zeros(1 << (32 - KIND_SHIFT), dtype=np.int64)
+    counts = metadata.get("record_counts") or {}
+    for kind in RecordKind:
+        count = counts.get(kind.name.lower())
+        limits[kind] = INDEX_MASK + 1 if count is None else min(int(count), INDEX_MASK + 1)
+    return limits
+
+
+def _read_meta(directory: Path) -> dict:
+    where = f"trace {str(directory)!r}"
+    try:
+        meta = json.loads((directory / "meta.json").read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise TraceIntegrityError(f"{where}: meta.json is damaged ({error})") from None
+    if not isinstance(meta, dict):
+        raise TraceIntegrityError(f"{where}: meta.json is damaged (not an object)")
+    stored = meta.pop("meta_checksum", None)
+    if stored is not None and stored != _meta_checksum(meta):
+        raise TraceIntegrityError(f"{where}: meta.json does not match its checksum (file damaged)")
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise TraceIntegrityError(f"{where}: unsupported format_version {meta.get('format_version')!r}")
+    return meta
+
+
+def _meta_checksum(meta: dict) -> str:
+    return xxhash.xxh3_64_hexdigest(json.dumps(meta, sort_keys=True).encode("utf-8"))
 
 
 def _temp_sibling(directory: Path) -> Path:
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{directory.name}.", suffix=".tmp", dir=directory.parent))
+    # Runs that died (SIGKILL, power cut) leave their temporaries: clear them first.
+    if directory.parent.is_dir():
+        remove_stale_temporaries(directory.parent)
+    return make_temp_dir(directory)
 
 
-def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: dict) -> None:
+def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: dict, checksums: dict) -> None:
     meta = {"format_version": FORMAT_VERSION, "width": int(width), "height": int(height),
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
-            "counter_names": list(COUNTER_NAMES), "metadata": metadata}
-    (tmp / "meta.json").write_text(json.dumps(meta, indent=1, default=json_default))
+            "counter_names": list(COUNTER_NAMES), "metadata": metadata,
+            "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums}}
+    # The checksum covers the JSON as it reads back (numpy values become plain ones).
+    meta = json.loads(json.dumps(meta, default=json_default))
+    meta["meta_checksum"] = _meta_checksum(meta)
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1))
 
 
 def _publish(tmp: Path, directory: Path) -> None:
@@ -198,9 +357,11 @@ def _publish(tmp: Path, directory: Path) -> None:
     # except between the two renames.
     old = None
     if directory.exists():
+        if not directory.is_dir():
+            raise NotADirectoryError(f"{str(directory)!r} exists and is a file, not a trace directory; not overwriting")
         if not (directory / "meta.json").is_file() and any(directory.iterdir()):
             raise ValueError(f"{str(directory)!r} exists and is not a trace directory; not overwriting")
-        old = directory.with_name(f".{directory.name}.old-{os.getpid()}")
+        old = directory.with_name(f"{temp_prefix(directory.name)}old.tmp")
         os.replace(directory, old)
     os.replace(tmp, directory)
     if old is not None:
@@ -218,8 +379,12 @@ class TraceWriter:
 
     def __init__(self, directory):
         self.directory = Path(directory)
+        if self.directory.exists() and not self.directory.is_dir():
+            raise NotADirectoryError(f"{str(self.directory)!r} exists and is a file, not a trace directory; "
+                                     "not overwriting")
         self.tmp = _temp_sibling(self.directory)
         self.n_records = 0
+        self._hasher = xxhash.xxh3_64()
         self._file = open(self.tmp / "records.npy", "wb")
         self._file.write(_npy_header(0))  # rewritten with the final length
 
@@ -235,6 +400,7 @@ class TraceWriter:
         """Append records (uint32, in sample order)."""
         records = np.ascontiguousarray(records, dtype=np.uint32)
         self._file.write(memoryview(records).cast("B"))
+        self._hasher.update(records)
         self.n_records += len(records)
 
     def abort(self) -> None:
@@ -250,9 +416,13 @@ class TraceWriter:
         self._file.seek(0)
         self._file.write(_npy_header(n))
         self._file.close()
-        np.save(self.tmp / "pixel_offsets.npy", np.asarray(pixel_offsets, dtype=np.int64))
-        np.save(self.tmp / "counters.npy", np.asarray(counters, dtype=np.int64))
-        _write_meta(self.tmp, width, height, n, metadata)
+        pixel_offsets = np.ascontiguousarray(pixel_offsets, dtype=np.int64)
+        counters = np.ascontiguousarray(counters, dtype=np.int64)
+        np.save(self.tmp / "pixel_offsets.npy", pixel_offsets)
+        np.save(self.tmp / "counters.npy", counters)
+        checksums = {"pixel_offsets": array_checksum(pixel_offsets), "records": self._hasher.hexdigest(),
+                     "counters": array_checksum(counters)}
+        _write_meta(self.tmp, width, height, n, metadata, checksums)
         _publish(self.tmp, self.directory)
         return AccessTrace.load(self.directory, mmap=mmap)
 

@@ -13,8 +13,10 @@ EPILOG = """\
 SCENE is one of the study's scenes or a .nff/.obj path; default balls. The
 trace is rendered once and cached (key: scene or file content, size, kd
 builder, depth, package version) under
-~/.cache/raytrace-coherence/traces, or $COHERENCE_CACHE/traces, or --cache;
-a second report of the same scene and size reuses it.
+CACHE/traces, where CACHE is --cache, else $COHERENCE_CACHE, else
+~/.cache/raytrace-coherence; a second report of the same scene and size
+reuses it. Every load checks the trace's checksums: a damaged entry is
+reported, evicted and rendered again.
 
 Every mapping runs at 1..--max-processes processes on --cpus simulated CPUs
 (default 8 CPUs, 1..16 processes, as in the study). Real time assumes

@@ -1,0 +1,156 @@
+"""Checks every subcommand makes before it computes anything.
+
+A run that fails after minutes of rendering, or after filling the disk, is
+worse than one that refuses at once. These functions look at the paths and
+the sizes a command was given and raise ``ValueError`` (or an ``OSError``
+subclass) with a one-line message naming the option, so the command line
+prints ``coherence CMD: error: ...`` and exits with 2 before any work.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+from pathlib import Path
+
+#: Bytes held in memory per pixel by a render or a replay: the image (3
+#: float64), per-pixel counters (18 int64), offsets, costs and work lists of
+#: the simulation, with room for numpy's temporaries. Measured peak at 512x512
+#: and 1024x1024 (balls, tetra) was below this; see the tests.
+BYTES_PER_PIXEL = 1024
+#: Records (4 bytes each) per pixel assumed for a trace on disk when no pilot
+#: render is made (more than any built-in scene at depth 2-5 needs).
+GIB = 2 ** 30
+
+
+def _gb(value: float) -> str:
+    return f"{value / GIB:.1f} GB"
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (``MemAvailable``), or None if unknown."""
+    try:
+        with open("/proc/meminfo") as stream:
+            for line in stream:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not on Linux
+        return None
+
+
+def check_memory(option: str, size: int, *, extra_bytes: int = 0, images: int = 1) -> None:
+    """Refuse an image size whose per-pixel arrays cannot fit in memory.
+
+    Parameters
+    ----------
+    option : str
+        How the message names the size (``--size``).
+    size : int
+        Image width and height.
+    extra_bytes : int
+        Further bytes held at once (records kept in memory).
+    images : int
+        Per-pixel array sets held at once (several traces of a study).
+    """
+    needed = images * size * size * BYTES_PER_PIXEL + extra_bytes
+    available = available_memory()
+    if available is not None and needed > available:
+        raise ValueError(f"{option} {size} needs about {_gb(needed)} of memory, {_gb(available)} available")
+
+
+def check_disk(option: str, folder, needed: int) -> None:
+    """Refuse when ``needed`` bytes will not fit on the file system holding ``folder``."""
+    probe = Path(folder).expanduser().absolute()
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    try:
+        free = shutil.disk_usage(probe).free
+    except OSError:
+        return
+    if needed > free:
+        raise ValueError(f"{option} needs about {_gb(needed)} of disk space in {str(probe)!r}, {_gb(free)} free")
+
+
+def check_input_file(option: str, path) -> Path:
+    """``path`` as a Path, refused unless it is an existing regular file (no folder, FIFO, device).
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, ValueError
+    """
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{option} {str(path)!r}: no such file") from None
+    except NotADirectoryError:
+        raise FileNotFoundError(f"{option} {str(path)!r}: a parent on the path is a file") from None
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(f"{option} {str(path)!r} is a folder, not a file")
+    if not stat.S_ISREG(mode):
+        raise ValueError(f"{option} {str(path)!r} is not a regular file (a pipe or device cannot be read twice)")
+    return path
+
+
+def check_output_file(option: str, path) -> Path:
+    """Refuse an output file path that cannot be written, before any work.
+
+    Raises
+    ------
+    FileNotFoundError
+        Its folder does not exist.
+    IsADirectoryError
+        It names an existing folder.
+    PermissionError
+        Its folder is not writable.
+    ValueError
+        It exists and is not a regular file, or its folder is a file.
+    """
+    path = Path(path).expanduser()
+    parent = path.parent
+    if path.is_dir():
+        raise IsADirectoryError(f"{option} {str(path)!r} is a folder, not a file")
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{option} {str(path)!r} exists and is not a regular file")
+    if not parent.exists():
+        raise FileNotFoundError(f"{option} {str(path)!r}: folder {str(parent)!r} does not exist")
+    if not parent.is_dir():
+        raise ValueError(f"{option} {str(path)!r}: {str(parent)!r} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise PermissionError(f"{option} {str(path)!r}: folder {str(parent)!r} is not writable")
+    return path
+
+
+def check_trace_folder(option: str, path) -> Path:
+    """Refuse a trace output folder that is a file, a non-trace folder, or unwritable."""
+    path = Path(path).expanduser()
+    if path.exists():
+        if not path.is_dir():
+            raise NotADirectoryError(f"{option} {str(path)!r} exists and is a file, not a trace folder")
+        if not (path / "meta.json").is_file() and any(path.iterdir()):
+            raise ValueError(f"{option} {str(path)!r} exists and is not a trace folder; not overwriting")
+    probe = path.parent
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise NotADirectoryError(f"{option} {str(path)!r}: {str(probe)!r} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise PermissionError(f"{option} {str(path)!r}: folder {str(probe)!r} is not writable")
+    return path
+
+
+def check_range(option: str, value, minimum=None, maximum=None) -> None:
+    """Raise ValueError naming ``option`` unless every value (one or a list) is in [minimum, maximum]."""
+    for item in value if isinstance(value, (list, tuple)) else [value]:
+        if item is None:
+            continue
+        if item != item or (minimum is not None and item < minimum) or (maximum is not None and item > maximum):
+            if minimum is not None and maximum is not None:
+                wanted = f"in [{minimum}, {maximum}]"
+            else:
+                wanted = f">= {minimum}" if minimum is not None else f"<= {maximum}"
+            raise ValueError(f"{option} must be {wanted}, got {item}")
