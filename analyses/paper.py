@@ -51,17 +51,17 @@ import pandas as pd
 
 from analyses.output import check_output_folder
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
-from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, FIT, N_CPUS, STUDY_SIZE,
+from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, N_CPUS, STUDY_SIZE,
                                   STUDY_TABLE, PaperResult, check_background, check_process_counts, check_scenes,
                                   check_size)
 from analyses.verdict import LOSSES, format_speedup, verdict
+from coherence.cost import OPERATIONS
 
-__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
-           "PaperResult", "reproduce", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
+__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
+           "PaperResult", "reproduce", "sequential_predictions", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
            "paper_summary", "paper_html", "check_scenes", "check_process_counts", "check_output_folder"]
 
-_COUNTERS = ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays", "node_visits", "index_reads",
-             "tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tests_cone", "shading")
+_COUNTERS = tuple(counter for counters in OPERATIONS.values() for counter in counters)
 _RAYS = ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays")
 _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tests_cone")
 
@@ -72,8 +72,7 @@ _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tes
 
 def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None, mappings=DEFAULT_MAPPINGS,
               background: int = DEFAULT_BACKGROUND, cache_dir=None, progress: bool = True, *,
-              hierarchy="alpha21164", layout="compact", fit=FIT, weighting: str = "relative",
-              n_cpus: int = N_CPUS) -> PaperResult:
+              hierarchy="alpha21164", layout="compact", costs=None, n_cpus: int = N_CPUS) -> PaperResult:
     """Calibrate the cost model to the study's times and simulate its runs for every scene.
 
     Parameters
@@ -94,11 +93,10 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     progress : bool
         Progress bars on stderr.
     hierarchy, layout : preset name or object
-    fit : sequence of str
-        Cost-model operations fitted; the others stay at ``alpha8400``.
-    weighting : {"relative", "absolute"}
-        Least squares of relative errors (each scene weighs the same; the
-        default) or of errors in seconds (long scenes dominate).
+    costs : coherence.calibration.CostStructure, optional
+        Which cycles per operation are fitted and how the rest follow
+        (default :data:`coherence.calibration.STUDY1997_COSTS`: per test,
+        per ray and per node visit, bounded).
     n_cpus : int
         Simulated CPUs (the study's machine had 8).
 
@@ -111,7 +109,8 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     from analyses.traces import cached_trace
     from cachesim import get_hierarchy
     from coherence import Machine, get_layout, get_mapping, study
-    from coherence.cost import OPERATIONS, alpha8400
+    from coherence.calibration import STUDY1997_COSTS, CostStructure
+    from coherence.cost import alpha8400
     from tracer.scenes import PAPER_SCENES
     from tracer.trace import AccessTrace
 
@@ -124,11 +123,9 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     names = [m.name for m in mapping_objects]
     if not names or len(set(names)) != len(names):
         raise ValueError(f"give at least one mapping, each once; got {names}")
-    unknown = sorted(set(fit) - set(OPERATIONS))
-    if unknown:
-        raise ValueError(f"fit: unknown operations {unknown}; use {sorted(OPERATIONS)}")
-    if weighting not in ("relative", "absolute"):
-        raise ValueError(f"weighting must be 'relative' or 'absolute', got {weighting!r}")
+    costs = STUDY1997_COSTS if costs is None else costs
+    if not isinstance(costs, CostStructure):
+        raise ValueError(f"costs must be a coherence.calibration.CostStructure, got {type(costs).__name__}")
     hierarchy = get_hierarchy(hierarchy)
     layout = get_layout(layout)
     machine = Machine(n_cpus=n_cpus, background_load=background)
@@ -158,7 +155,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     bar.close()
 
     # 3: calibration to the study's sequential times
-    model, calibration = _calibrate(measurements, base, fit, weighting, size)
+    model, calibration = _calibrate(measurements, costs, base.clock_hz, size)
     residuals = calibration["residuals"]
 
     # 4: every mapping at every count, per scene, with the calibrated model
@@ -176,6 +173,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
 
     table = side_by_side(loaded, runs, residuals, size)
+    predictions = sequential_predictions(runs, size, order=names)
     verdict_n = 8 if 8 in counts else max(counts)
     verdicts, numbers = scene_verdicts(runs, verdict_n, order=names)
     parameters = {
@@ -183,62 +181,94 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         "background_load": background, "verdict_n_processes": int(verdict_n), "hierarchy": hierarchy.to_dict(),
         "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
-        "clock_hz": base.clock_hz, "fit": list(fit), "study_size": STUDY_SIZE,
+        "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE,
     }
-    return PaperResult(table=table, runs=runs, calibration=calibration, verdicts=verdicts,
-                       verdict_numbers=numbers, parameters=parameters, info=info_out)
+    return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
+                       verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out)
 
 
-def _calibrate(measurements: list, base, fit, weighting: str, size: int):
+def _calibrate(measurements: list, costs, clock_hz: float, size: int):
     """Fit the cost model to the study's sequential S times (step 3 of :func:`reproduce`).
 
     ``measurements`` holds one dict per scene: ``scene``, ``memory_cycles``
-    and the operation counters of its sequential S run; ``base`` is the cost
-    model holding the operations not in ``fit``. Returns the calibrated
-    model and :attr:`PaperResult.calibration`.
+    and the operation counters of its sequential S run. The fit is
+    :func:`coherence.calibration.fit_costs` (bounded least squares of
+    relative errors); every scene is also predicted from a fit to the other
+    four (:func:`coherence.calibration.leave_one_out`). Returns the
+    calibrated model and :attr:`PaperResult.calibration`.
     """
-    from coherence.cost import OPERATIONS
+    from coherence.calibration import fit_costs, fitted_values, leave_one_out, rms
 
     measurements = pd.DataFrame(measurements).set_index("scene")
     study_rows = STUDY_TABLE.set_index("scene")
     scale = (size / STUDY_SIZE) ** 2
     measurements.insert(0, "seconds", study_rows.loc[measurements.index, "sequential_seconds"].to_numpy() * scale)
-    fixed = {op: getattr(base, op) for op in OPERATIONS if op not in fit}
-    if weighting == "relative":
-        # divide each scene's equation by its target time: least squares of relative errors, so the
-        # short scenes (tetra, fluid) weigh as much as the long ones
-        weights = 1.0 / measurements["seconds"].to_numpy()
-    elif weighting == "absolute":
-        weights = np.ones(len(measurements))
+    model, fit = fit_costs(measurements, costs, clock_hz=clock_hz, name="calibrated to the study")
+    values = fitted_values(model, costs)
+    residuals = pd.DataFrame({
+        "study_seconds": study_rows.loc[measurements.index, "sequential_seconds"].to_numpy(),
+        "target_seconds": fit["measured_seconds"],
+        "fitted_seconds": fit["fitted_seconds"],
+        "residual_seconds": fit["fitted_seconds"] - fit["measured_seconds"],
+        "relative_error": fit["relative_error"],
+        "memory_share": fit["memory_share"],
+        "memory_seconds": measurements["memory_cycles"].to_numpy() / clock_hz,
+    }, index=measurements.index)
+    residuals["fitted_seconds_at_512"] = residuals["fitted_seconds"] / scale
+    if len(measurements) >= 2:
+        held_out = leave_one_out(measurements, costs, clock_hz=clock_hz)
+        residuals["left_out_seconds"] = held_out["predicted_seconds"]
+        residuals["left_out_error"] = held_out["relative_error"]
     else:
-        raise AssertionError(weighting)  # checked on entry
-    weighted = measurements.astype(np.float64).mul(weights, axis=0)
-    model, fit_rows = type(base).calibrate(weighted, clock_hz=base.clock_hz, name="calibrated to the study",
-                                           fixed=fixed)
-    fitted_seconds = fit_rows["fitted_seconds"].to_numpy() / weights
-    target = measurements["seconds"].to_numpy()
-    residuals = pd.DataFrame({"target_seconds": target, "fitted_seconds": fitted_seconds,
-                              "residual_seconds": fitted_seconds - target,
-                              "relative_error": (fitted_seconds - target) / target}, index=measurements.index)
+        residuals["left_out_seconds"] = residuals["left_out_error"] = np.nan
     residuals.index.name = "scene"
     residuals = residuals.reset_index()
-    residuals["study_seconds"] = study_rows.loc[residuals["scene"], "sequential_seconds"].to_numpy()
-    residuals["fitted_seconds_at_512"] = residuals["fitted_seconds"] / scale
-    residuals["memory_seconds"] = measurements["memory_cycles"].to_numpy() / base.clock_hz
-    fitted_ops = [op for op in fit if op not in fixed]
+    fitted = [{"name": cost.name, "reference": next(iter(cost.multiples)), "cycles": values[cost.name],
+               "low": cost.bounds[0], "high": cost.bounds[1],
+               "at_bound": bool(np.isclose(values[cost.name], cost.bounds[0], rtol=1e-6)
+                                or np.isclose(values[cost.name], cost.bounds[1], rtol=1e-6))}
+              for cost in costs.fitted]
     calibration = {
         "model": model.to_dict(),
-        "default": base.to_dict(),
-        "fitted": [op for op in fitted_ops
-                   if float(measurements[list(OPERATIONS[op])].to_numpy().sum()) > 0],
-        "fixed": fixed,
+        "structure": costs.to_dict(),
+        "fitted": fitted,
         "scale": scale,
-        "weighting": weighting,
         "residuals": residuals,
-        "rms_relative_error": float(np.sqrt(np.mean(residuals["relative_error"].to_numpy() ** 2))),
+        "rms_relative_error": rms(residuals["relative_error"]),
+        "left_out_rms_relative_error": (rms(residuals["left_out_error"]) if len(measurements) >= 2
+                                        else float("nan")),
         "measurements": measurements.reset_index(),
     }
     return model, calibration
+
+
+def sequential_predictions(runs: pd.DataFrame, size: int, order=None) -> pd.DataFrame:
+    """Per scene, every mapping's one-process time predicted by the calibrated model, at 512x512.
+
+    Only S's time was fitted; the others (P, R, B with 64x64 fields, DB with
+    32x32 blocks) differ from it only through the order in which pixels meet
+    the caches (and DB's dispatches). Nothing is tuned to them.
+
+    Returns
+    -------
+    DataFrame
+        ``scene``, ``<mapping>_seconds`` per mapping (user time of the
+        one-process run, scaled to 512x512 by pixel count) and
+        ``<mapping>_minus_S_percent`` per mapping other than S.
+    """
+    one = runs[runs["n_processes"] == 1]
+    mappings = list(order) if order is not None else list(dict.fromkeys(one["mapping"]))
+    scale = (size / STUDY_SIZE) ** 2
+    rows = []
+    for scene in dict.fromkeys(one["scene"]):
+        seconds = one[one["scene"] == scene].set_index("mapping")["user_seconds_max"].astype(float) / scale
+        row = {"scene": scene, **{f"{m}_seconds": float(seconds[m]) for m in mappings if m in seconds}}
+        if "S" in seconds:
+            for m in mappings:
+                if m != "S" and m in seconds:
+                    row[f"{m}_minus_S_percent"] = float(100.0 * (seconds[m] - seconds["S"]) / seconds["S"])
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 def _geometry(counts: dict) -> str:

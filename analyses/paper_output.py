@@ -17,6 +17,7 @@ from analyses.html import figure_png, render_page
 from analyses.output import check_output_folder
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
+from coherence.cost import OPERATIONS
 from rtcommon.files import write_bytes_atomic
 
 __all__ = ["speedup_figure", "paper_summary", "paper_html", "write_paper"]
@@ -73,18 +74,19 @@ def paper_summary(result: PaperResult) -> dict:
         "traces": result.info and {k: {"trace_key": v["trace_key"]} for k, v in result.info.items()},
         "study": STUDY_TABLE,
         "calibration": {
-            "method": "non-negative least squares of the sequential S times (DESIGN.md section 2) minus simulated "
-                      "memory cycles; targets scaled by (size/512)^2",
-            "weighting": calibration["weighting"],
+            "method": "bounded least squares of relative errors of the sequential S times (DESIGN.md section 2) "
+                      "minus simulated memory cycles; targets scaled by (size/512)^2; each scene also predicted "
+                      "from a fit to the others (left_out_*)",
+            "structure": calibration["structure"],
             "fitted": calibration["fitted"],
-            "fixed": calibration["fixed"],
             "model": calibration["model"],
-            "default": calibration["default"],
             "scale": calibration["scale"],
             "rms_relative_error": calibration["rms_relative_error"],
+            "left_out_rms_relative_error": calibration["left_out_rms_relative_error"],
             "residuals": calibration["residuals"],
         },
         "scenes": result.table,
+        "predictions": result.predictions,
         "verdicts": result.verdicts,
         "verdict_numbers": result.verdict_numbers,
     })
@@ -98,18 +100,18 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
     """
     p = result.parameters
     cal = result.calibration
-    model = pd.DataFrame({"operation": list(cal["fitted"]),
-                          "fitted cycles": [cal["model"][op] for op in cal["fitted"]],
-                          "alpha8400 default": [cal["default"][op] for op in cal["fitted"]]})
-    fixed = pd.DataFrame({"operation": list(cal["fixed"]), "cycles (held)": list(cal["fixed"].values())})
-    residuals = cal["residuals"][["scene", "study_seconds", "target_seconds", "fitted_seconds", "residual_seconds",
-                                  "relative_error", "memory_seconds"]]
+    fitted = pd.DataFrame(cal["fitted"]).rename(columns={"name": "fitted cost", "reference": "cycles of",
+                                                         "low": "lowest", "high": "highest"})
+    model = pd.DataFrame({"operation": list(OPERATIONS), "cycles": [cal["model"][op] for op in OPERATIONS]})
+    residuals = cal["residuals"][["scene", "study_seconds", "target_seconds", "fitted_seconds", "relative_error",
+                                  "left_out_seconds", "left_out_error", "memory_share"]]
     decomposition = result.runs[result.runs["n_processes"] == p["verdict_n_processes"]][
         ["scene", "mapping", "speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
          "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss"]]
     return render_page("paper.html.j2", p=p, calibration=cal, verdicts=list(result.verdicts["text"]),
                        study_table=STUDY_TABLE, scenes_table=result.table.drop(columns=["study_geometry"]),
-                       model_table=model, residuals_table=residuals, fixed_table=fixed,
+                       fitted_table=fitted, model_table=model, residuals_table=residuals,
+                       predictions_table=result.predictions,
                        decomposition=decomposition, pngs=pngs)
 
 
@@ -118,7 +120,7 @@ def _csv(frame: pd.DataFrame) -> str:
 
 
 def write_paper(result: PaperResult, out="paper") -> Path:
-    """Write paper.csv, scenes.csv, paper.json, speedup_real.png, speedup_user.png and index.html into ``out``."""
+    """Write paper.csv, scenes.csv, predictions.csv, paper.json, the speed-up PNGs and index.html into ``out``."""
     path = check_output_folder(out)
     path.mkdir(parents=True, exist_ok=True)
     order = result.parameters["mappings"]
@@ -133,6 +135,7 @@ def write_paper(result: PaperResult, out="paper") -> Path:
     summary = paper_summary(result)
     write_bytes_atomic(path / "paper.csv", _csv(result.runs).encode())
     write_bytes_atomic(path / "scenes.csv", _csv(result.table).encode())
+    write_bytes_atomic(path / "predictions.csv", _csv(result.predictions).encode())
     write_bytes_atomic(path / "paper.json", (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
     for name, data in pngs.items():
         write_bytes_atomic(path / f"{name}.png", data)

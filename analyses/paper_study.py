@@ -15,7 +15,7 @@ from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.validate import require_int
 from tracer.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
 
-__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "FIT",
+__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
            "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
            "check_size", "check_background"]
 
@@ -36,9 +36,6 @@ DEFAULT_BACKGROUND = 2
 
 DEFAULT_PROCESSES = (1, 2, 4, 6, 8, 10, 12, 14, 16)
 
-#: Cost-model operations fitted to the study's times; the rest stay at alpha8400.
-FIT = ("node_visit", "test_sphere", "test_triangle", "test_polygon")
-
 N_CPUS = 8
 CLOCK_HZ = 300e6
 
@@ -56,10 +53,16 @@ class PaperResult:
         One row per (scene, mapping, n_processes): :func:`coherence.study`'s
         run table with a ``scene`` column first.
     calibration : dict
-        ``model`` (calibrated cycles per operation), ``fitted`` and ``fixed``
-        operation names, ``residuals`` (per scene: target, fitted, residual
-        and relative error in seconds), ``scale`` (the pixel-count factor of
-        the targets), ``rms_relative_error``.
+        ``model`` (calibrated cycles per operation), ``structure`` (what is
+        fitted and how the rest follow), ``fitted`` (per fitted cost: its
+        reference operation, cycles, bounds and whether it sits at one),
+        ``residuals`` (per scene: target, fitted, residual and relative
+        error in seconds, memory-stall share, and the time predicted by a
+        fit to the other scenes), ``scale`` (the pixel-count factor of the
+        targets), ``rms_relative_error``, ``left_out_rms_relative_error``.
+    predictions : DataFrame
+        Per scene, every mapping's predicted one-process time at 512x512 and
+        its gap to S (:func:`analyses.paper.sequential_predictions`).
     verdicts : DataFrame
         One row per scene (:func:`analyses.paper.scene_verdicts`).
     verdict_numbers : DataFrame
@@ -74,6 +77,7 @@ class PaperResult:
     table: pd.DataFrame
     runs: pd.DataFrame
     calibration: dict
+    predictions: pd.DataFrame
     verdicts: pd.DataFrame
     verdict_numbers: pd.DataFrame
     parameters: dict

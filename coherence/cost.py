@@ -29,6 +29,7 @@ OPERATIONS = {
     "test_patch": ("tests_patch",),
     "test_cone": ("tests_cone",),
     "shading": ("shading",),
+    "light_read": ("light_reads",),
 }
 
 
@@ -45,7 +46,12 @@ class CostModel:
     test_sphere, test_triangle, test_polygon, test_patch, test_cone : float
         Cycles per intersection test of each primitive type.
     shading : float
-        Cycles per shading operation (one hit shaded with all its lights).
+        Cycles per shading operation (one hit shaded; in the stock presets
+        with all its lights).
+    light_read : float
+        Cycles per light of a shaded hit, on top of ``shading`` (0 in the
+        stock presets, which count lights in ``shading``; fitted models tie
+        it to the other costs, see :mod:`coherence.calibration`).
     clock_hz : float
         CPU clock rate, to turn cycles into seconds.
     name : str
@@ -60,6 +66,7 @@ class CostModel:
     test_patch: float = 500.0
     test_cone: float = 500.0
     shading: float = 1500.0
+    light_read: float = 0.0
     clock_hz: float = 300e6
     name: str = "custom"
 

@@ -16,11 +16,13 @@ from analyses import paper
 from analyses import verdict as verdict_module
 from analyses.verdict import format_percent
 from analyses.cli import main
+from coherence.calibration import OPERATION_FLOPS
+from coherence.cost import OPERATIONS
 
 SCENES = ["tetra", "balls"]
 COUNTS = [1, 2, 4]
 SIZE = 24
-FILES = ("paper.csv", "scenes.csv", "paper.json", "speedup_real.png", "speedup_user.png", "index.html")
+FILES = ("paper.csv", "scenes.csv", "predictions.csv", "paper.json", "speedup_real.png", "speedup_user.png", "index.html")
 
 
 @pytest.fixture(scope="module")
@@ -94,12 +96,28 @@ def test_calibration_residuals_reported(result):
         assert residuals.loc[scene, "target_seconds"] == pytest.approx(study * scale)
         assert residuals.loc[scene, "residual_seconds"] == pytest.approx(
             residuals.loc[scene, "fitted_seconds"] - residuals.loc[scene, "target_seconds"])
-    assert math.isfinite(cal["rms_relative_error"])
-    # held operations keep the alpha8400 defaults, fitted ones are non-negative
-    for op, cycles in cal["fixed"].items():
-        assert cal["model"][op] == cycles == cal["default"][op]
-    assert set(cal["fitted"]) <= set(paper.FIT)
-    assert all(cal["model"][op] >= 0 for op in paper.FIT)
+    assert math.isfinite(cal["rms_relative_error"]) and math.isfinite(cal["left_out_rms_relative_error"])
+    assert np.isfinite(residuals["left_out_seconds"]).all()
+    assert ((residuals["memory_share"] > 0) & (residuals["memory_share"] < 1)).all()
+    # three bounded costs; every operation costs something; ties keep their flop ratios
+    assert len(cal["fitted"]) == 3
+    for cost in cal["fitted"]:
+        assert cost["low"] - 1e-9 <= cost["cycles"] <= cost["high"] + 1e-9
+    assert all(cal["model"][op] > 0 for op in OPERATIONS)
+    assert cal["model"]["test_triangle"] / cal["model"]["test_sphere"] == pytest.approx(
+        OPERATION_FLOPS["test_triangle"] / OPERATION_FLOPS["test_sphere"])
+
+
+def test_sequential_predictions_of_every_mapping(result):
+    predictions = result.predictions.set_index("scene")
+    fitted = result.calibration["residuals"].set_index("scene")["fitted_seconds_at_512"]
+    for scene in SCENES:
+        # S's one-process time is the fitted one; the others are predicted beside it
+        assert predictions.loc[scene, "S_seconds"] == pytest.approx(fitted[scene], rel=1e-9)
+        for mapping in ("P", "R", "B", "DB"):
+            gap = predictions.loc[scene, f"{mapping}_minus_S_percent"]
+            assert gap == pytest.approx(100 * (predictions.loc[scene, f"{mapping}_seconds"]
+                                               / predictions.loc[scene, "S_seconds"] - 1))
 
 
 def test_runs_cover_every_scene_mapping_count(result):
@@ -278,12 +296,6 @@ def test_api_validates_before_rendering(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
-def test_relative_weighting_beats_absolute_on_relative_error(result, cache):
-    absolute = paper.reproduce(size=SIZE, n_processes=[1], scenes=["tetra", "balls", "room"], cache_dir=cache,
-                               progress=False, weighting="absolute")
-    relative = paper.reproduce(size=SIZE, n_processes=[1], scenes=["tetra", "balls", "room"], cache_dir=cache,
-                               progress=False)
-    assert relative.calibration["weighting"] == "relative"
-    assert relative.calibration["rms_relative_error"] <= absolute.calibration["rms_relative_error"] + 1e-9
-    with pytest.raises(ValueError, match="weighting"):
-        paper.reproduce(size=SIZE, scenes=["tetra"], cache_dir=cache, weighting="median")
+def test_costs_must_be_a_structure(cache):
+    with pytest.raises(ValueError, match="CostStructure"):
+        paper.reproduce(size=SIZE, scenes=["tetra"], cache_dir=cache, costs={"ray": 1.0})

@@ -12,11 +12,13 @@ EPILOG = """\
 For each scene (default all five: balls tetra shell room fluid) the trace is
 rendered once and cached (see 'coherence report --help' for the cache). One
 sequential run with the strip mapping S gives the operation counters and the
-simulated memory cycles; the cost model is then fitted by non-negative least
-squares to the study's sequential S times (Balls 345.8 s, Tetra 28.8 s,
-Shell 403.0 s, Room 365.7 s, Fluid 97.5 s at 512x512; scaled by pixel count
-at other sizes): cycles per kd-node visit and per sphere, triangle and
-polygon test are fitted, the rest stay at the alpha8400 defaults. Then every
+simulated memory cycles; three costs are then fitted, each within 5-5000
+cycles, by least squares of relative errors to the study's sequential S times
+(Balls 345.8 s, Tetra 28.8 s, Shell 403.0 s, Room 365.7 s, Fluid 97.5 s at
+512x512; scaled by pixel count at other sizes): cycles per intersection test,
+per ray and per kd-node visit; every other operation is tied to the test cost
+by its routine's floating-point operation count. Each scene is also predicted
+from a fit to the other four. Then every
 mapping runs at every process count on 8 simulated CPUs with the calibrated
 model. Real time assumes --background always-runnable processes of other
 users (default 2: a lone process runs at full speed, and real-time speed-up
@@ -25,6 +27,7 @@ keeps growing past 8 processes, as on the study's shared machine).
 Output folder (default paper):
   paper.csv          one row per scene x mapping x process count
   scenes.csv         the study's table beside ours, calibrated times
+  predictions.csv    every mapping's predicted one-process time and its gap to S
   paper.json         parameters, versions, calibration, residuals, verdicts
   speedup_real.png   speed-up from real time, one panel per scene
   speedup_user.png   speed-up from user time (worst process)
@@ -77,14 +80,16 @@ def run(args: argparse.Namespace) -> int:
     result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
                        background=args.background, cache_dir=args.cache, progress=progress)
     path = write_paper(result, out)
-    print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, paper.json, speedup_real.png, speedup_user.png",
-          file=sys.stderr)
+    print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
+          "speedup_user.png", file=sys.stderr)
     if args.json:
         print(json.dumps(paper_summary(result), indent=2, allow_nan=False))
     else:
         cal = result.calibration
-        fitted = ", ".join(f"{op} {cal['model'][op]:.0f}" for op in cal["fitted"])
-        print(f"calibrated cycles: {fitted}; RMS relative error {cal['rms_relative_error'] * 100:.1f}%")
+        fitted = ", ".join(f"{cost['name']} {cost['cycles']:.0f} ({cost['low']:g}-{cost['high']:g})"
+                           for cost in cal["fitted"])
+        print(f"calibrated cycles: {fitted}; RMS relative error {cal['rms_relative_error'] * 100:.1f}%, "
+              f"each scene predicted from the others {cal['left_out_rms_relative_error'] * 100:.1f}%")
         for text in result.verdicts["text"]:
             print(text)
     return 0

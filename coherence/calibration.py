@@ -1,0 +1,275 @@
+"""Fitting a few physical costs to measured times: bounded, tied, and checked by leaving a run out.
+
+A :class:`CostStructure` says which cycles per operation are fitted and how
+the others follow: every :data:`coherence.cost.OPERATIONS` entry is either
+*fixed* (cycles given in advance) or *tied* to one :class:`FittedCost` by a
+multiple fixed in advance. A fitted cost is the cycles of its reference
+operation (multiple 1.0); it is bounded, so no operation that happens
+millions of times can be fitted to 0 cycles or to an absurd cost.
+
+:func:`fit_costs` solves the bounded least squares of *relative* errors (each
+run weighs the same, whatever its length), after taking each run's simulated
+memory cycles and fixed operations off its measured time.
+:func:`leave_one_out` fits on all runs but one and predicts the one left out,
+for every run: the honest error of a model fitted to few measurements.
+
+:data:`STUDY1997_COSTS` is the structure used for the study's five sequential
+Strip times: three fitted costs (per intersection test, per ray, per kd-node
+visit); every other operation is tied to the test cost by the ratio of
+floating-point operations in its routine (:data:`OPERATION_FLOPS`, counted by
+hand in ``tracer/geometry.py`` and ``tracer/render.py``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from coherence.cost import OPERATIONS, CostModel
+
+#: Floating-point operations (+, -, *, /, sqrt and compares each count one)
+#: on the full path of each routine, counted by hand in this project's code.
+#: Only their ratios are used: they tie the other costs to the sphere test.
+#:
+#: - sphere test (``hit_sphere``): offset 3, b 5, c 7, discriminant 2,
+#:   sqrt 1, root 2, compares 2: 22.
+#: - triangle test (``hit_triangle``, Moller-Trumbore): p 9, det 5, 1/det 1,
+#:   s 3, u 6, q 9, v 6, t 6, compares 7: 52.
+#: - polygon and patch test (``hit_convex``): plane 5 + 9, compares 2, hit
+#:   point 6, then 21 per edge (edge 3, offset 3, triple product 14,
+#:   compare 1) for 4 vertices (the layouts' assumption too): 106.
+#: - cone test (``hit_cone``): axis projections 18, quadratic 27, root 10,
+#:   range checks 15: 70.
+#: - shading one hit, before its lights (normal, material, ambient): 20.
+#: - one light of a shaded hit (direction and its length 13, N.L 5, Phong
+#:   R.V 12, power 1, colour 12, compares 2): 45.
+#: - one leaf index entry read (a load and the loop's add and compare): 2.
+OPERATION_FLOPS = {
+    "test_sphere": 22, "test_triangle": 52, "test_polygon": 106, "test_patch": 106, "test_cone": 70,
+    "shading": 20, "light_read": 45, "index_read": 2,
+}
+
+#: Bounds of every fitted cost in the study's structure, cycles of its
+#: reference operation: no operation is free, and none takes longer than a
+#: few hundred memory misses.
+STUDY_BOUNDS = (5.0, 5000.0)
+
+
+@dataclass(frozen=True)
+class FittedCost:
+    """One fitted cost and the operations tied to it.
+
+    Parameters
+    ----------
+    name : str
+        What the cost is (``"test"``, ``"ray"``, ...).
+    multiples : dict of str to float
+        Operation name (a :data:`coherence.cost.OPERATIONS` key) to its cost
+        as a multiple of the fitted one; the reference operation has 1.0.
+    bounds : (float, float)
+        Lowest and highest cycles of the reference operation.
+    """
+
+    name: str
+    multiples: dict
+    bounds: tuple = STUDY_BOUNDS
+
+    def __post_init__(self):
+        if not self.multiples:
+            raise ValueError(f"FittedCost {self.name!r}: multiples must name at least one operation")
+        for operation, multiple in self.multiples.items():
+            if operation not in OPERATIONS:
+                raise ValueError(f"FittedCost {self.name!r}: unknown operation {operation!r}; "
+                                 f"use {sorted(OPERATIONS)}")
+            if not (np.isfinite(multiple) and multiple > 0):
+                raise ValueError(f"FittedCost {self.name!r}: multiple of {operation} must be > 0, got {multiple!r}")
+        low, high = (float(b) for b in self.bounds)
+        if not (np.isfinite(low) and np.isfinite(high) and 0 <= low < high):
+            raise ValueError(f"FittedCost {self.name!r}: bounds must be finite with 0 <= low < high, "
+                             f"got {self.bounds!r}")
+        object.__setattr__(self, "bounds", (low, high))
+
+
+@dataclass(frozen=True)
+class CostStructure:
+    """Which costs are fitted, how the rest follow, and what is fixed.
+
+    Parameters
+    ----------
+    fitted : tuple of FittedCost
+        The fitted costs; each operation is tied to at most one.
+    fixed : dict of str to float
+        Cycles of the operations not tied to a fitted cost. Every operation
+        must be fitted, tied or fixed.
+    name : str
+    """
+
+    fitted: tuple
+    fixed: dict = field(default_factory=dict)
+    name: str = "custom"
+
+    def __post_init__(self):
+        object.__setattr__(self, "fitted", tuple(self.fitted))
+        if not self.fitted:
+            raise ValueError("CostStructure.fitted must hold at least one FittedCost")
+        seen = {}
+        for cost in self.fitted:
+            for operation in cost.multiples:
+                if operation in seen:
+                    raise ValueError(f"CostStructure: {operation} is tied to both {seen[operation]!r} "
+                                     f"and {cost.name!r}")
+                seen[operation] = cost.name
+        both = sorted(set(seen) & set(self.fixed))
+        if both:
+            raise ValueError(f"CostStructure: {both} are both fitted and fixed")
+        missing = sorted(set(OPERATIONS) - set(seen) - set(self.fixed))
+        if missing:
+            raise ValueError(f"CostStructure: operations {missing} are neither fitted nor fixed")
+        for operation, cycles in self.fixed.items():
+            if operation not in OPERATIONS or not (np.isfinite(cycles) and cycles >= 0):
+                raise ValueError(f"CostStructure.fixed: {operation!r} must be an operation with cycles >= 0")
+
+    def model(self, values, *, clock_hz: float, name: str) -> CostModel:
+        """The cost model with fitted cost ``values[i]`` for ``self.fitted[i]``."""
+        costs = dict(self.fixed)
+        for cost, value in zip(self.fitted, values):
+            for operation, multiple in cost.multiples.items():
+                costs[operation] = float(value) * multiple
+        return CostModel(clock_hz=clock_hz, name=name, **costs)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "fixed": dict(self.fixed),
+                "fitted": [{"name": c.name, "multiples": dict(c.multiples), "bounds": list(c.bounds)}
+                           for c in self.fitted]}
+
+
+def _study1997() -> CostStructure:
+    flops = OPERATION_FLOPS
+    work = {operation: n / flops["test_sphere"] for operation, n in flops.items()}
+    return CostStructure(name="study1997", fitted=(
+        FittedCost("test", work),
+        FittedCost("ray", {"ray": 1.0}),
+        FittedCost("node_visit", {"node_visit": 1.0}),
+    ))
+
+
+#: The structure fitted to the study's sequential Strip times (see module docstring).
+STUDY1997_COSTS = _study1997()
+
+
+def _operation_totals(measurements: pd.DataFrame) -> dict:
+    """Per operation, its count in every run (counters summed), float64 (R,)."""
+    totals = {}
+    for operation, counters in OPERATIONS.items():
+        present = [c for c in counters if c in measurements]
+        totals[operation] = (measurements[present].to_numpy(dtype=np.float64).sum(axis=1) if present
+                             else np.zeros(len(measurements)))
+    return totals
+
+
+def fit_costs(measurements: pd.DataFrame, structure: CostStructure = STUDY1997_COSTS, *,
+              clock_hz: float = 300e6, name: str = "calibrated") -> tuple[CostModel, pd.DataFrame]:
+    """Fit ``structure``'s costs to measured times, by bounded least squares of relative errors.
+
+    Parameters
+    ----------
+    measurements : DataFrame
+        One row per measured run: ``seconds``, optional ``memory_cycles``
+        (simulated, taken off first) and the operation counters
+        (``primary_rays``, ``node_visits``, ``tests_sphere``, ...; missing
+        ones count 0).
+    structure : CostStructure
+    clock_hz : float
+        Clock rate of the measured machine.
+
+    Returns
+    -------
+    model : CostModel
+    residuals : DataFrame
+        Per run (the index of ``measurements``): ``measured_seconds``,
+        ``fitted_seconds``, ``relative_error``, ``memory_share`` (simulated
+        memory cycles over fitted cycles).
+    """
+    from scipy.optimize import lsq_linear
+
+    seconds, memory, matrix, fixed_cycles = _system(measurements, structure, clock_hz)
+    target = seconds * clock_hz - memory - fixed_cycles
+    weight = 1.0 / (seconds * clock_hz)
+    low, high = np.array([c.bounds for c in structure.fitted]).T
+    scale = np.where(matrix.max(axis=0) > 0, matrix.max(axis=0), 1.0)
+    solution = lsq_linear((matrix / scale) * weight[:, None], target * weight,
+                          bounds=(low * scale, high * scale), method="bvls").x / scale
+    model = structure.model(solution, clock_hz=clock_hz, name=name)
+    return model, _residuals(measurements.index, seconds, memory, fixed_cycles, matrix @ solution, clock_hz)
+
+
+def _system(measurements: pd.DataFrame, structure: CostStructure, clock_hz: float):
+    if "seconds" not in measurements:
+        raise ValueError("fit_costs: measurements need a 'seconds' column")
+    seconds = measurements["seconds"].to_numpy(dtype=np.float64)
+    if np.any(~np.isfinite(seconds)) or np.any(seconds <= 0):
+        raise ValueError("fit_costs: 'seconds' must be finite and > 0")
+    if not (np.isfinite(clock_hz) and clock_hz > 0):
+        raise ValueError(f"fit_costs: clock_hz must be > 0, got {clock_hz!r}")
+    memory = (measurements["memory_cycles"].to_numpy(dtype=np.float64) if "memory_cycles" in measurements
+              else np.zeros(len(measurements)))
+    totals = _operation_totals(measurements)
+    matrix = np.column_stack([sum(multiple * totals[op] for op, multiple in cost.multiples.items())
+                              for cost in structure.fitted])
+    fixed_cycles = sum((cycles * totals[op] for op, cycles in structure.fixed.items()),
+                       np.zeros(len(measurements)))
+    return seconds, memory, matrix, fixed_cycles
+
+
+def _residuals(index, seconds, memory, fixed_cycles, fitted_cycles, clock_hz) -> pd.DataFrame:
+    total = memory + fixed_cycles + fitted_cycles
+    fitted = total / clock_hz
+    return pd.DataFrame({
+        "measured_seconds": seconds,
+        "fitted_seconds": fitted,
+        "relative_error": (fitted - seconds) / seconds,
+        "memory_share": np.divide(memory, total, out=np.zeros_like(total), where=total > 0),
+    }, index=index)
+
+
+def leave_one_out(measurements: pd.DataFrame, structure: CostStructure = STUDY1997_COSTS, *,
+                  clock_hz: float = 300e6) -> pd.DataFrame:
+    """Fit on every run but one and predict the one left out, for each run.
+
+    Returns
+    -------
+    DataFrame
+        Per run (the index of ``measurements``): ``measured_seconds``,
+        ``predicted_seconds``, ``relative_error``, and the fitted cost values
+        of that fold (one column per :class:`FittedCost`, cycles of its
+        reference operation).
+    """
+    if len(measurements) < 2:
+        raise ValueError("leave_one_out: needs at least two runs")
+    rows = []
+    for left_out in range(len(measurements)):
+        keep = np.arange(len(measurements)) != left_out
+        model, _ = fit_costs(measurements.iloc[keep], structure, clock_hz=clock_hz)
+        seconds, memory, matrix, fixed_cycles = _system(measurements.iloc[[left_out]], structure, clock_hz)
+        values = fitted_values(model, structure)
+        predicted = float((memory + fixed_cycles + matrix @ np.array(list(values.values())))[0] / clock_hz)
+        rows.append({"measured_seconds": float(seconds[0]), "predicted_seconds": predicted,
+                     "relative_error": (predicted - seconds[0]) / seconds[0],
+                     **values})
+    return pd.DataFrame(rows, index=measurements.index)
+
+
+def rms(errors) -> float:
+    """Root mean square of relative errors."""
+    errors = np.asarray(errors, dtype=np.float64)
+    return float(np.sqrt(np.mean(errors ** 2)))
+
+
+def fitted_values(model: CostModel, structure: CostStructure) -> dict:
+    """Cycles of each fitted cost's reference operation in ``model``."""
+    out = {}
+    for cost in structure.fitted:
+        operation, multiple = next(iter(cost.multiples.items()))
+        out[cost.name] = getattr(model, operation) / multiple
+    return out
