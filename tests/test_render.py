@@ -11,6 +11,7 @@ import tracer.render as render_module
 from tracer.camera import camera_rays
 from tracer.closest import closest_hit
 from tracer.render import render, save_png
+from tracer.records import INDEX_MASK
 from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, pack, unpack
 
 
@@ -198,15 +199,15 @@ def test_trace_load_errors(tmp_path):
 
 def test_pack_unpack():
     kinds = np.array([0, 1, 8, 4])
-    idx = np.array([0, 5, (1 << 28) - 1, 123456])
+    idx = np.array([0, 5, INDEX_MASK, 123456])
     rec = pack(kinds, idx)
     assert rec.dtype == np.uint32
     k, i = unpack(rec)
     assert np.array_equal(k, kinds) and np.array_equal(i, idx)
     with pytest.raises(ValueError, match="index"):
-        pack(0, 1 << 28)
+        pack(0, INDEX_MASK + 1)
     with pytest.raises(ValueError, match="kind"):
-        pack(9, 0)
+        pack(max(RecordKind) + 1, 0)
 
 
 def test_render_validation(mixed):
