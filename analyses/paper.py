@@ -72,7 +72,8 @@ _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tes
 
 def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None, mappings=DEFAULT_MAPPINGS,
               background: int = DEFAULT_BACKGROUND, cache_dir=None, progress: bool = True, *,
-              hierarchy="alpha21164", layout="compact", costs=None, n_cpus: int = N_CPUS) -> PaperResult:
+              hierarchy="alpha21164", layout="compact", costs=None, n_cpus: int = N_CPUS,
+              crossover: bool = False) -> PaperResult:
     """Calibrate the cost model to the study's times and simulate its runs for every scene.
 
     Parameters
@@ -99,6 +100,11 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         per ray and per node visit, bounded).
     n_cpus : int
         Simulated CPUs (the study's machine had 8).
+    crossover : bool
+        Also run :func:`analyses.crossover.crossover_study` per scene at the
+        verdict's process count with the calibrated model: where would
+        coherence have mattered more than balance? (16 more runs of S, P
+        and R per scene.)
 
     Returns
     -------
@@ -160,6 +166,8 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
 
     # 4: every mapping at every count, per scene, with the calibrated model
     frames = []
+    crossings = []
+    verdict_n = 8 if 8 in counts else max(counts)
     for name in scenes:
         scene, _, info = loaded[name]
         if progress:
@@ -167,14 +175,19 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         trace = AccessTrace.load(Path(info["path"]) / "trace", mmap=True)  # the entry of step 1
         result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
                        machine=machine, scene=scene, progress=progress)
-        del trace
         frames.append(result.runs.assign(scene=name))
+        if crossover and verdict_n > 1:
+            from analyses.crossover import crossover_study
+
+            crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout, scene=scene,
+                                             machine=machine, n_processes=verdict_n).assign(scene=name))
+        del trace
     runs = pd.concat(frames, ignore_index=True)
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
 
     table = side_by_side(loaded, runs, residuals, size)
     predictions = sequential_predictions(runs, size, order=names)
-    verdict_n = 8 if 8 in counts else max(counts)
+    crossings = pd.concat(crossings, ignore_index=True) if crossings else None
     verdicts, numbers = scene_verdicts(runs, verdict_n, order=names)
     parameters = {
         "size": size, "scenes": scenes, "mappings": names, "n_processes": counts, "n_cpus": int(n_cpus),
@@ -182,9 +195,11 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
         "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE,
+        "crossover": bool(crossover),
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
-                       verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out)
+                       verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,
+                       crossover=crossings)
 
 
 def _calibrate(measurements: list, costs, clock_hz: float, size: int):

@@ -20,7 +20,7 @@ from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
 from rtcommon.files import write_bytes_atomic
 
-__all__ = ["speedup_figure", "paper_summary", "paper_html", "write_paper"]
+__all__ = ["speedup_figure", "crossover_figure", "paper_summary", "paper_html", "write_paper"]
 
 
 # --------------------------------------------------------------------------
@@ -87,9 +87,28 @@ def paper_summary(result: PaperResult) -> dict:
         },
         "scenes": result.table,
         "predictions": result.predictions,
+        "crossover_boundary": _boundary(result),
         "verdicts": result.verdicts,
         "verdict_numbers": result.verdict_numbers,
     })
+
+
+def _boundary(result: PaperResult):
+    from analyses.crossover import crossover_boundary
+
+    return None if result.crossover is None else crossover_boundary(result.crossover)
+
+
+def crossover_figure(boundary: pd.DataFrame):
+    """The crossover boundary of every scene (:func:`analyses.crossover.plot_crossover`) in a Figure."""
+    from matplotlib.figure import Figure
+
+    from analyses.crossover import plot_crossover
+
+    figure = Figure(figsize=(7, 5))
+    plot_crossover(boundary, ax=figure.subplots())
+    figure.suptitle("Where P or R would lose more to coherence than S to imbalance")
+    return figure
 
 
 def paper_html(result: PaperResult, pngs: dict) -> str:
@@ -111,7 +130,7 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
     return render_page("paper.html.j2", p=p, calibration=cal, verdicts=list(result.verdicts["text"]),
                        study_table=STUDY_TABLE, scenes_table=result.table.drop(columns=["study_geometry"]),
                        fitted_table=fitted, model_table=model, residuals_table=residuals,
-                       predictions_table=result.predictions,
+                       predictions_table=result.predictions, crossover_table=_boundary(result),
                        decomposition=decomposition, pngs=pngs)
 
 
@@ -132,10 +151,15 @@ def write_paper(result: PaperResult, out="paper") -> Path:
         "speedup_user": figure_png(speedup_figure(result.runs, "speedup_user", n_cpus=n_cpus, order=order,
                                                   title="Speed-up from user time (worst process)")),
     }
+    boundary = _boundary(result)
+    if boundary is not None:
+        pngs["crossover"] = figure_png(crossover_figure(boundary))
     summary = paper_summary(result)
     write_bytes_atomic(path / "paper.csv", _csv(result.runs).encode())
     write_bytes_atomic(path / "scenes.csv", _csv(result.table).encode())
     write_bytes_atomic(path / "predictions.csv", _csv(result.predictions).encode())
+    if boundary is not None:
+        write_bytes_atomic(path / "crossover.csv", _csv(result.crossover).encode())
     write_bytes_atomic(path / "paper.json", (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
     for name, data in pngs.items():
         write_bytes_atomic(path / f"{name}.png", data)

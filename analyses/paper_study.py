@@ -72,6 +72,9 @@ class PaperResult:
         Inputs and machine, as plain data.
     info : dict
         Per scene: the trace cache key and whether it came from the cache.
+    crossover : DataFrame or None
+        With ``reproduce(crossover=True)``: per scene,
+        :func:`analyses.crossover.crossover_study`'s rows.
     """
 
     table: pd.DataFrame
@@ -82,6 +85,7 @@ class PaperResult:
     verdict_numbers: pd.DataFrame
     parameters: dict
     info: dict = field(default_factory=dict)
+    crossover: pd.DataFrame | None = None
 
 
 # --------------------------------------------------------------------------

@@ -112,6 +112,19 @@ class MemoryLayout:
         if self.region_align < 1 or self.region_align & (self.region_align - 1):
             raise ValueError(f"MemoryLayout.region_align must be a power of two, got {self.region_align}")
 
+    def scaled(self, factor: int) -> "MemoryLayout":
+        """This layout with every record ``factor`` times as many bytes (alignments kept).
+
+        The what-if "what if the scene's records were bigger": a richer
+        material, a double-precision vertex, a fatter node.
+        """
+        if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+            raise ValueError(f"MemoryLayout.scaled: factor must be an integer >= 1, got {factor!r}")
+        records = {name: RecordLayout(record.size * int(factor), record.align, record.per_vertex * int(factor))
+                   for name, record in self.records.items()}
+        return MemoryLayout(records=records, base=self.base, region_align=self.region_align,
+                            name=self.name if factor == 1 else f"{self.name} x{int(factor)}")
+
     def record(self, kind: RecordKind | str) -> RecordLayout:
         key = kind.name.lower() if isinstance(kind, RecordKind) else str(kind).lower()
         return self.records[key]

@@ -299,3 +299,21 @@ def test_api_validates_before_rendering(tmp_path):
 def test_costs_must_be_a_structure(cache):
     with pytest.raises(ValueError, match="CostStructure"):
         paper.reproduce(size=SIZE, scenes=["tetra"], cache_dir=cache, costs={"ray": 1.0})
+
+
+def test_crossover_study_in_the_paper(cache, tmp_path):
+    result = paper.reproduce(size=SIZE, n_processes=[1, 4], scenes=["tetra"], cache_dir=cache, progress=False,
+                             crossover=True)
+    crossing = result.crossover
+    assert set(crossing["mapping"]) == {"S", "P", "R"} and set(crossing["scene"]) == {"tetra"}
+    assert (crossing["n_processes"] == 4).all() and len(crossing) == 4 * 4 * 3
+    # the (1, 1) point is the paper's own run at 4 processes
+    own = result.runs[(result.runs["n_processes"] == 4)].set_index("mapping")
+    first = crossing[(crossing["record_scale"] == 1) & (crossing["latency_scale"] == 1)].set_index("mapping")
+    for mapping in ("S", "P", "R"):
+        assert first.loc[mapping, "coherence_loss"] == pytest.approx(own.loc[mapping, "coherence_loss"], rel=1e-12)
+    out = paper.write_paper(result, tmp_path / "out")
+    assert (out / "crossover.csv").is_file() and (out / "crossover.png").is_file()
+    summary = json.loads((out / "paper.json").read_text())
+    assert {row["mapping"] for row in summary["crossover_boundary"]} == {"P", "R"}
+    assert "When would coherence have won?" in (out / "index.html").read_text()

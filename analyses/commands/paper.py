@@ -56,6 +56,10 @@ def register(subparsers) -> None:
     parser.add_argument("--scenes", nargs="+", metavar="SCENE",
                         help="study scenes (default: all of %(scenes)s)")
     parser.add_argument("--json", action="store_true", help="print paper.json to stdout instead of the verdicts")
+    parser.add_argument("--crossover", action="store_true",
+                        help="also find, per scene at 8 processes, how much bigger the records (x1..x64) and "
+                             "slower the memory (x1..x64) would have to be before P or R lose more to coherence "
+                             "than S loses to imbalance (48 more runs per scene; crossover.csv, crossover.png)")
     parser.set_defaults(func=run)
 
 
@@ -78,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_folder(args.out)
     progress = sys.stderr.isatty()
     result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
-                       background=args.background, cache_dir=args.cache, progress=progress)
+                       background=args.background, cache_dir=args.cache, progress=progress,
+                       crossover=args.crossover)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
           "speedup_user.png", file=sys.stderr)
