@@ -14,6 +14,9 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import write_text_atomic
 from rtcommon.validate import require_int, require_number
 
@@ -48,6 +51,11 @@ class CacheLevel:
         Hit latency in CPU cycles.
     seed : int
         Seed of the random replacement policy (ignored otherwise).
+    write_allocate : bool
+        Whether a write miss fills this level. False models a write-through,
+        read-allocate cache such as the 21164 D-cache: the write passes on to
+        the next level and leaves this one unchanged. A write hit is served
+        like a read either way (see :mod:`cachesim.by_access`).
     """
 
     name: str
@@ -57,6 +65,7 @@ class CacheLevel:
     policy: str = "lru"
     latency: float = 1.0
     seed: int = 0
+    write_allocate: bool = True
 
     def __post_init__(self):
         owner = f"CacheLevel({self.name!r})" if isinstance(self.name, str) else "CacheLevel"
@@ -85,6 +94,9 @@ class CacheLevel:
         object.__setattr__(self, "policy", self.policy.lower())
         object.__setattr__(self, "latency", require_number(f"{owner}.latency", self.latency, 0, "cycles"))
         object.__setattr__(self, "seed", require_int(f"{owner}.seed", self.seed, 0))
+        if not isinstance(self.write_allocate, (bool, np.bool_)):
+            raise ValueError(f"{owner}.write_allocate must be true or false, got {self.write_allocate!r}")
+        object.__setattr__(self, "write_allocate", bool(self.write_allocate))
 
     @property
     def ways(self) -> int:
@@ -110,6 +122,7 @@ class CacheLevel:
             "policy": self.policy,
             "latency": self.latency,
             "seed": self.seed,
+            "write_allocate": self.write_allocate,
         }
 
 
@@ -127,17 +140,22 @@ class Hierarchy:
         ``non-inclusive``: a miss fills every level that missed; levels evict
         independently. ``inclusive``: the same fills, and a line evicted from
         a lower level is invalidated in every level above it
-        (back-invalidation). ``exclusive``: a line lives in one level at most;
+        (back-invalidation); a lower level smaller than one above it is
+        allowed (what-if grids ask for it) and then caps what the upper one
+        can keep. ``exclusive``: a line lives in one level at most;
         misses fill only the first level, its victims move one level down, and
         a hit in a lower level moves the line up to the first level.
     name : str
         Label for reports.
+    tlb : Tlb or None
+        A data TLB looked up on every access, or None for none.
     """
 
     levels: tuple[CacheLevel, ...]
     memory_latency: float = 100.0
     inclusion: str = "non-inclusive"
     name: str = "custom"
+    tlb: Tlb | None = None
 
     def __post_init__(self):
         levels = tuple(self.levels) if isinstance(self.levels, (list, tuple)) else None
@@ -162,18 +180,25 @@ class Hierarchy:
                     f"Hierarchy: line_size may only grow towards memory, but {lower.name} has "
                     f"{lower.line_size} B lines below {upper.name} with {upper.line_size} B"
                 )
-            if self.inclusion == "inclusive" and lower.size < upper.size:
+            if self.inclusion == "inclusive" and upper.write_allocate and not lower.write_allocate:
                 raise ValueError(
-                    f"Hierarchy: an inclusive {lower.name} ({lower.size} B) cannot hold all of "
-                    f"{upper.name} ({upper.size} B) above it"
+                    f"Hierarchy: in an inclusive hierarchy a level that allocates on writes ({upper.name}) "
+                    f"cannot sit above one that does not ({lower.name}): the line it takes would not be below it"
                 )
             if self.inclusion == "exclusive" and lower.line_size != upper.line_size:
                 raise ValueError(
                     f"Hierarchy: exclusive levels must share one line size; {upper.name} has "
                     f"{upper.line_size} B and {lower.name} {lower.line_size} B"
                 )
+        if self.inclusion == "exclusive":
+            for level in levels:
+                if not level.write_allocate:
+                    raise ValueError(f"Hierarchy: exclusive levels must allocate on writes; "
+                                     f"{level.name} has write_allocate=False")
         if not isinstance(self.name, str):
             raise ValueError(f"Hierarchy.name must be a string, got {self.name!r}")
+        if self.tlb is not None and not isinstance(self.tlb, Tlb):
+            raise ValueError(f"Hierarchy.tlb must be a Tlb or None, got {type(self.tlb).__name__}")
 
     @property
     def level_names(self) -> list[str]:
@@ -185,6 +210,7 @@ class Hierarchy:
             "memory_latency": self.memory_latency,
             "inclusion": self.inclusion,
             "levels": [level.to_dict() for level in self.levels],
+            **({"tlb": self.tlb.to_dict()} if self.tlb is not None else {}),
         }
 
     @classmethod
@@ -195,14 +221,15 @@ class Hierarchy:
         """
         if not isinstance(data, dict):
             raise ValueError(f"{source}: expected a table with 'levels', got {type(data).__name__}")
-        unknown = set(data) - {"name", "memory_latency", "inclusion", "levels"}
+        unknown = set(data) - {"name", "memory_latency", "inclusion", "levels", "tlb"}
         if unknown:
-            raise ValueError(f"{source}: unknown field(s) {sorted(unknown)}; allowed: name, memory_latency, inclusion, levels")
+            raise ValueError(f"{source}: unknown field(s) {sorted(unknown)}; "
+                             "allowed: name, memory_latency, inclusion, levels, tlb")
         raw_levels = data.get("levels")
         if not isinstance(raw_levels, list) or not raw_levels:
             raise ValueError(f"{source}: 'levels' must be a non-empty list of tables")
         levels = []
-        allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed"}
+        allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed", "write_allocate"}
         for index, raw in enumerate(raw_levels):
             where = f"{source}: levels[{index}]"
             if not isinstance(raw, dict):
@@ -218,6 +245,21 @@ class Hierarchy:
             except ValueError as error:
                 raise ValueError(f"{where}: {error}") from None
         kwargs = {key: data[key] for key in ("name", "memory_latency", "inclusion") if key in data}
+        if data.get("tlb") is not None:
+            raw = data["tlb"]
+            allowed_tlb = {"name", "entries", "page_size", "policy", "miss_cycles"}
+            if not isinstance(raw, dict):
+                raise ValueError(f"{source}: 'tlb' must be a table")
+            if set(raw) - allowed_tlb:
+                raise ValueError(f"{source}: tlb: unknown field(s) {sorted(set(raw) - allowed_tlb)}; "
+                                 f"allowed: {', '.join(sorted(allowed_tlb))}")
+            missing = {"entries", "page_size", "miss_cycles"} - set(raw)
+            if missing:
+                raise ValueError(f"{source}: tlb: missing field(s) {sorted(missing)}")
+            try:
+                kwargs["tlb"] = Tlb(**raw)
+            except ValueError as error:
+                raise ValueError(f"{source}: tlb: {error}") from None
         try:
             return cls(levels=tuple(levels), **kwargs)
         except ValueError as error:
@@ -261,21 +303,63 @@ class Hierarchy:
 
 
 def alpha21164() -> Hierarchy:
-    """The Alpha 21164 of the AlphaServer 8400 (DESIGN.md §3), per CPU.
+    """The Alpha 21164 of the AlphaServer 8400, per CPU, as its manuals describe it.
 
-    L1 data 8 KB direct-mapped, 32-byte lines; L2 (S-cache) 96 KB 3-way,
-    64-byte lines (512 sets); L3 (B-cache) 4 MB direct-mapped, 64-byte lines.
+    - L1, the D-cache: 8 KB direct-mapped, 32-byte lines, write-through and
+      read-allocate (``write_allocate=False``), kept a subset of the S-cache;
+    - L2, the S-cache: 96 KB 3-way (3 sets of 512 blocks), 64-byte lines,
+      write-back and write-allocate;
+    - L3, the B-cache: 4 MB direct-mapped, 64-byte lines, a superset of both.
+
+    Sources: DESIGN.md section 3 and issue 12, which cite the AlphaServer
+    8200/8400 technical manual for the three caches; the D-cache facts (a
+    write-through, read-allocate, direct-mapped cache of 32-byte blocks, kept
+    a subset of the S-cache) also read in Digital's manual EK-SWRA2-IG,
+    chapter 4 "Memory Subsystem", section 4.1.2. The B-cache being a
+    superset of the D-cache and S-cache makes the hierarchy ``inclusive``: a
+    line evicted from the S-cache or B-cache is invalidated in every level
+    above it. :func:`alpha21164_noninclusive` is the same machine without
+    that rule, for comparison.
+
+    Replacement: the D-cache and B-cache are direct-mapped, so only the
+    S-cache has a choice. Its policy is modelled as LRU. The manual text we
+    could consult here (searches of the 21164 hardware reference manual and
+    the AlphaServer 8400 manual) does not state the S-cache's replacement
+    rule; LRU is an assumption, flagged as such, and ``policy="random"`` is
+    available to test its weight.
+
+    Dirty write-backs are not modelled (see :mod:`cachesim.by_access`).
     Latencies 2 / 8 / 12 cycles and 80 for memory are approximate defaults.
     """
     return Hierarchy(
         levels=(
-            CacheLevel("L1", 8 * 1024, 32, 1, "lru", latency=2),
+            CacheLevel("L1", 8 * 1024, 32, 1, "lru", latency=2, write_allocate=False),
             CacheLevel("L2", 96 * 1024, 64, 3, "lru", latency=8),
             CacheLevel("L3", 4 * 1024 * 1024, 64, 1, "lru", latency=12),
         ),
         memory_latency=80,
+        inclusion="inclusive",
         name="alpha21164",
     )
+
+
+def alpha21164_noninclusive() -> Hierarchy:
+    """:func:`alpha21164` without inclusion: levels evict independently.
+
+    The model of the 21164 used before the manuals were checked; kept to show
+    what inclusion changes. For a stream of reads it gives exactly the
+    counts of the earlier ``alpha21164`` preset.
+    """
+    inclusive = alpha21164()
+    return Hierarchy(inclusive.levels, memory_latency=inclusive.memory_latency, inclusion="non-inclusive",
+                     name="alpha21164-noninclusive")
+
+
+def alpha21164_with_dtb() -> Hierarchy:
+    """:func:`alpha21164` with its data TLB (:func:`cachesim.tlb_config.alpha21164_dtb`)."""
+    machine = alpha21164()
+    return Hierarchy(machine.levels, memory_latency=machine.memory_latency, inclusion=machine.inclusion,
+                     name="alpha21164-dtb", tlb=alpha21164_dtb())
 
 
 def modern() -> Hierarchy:
@@ -296,11 +380,13 @@ def modern() -> Hierarchy:
     )
 
 
-PRESETS = {"alpha21164": alpha21164, "modern": modern}
+PRESETS = {"alpha21164": alpha21164, "alpha21164-noninclusive": alpha21164_noninclusive,
+           "alpha21164-dtb": alpha21164_with_dtb, "modern": modern}
 
 
 def get_hierarchy(name_or_path: str | os.PathLike | Hierarchy) -> Hierarchy:
-    """A preset by name (``alpha21164``, ``modern``), a file path, or a Hierarchy."""
+    """A preset by name (``alpha21164``, ``alpha21164-noninclusive``, ``alpha21164-dtb``,
+    ``modern``), a file path, or a Hierarchy."""
     if isinstance(name_or_path, Hierarchy):
         return name_or_path
     key = str(name_or_path)

@@ -18,7 +18,12 @@ import numpy as np
 import pandas as pd
 
 from cachesim import kernels as K
+from cachesim import tlb as T
 from cachesim.config import Hierarchy
+from cachesim.inputs import as_addresses, as_writes
+
+__all__ = ["CacheState", "SimulationResult", "as_addresses", "as_writes", "cache_geometry", "simulate",
+           "simulate_many", "tlb_geometry"]
 
 _POLICY_CODES = {"lru": K.LRU, "fifo": K.FIFO, "random": K.RANDOM}
 _INCLUSION_CODES = {"non-inclusive": K.NON_INCLUSIVE, "inclusive": K.INCLUSIVE, "exclusive": K.EXCLUSIVE}
@@ -42,7 +47,20 @@ def cache_geometry(hierarchy: Hierarchy) -> K.CacheGeometry:
         inclusion=_INCLUSION_CODES[hierarchy.inclusion],
         seeds=np.array([_seed_state(level.seed, index) for index, level in enumerate(levels)],
                        dtype=np.uint64),
+        write_allocate=np.array([level.write_allocate for level in levels], dtype=np.bool_),
     )
+
+
+_TLB_POLICY_CODES = {"nlu": T.NLU, "lru": T.TLB_LRU, "fifo": T.TLB_FIFO}
+
+
+def tlb_geometry(hierarchy: Hierarchy) -> T.TlbGeometry | None:
+    """The kernels' view of a hierarchy's TLB (None when it has none)."""
+    tlb = hierarchy.tlb
+    if tlb is None:
+        return None
+    return T.TlbGeometry(page_shift=tlb.page_size.bit_length() - 1, entries=tlb.entries,
+                         policy=_TLB_POLICY_CODES[tlb.policy])
 
 
 def _seed_state(seed: int, level: int) -> int:
@@ -65,6 +83,7 @@ class CacheState:
             raise ValueError(f"CacheState needs a Hierarchy, got {type(hierarchy).__name__}")
         self.hierarchy = hierarchy
         self._geometry = cache_geometry(hierarchy)
+        self._tlb_geometry = tlb_geometry(hierarchy)
         self.reset()
 
     @property
@@ -78,6 +97,16 @@ class CacheState:
         of :mod:`cachesim.kernels` (views: the kernels update this state)."""
         return K.CacheArrays(self.tags, self.stamps, self.counts)
 
+    @property
+    def tlb_geometry(self) -> T.TlbGeometry | None:
+        """The TLB's parameters as :func:`cachesim.tlb.tlb_lookup` takes them (None: no TLB)."""
+        return self._tlb_geometry
+
+    @property
+    def tlb_arrays(self) -> T.TlbArrays | None:
+        """The TLB's contents and counters for :func:`cachesim.tlb.tlb_lookup` (None: no TLB)."""
+        return self.tlb
+
     def reset(self) -> None:
         """Empty every level and zero the counters."""
         n_levels = len(self.hierarchy.levels)
@@ -86,12 +115,15 @@ class CacheState:
         self.stamps = np.zeros(total_ways, dtype=np.int64)
         self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
         self.clock = 0
+        self.tlb = T.empty_tlb(self.hierarchy.tlb.entries) if self.hierarchy.tlb is not None else None
 
     def copy(self) -> "CacheState":
         """An independent clone: continuing either leaves the other untouched."""
         clone = CacheState.__new__(CacheState)
         clone.hierarchy = self.hierarchy
         clone._geometry = self._geometry
+        clone._tlb_geometry = self._tlb_geometry
+        clone.tlb = None if self.tlb is None else T.TlbArrays(*(array.copy() for array in self.tlb))
         clone.tags = self.tags.copy()
         clone.stamps = self.stamps.copy()
         clone.counts = self.counts.copy()
@@ -100,7 +132,8 @@ class CacheState:
 
     def totals(self) -> "SimulationResult":
         """Cumulative counts of everything run on this state since the last reset."""
-        return SimulationResult(self.hierarchy, self.counts.copy())
+        return SimulationResult(self.hierarchy, self.counts.copy(),
+                                tlb_counts=None if self.tlb is None else self.tlb.counts.copy())
 
     def resident_lines(self, level: int | str) -> np.ndarray:
         """Sorted line numbers (address // line_size) held by one level."""
@@ -119,18 +152,40 @@ class SimulationResult:
     Attributes
     ----------
     hierarchy : Hierarchy
-    counts : ndarray of int64, shape (L, 5)
-        accesses, hits, misses, evictions, back-invalidations per level.
+    counts : ndarray of int64, shape (L, N_COUNTERS)
+        Per level, in the columns of :mod:`cachesim.kernels`: accesses, hits,
+        misses (reads and writes together), evictions, back-invalidations,
+        then writes, write hits and write misses.
     served_by : ndarray of uint8, shape (N,), or None
         Level that served each access (``L`` means memory), when requested.
     state : CacheState or None
         The state after the call, to continue from.
+    tlb_counts : ndarray of int64, shape (3,), or None
+        TLB lookups, hits and misses, when the hierarchy has a TLB.
     """
 
     hierarchy: Hierarchy
     counts: np.ndarray
     served_by: np.ndarray | None = None
     state: CacheState | None = None
+    tlb_counts: np.ndarray | None = None
+
+    @property
+    def tlb_accesses(self) -> int | None:
+        return None if self.tlb_counts is None else int(self.tlb_counts[T.TLB_ACCESSES])
+
+    @property
+    def tlb_hits(self) -> int | None:
+        return None if self.tlb_counts is None else int(self.tlb_counts[T.TLB_HITS])
+
+    @property
+    def tlb_misses(self) -> int | None:
+        return None if self.tlb_counts is None else int(self.tlb_counts[T.TLB_MISSES])
+
+    @property
+    def tlb_cycles(self) -> float | None:
+        """TLB misses times the TLB's fixed miss penalty (None: no TLB)."""
+        return None if self.tlb_counts is None else self.tlb_misses * self.hierarchy.tlb.miss_cycles
 
     @property
     def accesses(self) -> np.ndarray:
@@ -153,6 +208,30 @@ class SimulationResult:
         return self.counts[:, K.INVALIDATIONS]
 
     @property
+    def write_accesses(self) -> np.ndarray:
+        return self.counts[:, K.WRITES]
+
+    @property
+    def write_hits(self) -> np.ndarray:
+        return self.counts[:, K.WRITE_HITS]
+
+    @property
+    def write_misses(self) -> np.ndarray:
+        return self.counts[:, K.WRITE_MISSES]
+
+    @property
+    def read_accesses(self) -> np.ndarray:
+        return self.accesses - self.write_accesses
+
+    @property
+    def read_hits(self) -> np.ndarray:
+        return self.hits - self.write_hits
+
+    @property
+    def read_misses(self) -> np.ndarray:
+        return self.misses - self.write_misses
+
+    @property
     def hit_rate(self) -> np.ndarray:
         """Hits / accesses per level (NaN where a level saw no access)."""
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -165,7 +244,8 @@ class SimulationResult:
 
     def to_frame(self) -> pd.DataFrame:
         """One row per level: level, size, line_size, ways, accesses, hits,
-        misses, evictions, invalidations, hit_rate."""
+        misses, evictions, invalidations, hit_rate, then write_accesses,
+        write_hits, write_misses (the writes among accesses, hits, misses)."""
         levels = self.hierarchy.levels
         return pd.DataFrame({
             "level": pd.Series([level.name for level in levels], dtype="string"),
@@ -178,6 +258,9 @@ class SimulationResult:
             "evictions": self.evictions.astype(np.int64),
             "invalidations": self.invalidations.astype(np.int64),
             "hit_rate": self.hit_rate.astype(np.float64),
+            "write_accesses": self.write_accesses.astype(np.int64),
+            "write_hits": self.write_hits.astype(np.int64),
+            "write_misses": self.write_misses.astype(np.int64),
         })
 
     def to_dict(self) -> dict:
@@ -190,42 +273,9 @@ class SimulationResult:
                 for row in self.to_frame().astype(object).to_dict(orient="records")
             ],
             "memory_accesses": self.memory_accesses,
+            **({"tlb": {"accesses": self.tlb_accesses, "hits": self.tlb_hits, "misses": self.tlb_misses,
+                        "cycles": self.tlb_cycles}} if self.tlb_counts is not None else {}),
         }
-
-
-def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
-    """Validate and convert to a contiguous uint64 array of byte addresses.
-
-    Accepts any integer array or sequence of non-negative integers below 2**64.
-    Floats, booleans, negative values and non-numeric input raise ValueError.
-    """
-    if isinstance(addresses, np.ndarray):
-        array = addresses
-    else:
-        try:
-            array = np.asarray(addresses)
-        except (OverflowError, ValueError, TypeError) as error:
-            raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
-        if array.dtype == object:
-            try:
-                array = np.array([int(value) for value in array.ravel()], dtype=np.uint64)
-            except (OverflowError, ValueError, TypeError) as error:
-                raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
-    if array.ndim != 1:
-        if array.size == 0:
-            array = array.reshape(0)
-        else:
-            raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
-    if array.size == 0:
-        return np.zeros(0, dtype=np.uint64)
-    if array.dtype.kind == "u":
-        return np.ascontiguousarray(array, dtype=np.uint64)
-    if array.dtype.kind == "i":
-        lowest = array.min()
-        if lowest < 0:
-            raise ValueError(f"{name} must be non-negative; found {lowest} at index {int(np.argmin(array))}")
-        return np.ascontiguousarray(array, dtype=np.uint64)
-    raise ValueError(f"{name} must be integers (got dtype {array.dtype}); byte addresses are whole numbers")
 
 
 def _check_line_range(addresses: np.ndarray, hierarchy: Hierarchy) -> None:
@@ -235,17 +285,22 @@ def _check_line_range(addresses: np.ndarray, hierarchy: Hierarchy) -> None:
         raise ValueError("with a 1-byte first-level line, addresses must be below 2**63")
 
 
-def simulate(addresses, hierarchy: Hierarchy | CacheState, *, return_levels: bool = False) -> SimulationResult:
+def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None,
+             return_levels: bool = False) -> SimulationResult:
     """Run a stream of byte addresses through a cache hierarchy in one compiled call.
 
     Parameters
     ----------
     addresses : array_like of int, shape (N,)
-        Byte addresses (non-negative, below 2**64), in access order. Every
-        access is a read of the line holding that byte.
+        Byte addresses (non-negative, below 2**64), in access order; each
+        access reads (or writes) the line holding that byte.
     hierarchy : Hierarchy or CacheState
         A configuration (runs on empty caches) or a state to continue; a
         state is updated in place.
+    writes : array_like of bool, shape (N,), optional
+        True where the access is a write. Omitted (or all false): every
+        access is a read, with results identical to a call without it.
+        Semantics of writes per level: :mod:`cachesim.by_access`.
     return_levels : bool
         Also return ``served_by`` (uint8, (N,)): the level index that served
         each access, ``L`` meaning memory.
@@ -253,21 +308,33 @@ def simulate(addresses, hierarchy: Hierarchy | CacheState, *, return_levels: boo
     Returns
     -------
     SimulationResult
-        Counts of this call only, and the state after it (``.state``).
+        Counts of this call only, and the state after it (``.state``); with
+        the TLB's lookups, hits and misses when the hierarchy has a TLB
+        (every access, read or write, is looked up).
     """
     state = hierarchy if isinstance(hierarchy, CacheState) else CacheState(hierarchy)
     addresses = as_addresses(addresses)
+    flags = as_writes(writes, addresses.size)
     _check_line_range(addresses, state.hierarchy)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
     before = state.counts.copy()
-    state.clock = int(K.simulate_stream(addresses, state.geometry, state.arrays, state.clock, served_by,
+    state.clock = int(K.simulate_writes(addresses, flags, state.geometry, state.arrays, state.clock, served_by,
                                         return_levels))
     return SimulationResult(state.hierarchy, state.counts - before,
-                            served_by if return_levels else None, state)
+                            served_by if return_levels else None, state, _run_tlb(addresses, state))
+
+
+def _run_tlb(addresses: np.ndarray, state: CacheState) -> np.ndarray | None:
+    """Look every address up in the state's TLB; the counts of this call (None: no TLB)."""
+    if state.tlb is None:
+        return None
+    before = state.tlb.counts.copy()
+    T.tlb_lookup(addresses, state.tlb_geometry, state.tlb)
+    return state.tlb.counts - before
 
 
 def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[CacheState] | None = None,
-                  return_levels: bool = False) -> list[SimulationResult]:
+                  writes=None, return_levels: bool = False) -> list[SimulationResult]:
     """Run independent streams, each on its own hierarchy state, in one parallel call.
 
     Parameters
@@ -278,6 +345,8 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
         Configuration of fresh states; omit when ``states`` is given.
     states : list of CacheState, optional
         States to continue (updated in place), all of one hierarchy.
+    writes : sequence of array_like of bool, length S, optional
+        Write flags of each stream (see :func:`simulate`); omitted: all reads.
     return_levels : bool
         Also return per-access ``served_by`` for every stream.
 
@@ -286,6 +355,20 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
     list of SimulationResult, length S
     """
     streams = [as_addresses(stream, name=f"streams[{index}]") for index, stream in enumerate(streams)]
+    if writes is not None:
+        writes = list(writes)
+        if len(writes) != len(streams):
+            raise ValueError(f"simulate_many got {len(streams)} streams but {len(writes)} write-flag arrays")
+        flags = [as_writes(flag, stream.size, name=f"writes[{index}]")
+                 for index, (flag, stream) in enumerate(zip(writes, streams))]
+        if any(flag.size for flag in flags):
+            flags = [flag if flag.size else np.zeros(stream.size, dtype=np.bool_)
+                     for flag, stream in zip(flags, streams)]
+            all_writes = np.concatenate(flags) if flags else np.zeros(0, dtype=np.bool_)
+        else:
+            all_writes = np.zeros(0, dtype=np.bool_)
+    else:
+        all_writes = np.zeros(0, dtype=np.bool_)
     if states is None:
         if hierarchy is None:
             raise ValueError("simulate_many needs a hierarchy or a list of states")
@@ -311,11 +394,12 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
     clocks = np.array([state.clock for state in states], dtype=np.int64)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
     K.simulate_streams(addresses, starts, states[0].geometry, K.CacheArrays(tags, stamps, counts), clocks,
-                       served_by, return_levels)
+                       served_by, return_levels, all_writes)
     results = []
     for index, state in enumerate(states):
         state.tags, state.stamps = tags[index].copy(), stamps[index].copy()
         state.counts, state.clock = counts[index].copy(), int(clocks[index])
         levels = served_by[starts[index]:starts[index + 1]] if return_levels else None
-        results.append(SimulationResult(reference, counts[index] - before[index], levels, state))
+        results.append(SimulationResult(reference, counts[index] - before[index], levels, state,
+                                        _run_tlb(streams[index], state)))
     return results

@@ -4,6 +4,12 @@ LRU and FIFO sets are OrderedDicts (oldest first); random replacement keeps a
 list of ways and draws victims with the same documented hash of (level seed,
 access clock) as the simulator, so the victim sequences can be compared
 exactly. The clock counts accesses from 1.
+
+Writes (``writes[i]`` true): a write hit is served like a read (LRU recency
+updated); a write miss goes on down like a read miss; on the way back the
+levels that missed are filled, except those with ``write_allocate=False``.
+Counts have 8 columns: accesses, hits, misses, evictions, invalidations,
+writes, write hits, write misses.
 """
 from collections import OrderedDict
 
@@ -74,22 +80,28 @@ class ReferenceLevel:
         return evicted
 
 
-def reference_simulate(addresses, hierarchy):
-    """Return (counts (L, 5) int64, served_by list) like cachesim.simulate."""
+def reference_simulate(addresses, hierarchy, writes=None):
+    """Return (counts (L, 8) int64, served_by list) like cachesim.simulate."""
     levels = [ReferenceLevel(level, index) for index, level in enumerate(hierarchy.levels)]
+    allocate = [level.write_allocate for level in hierarchy.levels]
     n_levels = len(levels)
-    counts = np.zeros((n_levels, 5), dtype=np.int64)
+    counts = np.zeros((n_levels, 8), dtype=np.int64)
     served_by = []
-    for clock, address in enumerate((int(a) for a in addresses), start=1):
+    addresses = [int(a) for a in addresses]
+    flags = [False] * len(addresses) if writes is None else [bool(w) for w in writes]
+    for clock, (address, is_write) in enumerate(zip(addresses, flags), start=1):
         lines = [address // level.line_size for level in levels]
         served = n_levels
         for index, level in enumerate(levels):
             counts[index, 0] += 1
+            counts[index, 5] += is_write
             if level.lookup(lines[index]):
                 counts[index, 1] += 1
+                counts[index, 6] += is_write
                 served = index
                 break
             counts[index, 2] += 1
+            counts[index, 7] += is_write
         served_by.append(served)
         if served == 0:
             continue
@@ -104,6 +116,8 @@ def reference_simulate(addresses, hierarchy):
                 counts[index, 3] += 1
             continue
         for index in range(served - 1, -1, -1):
+            if is_write and not allocate[index]:
+                continue
             evicted = levels[index].insert(lines[index], clock)
             if evicted is None:
                 continue

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from cachesim import CacheLevel, Hierarchy, alpha21164, get_hierarchy, modern
+from cachesim import CacheLevel, Hierarchy, alpha21164, alpha21164_noninclusive, get_hierarchy, modern
 
 
 def test_alpha_preset_geometry():
@@ -11,6 +11,17 @@ def test_alpha_preset_geometry():
     assert (l1.size, l1.line_size, l1.ways, l1.n_sets) == (8192, 32, 1, 256)
     assert (l2.size, l2.line_size, l2.ways, l2.n_sets) == (98304, 64, 3, 512)
     assert (l3.size, l3.line_size, l3.ways, l3.n_sets) == (4 << 20, 64, 1, 65536)
+
+
+def test_alpha_preset_follows_the_manual():
+    # D-cache write-through read-allocate, S-cache and B-cache write-allocate,
+    # B-cache a superset of both: inclusive. The variant differs only there.
+    hierarchy = alpha21164()
+    assert hierarchy.inclusion == "inclusive"
+    assert [level.write_allocate for level in hierarchy.levels] == [False, True, True]
+    variant = get_hierarchy("alpha21164-noninclusive")
+    assert variant == alpha21164_noninclusive()
+    assert variant.inclusion == "non-inclusive" and variant.levels == hierarchy.levels
 
 
 def test_non_power_of_two_set_count_is_allowed():
@@ -36,6 +47,7 @@ def test_full_associativity():
     (dict(latency=float("nan")), "latency"),
     (dict(seed=-3), "seed"),
     (dict(name=""), "name"),
+    (dict(write_allocate=1), "write_allocate"),
 ])
 def test_bad_level_names_the_field(kwargs, field):
     arguments = dict(name="L1", size=8192, line_size=32, assoc=1)
@@ -48,8 +60,6 @@ def test_inconsistent_hierarchies_are_rejected():
     small = CacheLevel("L1", 8192, 64, 2)
     with pytest.raises(ValueError, match="line_size may only grow"):
         Hierarchy((small, CacheLevel("L2", 65536, 32, 4)))
-    with pytest.raises(ValueError, match="inclusive"):
-        Hierarchy((small, CacheLevel("L2", 4096, 64, 4)), inclusion="inclusive")
     with pytest.raises(ValueError, match="exclusive"):
         Hierarchy((CacheLevel("L1", 8192, 32, 2), CacheLevel("L2", 65536, 64, 4)), inclusion="exclusive")
     with pytest.raises(ValueError, match="distinct names"):
@@ -63,7 +73,7 @@ def test_inconsistent_hierarchies_are_rejected():
 
 
 @pytest.mark.parametrize("suffix", [".toml", ".json"])
-@pytest.mark.parametrize("preset", [alpha21164, modern])
+@pytest.mark.parametrize("preset", [alpha21164, alpha21164_noninclusive, modern])
 def test_round_trip_through_files(tmp_path, suffix, preset):
     hierarchy = preset()
     path = hierarchy.save(tmp_path / f"h{suffix}")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import pycachesim_oracle
-from cachesim import CacheLevel, Hierarchy, alpha21164, modern, simulate
+from cachesim import CacheLevel, Hierarchy, alpha21164_noninclusive, modern, simulate
 
 pytestmark = pytest.mark.skipif(
     not pycachesim_oracle.available(),
@@ -32,7 +32,7 @@ def streams():
 
 
 def hierarchies():
-    yield alpha21164()
+    yield alpha21164_noninclusive()  # pycachesim has no back-invalidation
     yield modern()
     for policy in ("lru", "fifo"):
         yield Hierarchy((

@@ -1,0 +1,61 @@
+"""Validation of simulator inputs: byte addresses and per-access write flags."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
+    """Validate and convert to a contiguous uint64 array of byte addresses.
+
+    Accepts any integer array or sequence of non-negative integers below 2**64.
+    Floats, booleans, negative values and non-numeric input raise ValueError.
+    """
+    if isinstance(addresses, np.ndarray):
+        array = addresses
+    else:
+        try:
+            array = np.asarray(addresses)
+        except (OverflowError, ValueError, TypeError) as error:
+            raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+        if array.dtype == object:
+            try:
+                array = np.array([int(value) for value in array.ravel()], dtype=np.uint64)
+            except (OverflowError, ValueError, TypeError) as error:
+                raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+    if array.ndim != 1:
+        if array.size == 0:
+            array = array.reshape(0)
+        else:
+            raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
+    if array.size == 0:
+        return np.zeros(0, dtype=np.uint64)
+    if array.dtype.kind == "u":
+        return np.ascontiguousarray(array, dtype=np.uint64)
+    if array.dtype.kind == "i":
+        lowest = array.min()
+        if lowest < 0:
+            raise ValueError(f"{name} must be non-negative; found {lowest} at index {int(np.argmin(array))}")
+        return np.ascontiguousarray(array, dtype=np.uint64)
+    raise ValueError(f"{name} must be integers (got dtype {array.dtype}); byte addresses are whole numbers")
+
+
+def as_writes(writes, n_accesses: int, name: str = "writes") -> np.ndarray:
+    """Validate per-access write flags: a bool array of shape (N,), or None (all reads).
+
+    Returns a contiguous bool array; (0,) when there is no write at all, so
+    that read-only streams take the read-only paths.
+    """
+    if writes is None:
+        return np.zeros(0, dtype=np.bool_)
+    array = np.asarray(writes)
+    if array.dtype != np.bool_:
+        if array.dtype.kind in "iu" and array.size and not np.isin(array, (0, 1)).all():
+            raise ValueError(f"{name} must be booleans (or 0/1), one per address; found other values")
+        if array.dtype.kind not in "iub" and array.size:
+            raise ValueError(f"{name} must be booleans, one per address; got dtype {array.dtype}")
+        array = array.astype(np.bool_)
+    if array.ndim != 1 or array.size != n_accesses:
+        raise ValueError(f"{name} must have shape ({n_accesses},), one flag per address; got {array.shape}")
+    if not array.any():
+        return np.zeros(0, dtype=np.bool_)
+    return np.ascontiguousarray(array)

@@ -1,0 +1,171 @@
+"""Compiled data-TLB kernels: a fully associative cache of page numbers.
+
+The TLB is looked up on every access, read or write, and its contents depend
+only on the pages touched, never on the caches; so it runs as a pass of its
+own over the same addresses (:func:`tlb_lookup`), and compiled code of other
+packages calls it beside :func:`cachesim.kernels.simulate_into`.
+
+State of one TLB of ``E`` entries (:class:`TlbArrays`):
+
+- ``pages`` int64 (E,): the page number held by each entry, or -1;
+- ``stamps`` int64 (E,): the TLB clock of each entry's last use (LRU only);
+- ``cursor`` int64 (3,): :data:`NEXT_FILL` (the entry the round-robin fill
+  pointer designates), :data:`LAST_USED` (the entry of the last lookup, -1
+  before any) and :data:`CLOCK` (lookups so far);
+- ``counts`` int64 (3,): :data:`TLB_ACCESSES`, :data:`TLB_HITS`,
+  :data:`TLB_MISSES`.
+
+Policies (:class:`TlbGeometry` ``policy``):
+
+- :data:`NLU`, not-last-used, the 21164 DTB's: a fill goes to the entry the
+  fill pointer designates, unless that entry served the last lookup, in
+  which case it goes to the next one; the pointer then moves one past the
+  filled entry. The 21164 hardware reference manual says the DTB is filled
+  by a not-last-used algorithm implemented in hardware and that each fill
+  (a write of DTB_TAG) increments the TB entry pointer, which starts at
+  entry 0; skipping the last-used entry is our reading of "not last used".
+- :data:`TLB_FIFO`: the same round robin without the skip.
+- :data:`TLB_LRU`: the least recently used entry (an empty one first).
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+# Replacement policies (TlbGeometry.policy).
+NLU, TLB_LRU, TLB_FIFO = 0, 1, 2
+# Columns of TlbArrays.cursor.
+NEXT_FILL, LAST_USED, CLOCK = 0, 1, 2
+N_CURSOR = 3
+# Columns of TlbArrays.counts.
+TLB_ACCESSES, TLB_HITS, TLB_MISSES = 0, 1, 2
+N_TLB_COUNTERS = 3
+
+
+class TlbGeometry(NamedTuple):
+    """A TLB's fixed parameters.
+
+    Attributes
+    ----------
+    page_shift : int
+        log2 of the page size: byte address to page number.
+    entries : int
+        Number of entries (fully associative).
+    policy : int
+        :data:`NLU`, :data:`TLB_LRU` or :data:`TLB_FIFO`.
+    """
+
+    page_shift: int
+    entries: int
+    policy: int
+
+
+class TlbArrays(NamedTuple):
+    """The mutable contents and counters of one TLB (updated in place).
+
+    Attributes
+    ----------
+    pages : ndarray of int64, shape (E,)
+        Page number held by each entry, or -1.
+    stamps : ndarray of int64, shape (E,)
+        TLB clock of each entry's last use (read by LRU only).
+    cursor : ndarray of int64, shape (N_CURSOR,)
+        Fill pointer, last-used entry and clock (columns :data:`NEXT_FILL`,
+        :data:`LAST_USED`, :data:`CLOCK`).
+    counts : ndarray of int64, shape (N_TLB_COUNTERS,)
+        Cumulative lookups, hits and misses.
+    """
+
+    pages: np.ndarray
+    stamps: np.ndarray
+    cursor: np.ndarray
+    counts: np.ndarray
+
+
+def empty_tlb(entries: int) -> TlbArrays:
+    """A TLB of ``entries`` entries with nothing in it and zero counters."""
+    cursor = np.zeros(N_CURSOR, dtype=np.int64)
+    cursor[LAST_USED] = -1
+    return TlbArrays(np.full(entries, -1, dtype=np.int64), np.zeros(entries, dtype=np.int64), cursor,
+                     np.zeros(N_TLB_COUNTERS, dtype=np.int64))
+
+
+def empty_tlbs(n_tlbs: int, entries: int) -> TlbArrays:
+    """``n_tlbs`` empty TLBs stacked (shapes (S, E), (S, N_CURSOR), (S, N_TLB_COUNTERS)).
+
+    TLB ``s`` is ``TlbArrays(pages[s], stamps[s], cursor[s], counts[s])``; a
+    caller whose TLBs stay with CPUs but whose counters follow processes
+    builds the bundle from ``cursor[cpu]`` and another (P, N_TLB_COUNTERS)
+    array's row, as for the caches.
+    """
+    cursor = np.zeros((n_tlbs, N_CURSOR), dtype=np.int64)
+    cursor[:, LAST_USED] = -1
+    return TlbArrays(np.full((n_tlbs, entries), -1, dtype=np.int64), np.zeros((n_tlbs, entries), dtype=np.int64),
+                     cursor, np.zeros((n_tlbs, N_TLB_COUNTERS), dtype=np.int64))
+
+
+@njit(cache=True)
+def tlb_lookup(addresses, geometry, tlb):
+    """Look up the page of every address in one TLB, in order.
+
+    Parameters
+    ----------
+    addresses : ndarray of uint64, shape (N,)
+        Byte addresses in access order (reads and writes alike).
+    geometry : TlbGeometry
+    tlb : TlbArrays
+        Updated in place, counters included.
+
+    Returns
+    -------
+    int
+        The misses of this call (each costs the TLB's fixed miss penalty).
+    """
+    pages = tlb.pages
+    stamps = tlb.stamps
+    cursor = tlb.cursor
+    entries = geometry.entries
+    policy = geometry.policy
+    shift = np.uint64(geometry.page_shift)
+    clock = cursor[CLOCK]
+    next_fill = cursor[NEXT_FILL]
+    last = cursor[LAST_USED]
+    last_page = pages[last] if last >= 0 else np.int64(-1)
+    misses = np.int64(0)
+    for i in range(addresses.shape[0]):
+        page = np.int64(addresses[i] >> shift)
+        clock += 1
+        if page == last_page:
+            stamps[last] = clock
+            continue
+        # One pass without early exit over the entries: the host vectorises it.
+        found = -1
+        for entry in range(entries):
+            found = entry if pages[entry] == page else found
+        if found < 0:
+            misses += 1
+            if policy == TLB_LRU:
+                found = 0
+                oldest = np.int64(9223372036854775807)
+                for entry in range(entries):
+                    age = stamps[entry] if pages[entry] >= 0 else np.int64(-1)
+                    if age < oldest:
+                        oldest = age
+                        found = entry
+            else:
+                found = next_fill
+                if policy == NLU and found == last:
+                    found = (found + 1) % entries
+                next_fill = (found + 1) % entries
+            pages[found] = page
+        stamps[found] = clock
+        last = found
+        last_page = page
+    n = addresses.shape[0]
+    cursor[CLOCK] = clock
+    cursor[NEXT_FILL] = next_fill
+    cursor[LAST_USED] = last
+    tlb.counts[TLB_ACCESSES] += n
+    tlb.counts[TLB_HITS] += n - misses
+    tlb.counts[TLB_MISSES] += misses
+    return misses
