@@ -53,10 +53,14 @@ def jobs(work: pathlib.Path) -> list[list[str]]:
 
 
 def _stable(value, work: str):
-    """The JSON value without what changes from run to run of one commit."""
+    """The JSON value without what changes from run to run of one commit.
+
+    ``meta_checksum`` hashes the trace metadata, which holds the command line
+    and so the scratch folder; the arrays' own checksums stay in.
+    """
     if isinstance(value, dict):
         return {k: (v.rsplit("-", 1)[0] if k == "trace_key" else _stable(v, work)) for k, v in value.items()
-                if k not in ("versions", "timings") and not k.endswith("seconds")}
+                if k not in ("versions", "timings", "meta_checksum") and not k.endswith("seconds")}
     if isinstance(value, list):
         return [_stable(v, work) for v in value]
     if isinstance(value, str):
