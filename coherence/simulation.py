@@ -24,6 +24,7 @@ processes are not simulated in the caches.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -243,6 +244,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         raise ValueError(f"compute must have shape ({n_pixels},), got {compute.shape}")
 
     n_processes = distribution.n_processes
+    _warn_idle_processes(distribution)
     cpu_of = machine.cpu_of(n_processes)
     n_cpus = int(min(machine.n_cpus, n_processes))
     order = np.argsort(cpu_of, kind="stable")
@@ -303,6 +305,25 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     processes = pd.DataFrame(frame)
     real = processor_sharing_time(processes["user_cycles"].to_numpy(), machine.n_cpus, machine.background_load)
     return Run(processes, task_owner, real)
+
+
+def _warn_idle_processes(distribution: Distribution) -> None:
+    """Warn when some processes can get no pixels: a legal run (they count
+    with zero user time) whose speed-up the user may misread."""
+    n_processes = distribution.n_processes
+    size = f"{distribution.width}x{distribution.height}"
+    if distribution.dynamic:
+        n_work = int(np.count_nonzero(distribution.task_lengths))
+        if n_work < n_processes:
+            warnings.warn(f"mapping {distribution.name}: {n_work} non-empty tasks for {n_processes} processes "
+                          f"on a {size} image, so {n_processes - n_work} processes get no work and the "
+                          f"speed-up cannot exceed {n_work}; use a larger image or smaller tasks",
+                          stacklevel=3)
+        return
+    n_idle = int(np.count_nonzero(distribution.process_pixel_counts() == 0))
+    if n_idle:
+        warnings.warn(f"mapping {distribution.name}: {n_idle} of {n_processes} processes get no pixels "
+                      f"of the {size} image; they count with zero user time", stacklevel=3)
 
 
 def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> float:
@@ -413,6 +434,7 @@ def _run(reads, geometry, caches, cost, schedule, cpus, out_cycles, task_owner):
                 task_owner[task] = process
                 current_task[process] = task
                 position[process] = task_offsets[task]
+                continue  # the task may be empty (more processes than rows or pixels)
             pixel = task_pixels[position[process]]
             position[process] += 1
             buffer, n_addresses = record_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],

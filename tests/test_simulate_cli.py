@@ -1,5 +1,8 @@
 """``coherence simulate`` on a saved trace."""
 import json
+import signal
+import subprocess
+import sys
 
 import pandas as pd
 import pytest
@@ -45,3 +48,30 @@ def test_errors_are_clear(saved, tmp_path, capsys):
     assert "Machine.n_cpus" in capsys.readouterr().err
     assert main(["simulate", str(folder), "--csv", str(tmp_path / "no" / "r.csv")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def run_cli(*arguments, cwd):
+    """``coherence ...`` in a subprocess: a segfault fails the test instead of killing pytest."""
+    done = subprocess.run([sys.executable, "-m", "analyses", *arguments], capture_output=True, text=True,
+                          cwd=cwd, timeout=900)
+    assert done.returncode not in (-signal.SIGSEGV, 128 + signal.SIGSEGV), "segfault: " + done.stderr[-2000:]
+    return done
+
+
+def test_more_processes_than_rows_is_a_legal_run(tmp_path):
+    trace = random_trace(width=32, height=32, seed=10)
+    trace.save(tmp_path / "t")
+    done = run_cli("simulate", str(tmp_path / "t"), "--mapping", "S", "--processes", "33", "--json",
+                   cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "1 of 33 processes get no pixels" in done.stderr
+    run = json.loads(done.stdout)["runs"][-1]
+    assert run["n_processes"] == 33 and run["pixels"] == 32 * 32
+
+
+def test_report_below_its_default_process_count(tmp_path):
+    """The report's 16 processes on a 15x15 image: S and R leave a process without rows."""
+    done = run_cli("report", "tetra", "--size", "15", "--cache", str(tmp_path / "cache"), "--out",
+                   str(tmp_path / "report"), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "report" / "summary.json").is_file()

@@ -1,11 +1,19 @@
 """The schedule simulation against plain replays through cachesim.simulate."""
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pandas as pd
 import pytest
 
 from cachesim import CacheState, Hierarchy, alpha21164, simulate
 from coherence.cost import CostModel
 from coherence.layout import get_layout
 from coherence.distribution import Distribution
+from coherence.mappings import get_mapping
+from coherence.metrics import add_speedups, run_summary
 from coherence.simulation import Machine, processor_sharing_time, simulate_run
 from tracer.trace import COUNTER_NAMES, RecordKind
 
@@ -135,3 +143,80 @@ def test_machine_validation_and_placement():
         Machine(n_cpus=0)
     with pytest.raises(ValueError, match="Machine.placement"):
         Machine(placement="random")
+
+
+# --------------------------------------------------------------------------
+# Processes with no work (issue 13): a legal run, never a crash.
+
+IDLE_SCRIPT = """
+import sys, warnings
+sys.path.insert(0, {tests!r})
+from trace_factory import random_trace
+from coherence.mappings import get_mapping
+from coherence.layout import get_layout
+from coherence.cost import CostModel
+from coherence.simulation import Machine, simulate_run
+from tracer.trace import RecordKind
+from trace_factory import SMALL
+warnings.simplefilter("ignore")
+trace = random_trace(width=8, height=4, seed=5)
+placed = get_layout("compact").place({{kind: 60 for kind in RecordKind}})
+for name, n in (("S", 6), ("R", 7), ("P", 40), ("B", 33), ("DB", 3), ("S", 33)):
+    run = simulate_run(trace, get_mapping(name).build(8, 4, n), SMALL, placed, CostModel(), Machine(n_cpus=4))
+    print(name, n, int(run.processes["pixels"].sum()))
+"""
+
+
+def test_processes_without_work_do_not_crash_the_kernel(tmp_path):
+    """In a subprocess, so that a segfault fails this test instead of killing pytest."""
+    script = tmp_path / "idle.py"
+    script.write_text(IDLE_SCRIPT.format(tests=str(Path(__file__).parent)))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    assert done.returncode not in (-signal.SIGSEGV, 128 + signal.SIGSEGV), "segfault: " + done.stderr[-2000:]
+    assert done.returncode == 0, done.stderr[-2000:]
+    # Every pixel rendered exactly once in every run.
+    assert [line.split()[-1] for line in done.stdout.split("\n") if line] == ["32"] * 6
+
+
+@pytest.mark.parametrize("machine", [Machine(n_cpus=8), Machine(n_cpus=2, quantum_cycles=5000.0)])
+def test_idle_processes_have_zero_user_time_and_the_worst_process_decides(machine):
+    trace = random_trace(width=8, height=4, seed=6)
+    placed = placed_for(trace)
+    cost = CostModel(ray=3, node_visit=1, test_sphere=5, shading=11)
+    rows = [np.arange(row * 8, row * 8 + 8) for row in range(4)]
+    with pytest.warns(UserWarning, match="2 of 6 processes get no pixels of the 8x4 image"):
+        run = simulate_run(trace, get_mapping("S").build(8, 4, 6), SMALL, placed, cost, machine)
+    user = run.processes["user_cycles"].to_numpy()
+    assert run.processes["pixels"].tolist() == [8, 8, 8, 8, 0, 0]
+    assert user[4:].tolist() == [0.0, 0.0]
+    assert run.processes["tasks"].sum() == 6  # the empty strips are handed out, and render nothing
+    if machine.n_cpus >= 6:  # every process alone on a CPU: each equals a cold replay of its row
+        for process, row in enumerate(rows):
+            assert user[process] == pytest.approx(sum(replay(trace, placed, row, CacheState(SMALL), SMALL, cost)))
+    one = simulate_run(trace, get_mapping("S").build(8, 4, 1), SMALL, placed, cost, machine)
+    runs = add_speedups(pd.DataFrame([
+        {"mapping": "S", **run_summary(frame, SMALL.level_names, cost.clock_hz, real)}
+        for frame, real in ((one.processes, one.real_cycles), (run.processes, run.real_cycles))]))
+    assert runs["speedup_user"].iloc[1] == pytest.approx(one.processes["user_cycles"][0] / user.max())
+    assert runs["load_balance"].iloc[1] == pytest.approx(user.mean() / user.max())
+
+
+def test_pixel_mapping_with_more_processes_than_pixels():
+    trace = random_trace(width=3, height=2, seed=7)
+    placed = placed_for(trace)
+    cost = CostModel()
+    with pytest.warns(UserWarning, match="4 of 10 processes get no pixels"):
+        run = simulate_run(trace, get_mapping("P").build(3, 2, 10), SMALL, placed, cost, Machine(n_cpus=16))
+    assert run.processes["pixels"].tolist() == [1] * 6 + [0] * 4
+    for pixel in range(6):
+        assert run.processes["user_cycles"][pixel] == pytest.approx(
+            sum(replay(trace, placed, [pixel], CacheState(SMALL), SMALL, cost)))
+
+
+def test_dynamic_blocks_fewer_than_processes_warn():
+    trace = random_trace(width=8, height=8, seed=8)
+    with pytest.warns(UserWarning, match="1 non-empty tasks for 3 processes .* cannot exceed 1"):
+        run = simulate_run(trace, get_mapping("DB").build(8, 8, 3), SMALL, placed_for(trace), CostModel(),
+                           Machine(n_cpus=4))
+    assert run.processes["pixels"].tolist() == [64, 0, 0]
+    assert run.processes["user_cycles"][1:].tolist() == [0.0, 0.0]
