@@ -7,7 +7,8 @@ trace by everything that decides its content:
 
 - the scene: its name for a built-in scene (``balls`` ...), or the SHA-256 of
   the file's bytes for an NFF/OBJ path (so editing the file misses the cache);
-- the image size, the kd-tree builder and the ray-tree depth;
+- the image size, the kd-tree builder, the ray-tree depth and the workload
+  (:data:`tracer.workload.WORKLOADS`, with its parameters);
 - the package version, the trace format version and a digest of the
   ``tracer`` package's source files (an editable checkout changes the
   renderer without changing the version).
@@ -16,7 +17,7 @@ The cache folder is ``cache_dir`` when given (the CLI's ``--cache``), else
 the ``COHERENCE_CACHE`` environment variable, else
 ``~/.cache/raytrace-coherence``; whichever names it, its layout is the same::
 
-    <cache>/traces/<scene>-<size>-<kd>-d<depth>-<hash>/
+    <cache>/traces/<scene>-<size>[-<workload>]-<kd>-d<depth>-<hash>/   (workload left out for "modern")
         trace/         the AccessTrace (pixel_offsets.npy, records.npy, ...,
                        meta.json with a checksum of every array)
         image.png      the rendered image
@@ -149,7 +150,7 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
     return label, f"file:{content}"
 
 
-def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int) -> str:
+def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workload: str = "modern") -> str:
     """Folder name of a cache entry: readable prefix plus a hash of every ingredient.
 
     Parameters
@@ -161,19 +162,25 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int) -> st
     kd : {"sah", "median"}
     max_depth : int
         The ray-tree depth actually rendered (the scene's when not overridden).
+    workload : str
+        A :data:`tracer.workload.WORKLOADS` name; its parameters are hashed too.
     """
     from coherence import __version__
     from tracer.trace import FORMAT_VERSION
+    from tracer.workload import get_workload
 
     label, identity = _scene_identity(name_or_path)
+    preset = get_workload(workload)
     ingredients = {"scene": identity, "size": int(size), "kd": kd, "max_depth": int(max_depth),
+                   "workload": preset.to_dict(),
                    "version": __version__, "format_version": FORMAT_VERSION, "tracer_source": _source_digest()}
     digest = hashlib.sha256(json.dumps(ingredients, sort_keys=True).encode()).hexdigest()[:16]
-    return f"{label}-{int(size)}-{kd}-d{int(max_depth)}-{digest}"
+    named = "" if preset.name == "modern" else f"-{preset.name}"
+    return f"{label}-{int(size)}{named}-{kd}-d{int(max_depth)}-{digest}"
 
 
-def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sah", max_depth: int | None = None,
-                 progress: bool = True):
+def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | None = None,
+                 max_depth: int | None = None, progress: bool = True, workload: str = "modern"):
     """The scene and its access trace at ``size`` x ``size``, rendered once and then loaded.
 
     Parameters
@@ -185,12 +192,15 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
         Image width and height in pixels.
     cache_dir : path, optional
         Folder of cache entries (default :func:`default_cache_dir`).
-    kd : {"sah", "median"}
-        kd-tree builder.
+    kd : {"sah", "median"}, optional
+        kd-tree builder with its default parameters; default the
+        workload's tree (SAH for ``"modern"``).
     max_depth : int, optional
         Ray-tree depth; default the scene's.
     progress : bool
         Show a progress bar on stderr while rendering.
+    workload : str
+        The tracer imitated: a :data:`tracer.workload.WORKLOADS` name.
 
     Returns
     -------
@@ -199,28 +209,34 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
         Records memory-mapped from the cache.
     render_info : dict
         ``key``, ``path`` (the entry folder), ``png`` (image path), ``cached``
-        (whether it was loaded), ``size``, ``kd``, ``max_depth``, ``tree``
+        (whether it was loaded), ``size``, ``kd``, ``max_depth``, ``workload``, ``tree``
         (statistics), ``kd_config``, ``totals`` (counter sums), ``timings``
         (seconds of the original render).
 
     Raises
     ------
     ValueError
-        Unknown scene name, bad size or builder, malformed scene file.
+        Unknown scene name or workload, bad size or builder, malformed scene file.
     FileNotFoundError
         A scene path that does not exist.
     """
     from tracer.scenes import load
     from tracer.trace import AccessTrace
+    from tracer.workload import WORKLOADS
 
     from tracer.trace import TraceIntegrityError
 
     size = require_int("size", size, 1)
-    if kd not in _KD_BUILDERS:
+    if workload not in WORKLOADS:
+        raise ValueError(f"workload must be one of {', '.join(WORKLOADS)}, got {workload!r}")
+    if kd is None:
+        kd = WORKLOADS[workload].kd_config.builder
+    elif kd not in _KD_BUILDERS:
         raise ValueError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
+    explicit_kd = kd if kd != WORKLOADS[workload].kd_config.builder else None
     root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
-    key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth)
+    key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload)
     entry = root / "traces" / key
     info = _read_entry(entry)
     if info is not None:
@@ -236,7 +252,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str = "sa
         folder = _writable_traces_folder(root)
         remove_stale_temporaries(folder)
         entry = folder / key
-        _render_entry(scene, size, kd, key, entry, progress)
+        _render_entry(scene, size, kd, explicit_kd, workload, key, entry, progress)
         info = _read_entry(entry)
         if info is None:
             raise RuntimeError(f"trace cache entry {entry} was not written completely")
@@ -269,7 +285,9 @@ def _read_entry(entry: Path) -> dict | None:
     return info
 
 
-def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bool) -> None:
+def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: str, entry: Path,
+                  progress: bool) -> None:
+    # explicit_kd: a builder other than the workload's, with its defaults
     from tqdm.auto import tqdm
 
     from tracer.kdtree import KdTreeConfig
@@ -280,14 +298,15 @@ def _render_entry(scene, size: int, kd: str, key: str, entry: Path, progress: bo
         bar = tqdm(total=1, desc=f"rendering {scene.name} {size}x{size} (logging accesses)", unit="image",
                    disable=not progress, leave=False, file=sys.stderr)
         start = time.perf_counter()
-        result = render(scene, size=size, kd_config=KdTreeConfig(builder=kd), trace_path=tmp / "trace",
-                        metadata={"cache_key": key})
+        result = render(scene, size=size, kd_config=KdTreeConfig(builder=explicit_kd) if explicit_kd else None,
+                        trace_path=tmp / "trace", metadata={"cache_key": key}, workload=workload)
         seconds = time.perf_counter() - start
         bar.update(1)
         bar.close()
         save_png(result.image, tmp / "image.png")
         info = {
             "key": key, "scene": scene.name, "size": size, "kd": kd, "max_depth": int(scene.max_depth),
+            "workload": workload,
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
             "image_checksum": xxhash.xxh3_64_hexdigest((tmp / "image.png").read_bytes()),

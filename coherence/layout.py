@@ -25,7 +25,17 @@ cone        32 [16]: base, radii, apex            152 [8]: header, base, apex, r
 material    32 [16]: colour, kd, ks, shine, t,    64 [8]: doubles
             ior
 light       24 [8]: position, colour              48 [8]: doubles
+ray stack   44 [4]: origin, direction, weight,    88 [8]: the same in doubles
+            depth, type
+hit record  16 [8]: distance, element             32 [8]: double t, object pointer, pad
+shading     36 [4]: hit point, normal, colour     72 [8]: the same in doubles
+temps       sum
+frame buf.  12 [4]: float RGB                     4 [4]: 8-bit RGBA pixel
 ==========  =====================================  =========================================
+
+The last four kinds are the tracer's own per-ray data, logged only by the
+``study1997`` workload (:mod:`tracer.workload`); their ``alpha1997`` sizes
+are placeholders until that table is rewritten for issue 12.
 
 The 1997 sizes are a plausible layout of a C tracer of the time on the 64-bit
 Alpha, not the study's code (which is not public).
@@ -370,6 +380,8 @@ def _compact() -> MemoryLayout:
         "sphere": RecordLayout(16, 16), "triangle": RecordLayout(36, 4),
         "polygon": RecordLayout(4, 4, 12), "patch": RecordLayout(4, 4, 24),
         "cone": RecordLayout(32, 16), "material": RecordLayout(32, 16), "light": RecordLayout(24, 8),
+        "ray_stack": RecordLayout(44, 4), "hit_record": RecordLayout(16, 8),
+        "shading_temp": RecordLayout(36, 4), "frame_buffer": RecordLayout(12, 4),
     })
 
 
@@ -379,6 +391,8 @@ def _alpha1997() -> MemoryLayout:
         "sphere": RecordLayout(64, 8), "triangle": RecordLayout(96, 8),
         "polygon": RecordLayout(64, 8, 24), "patch": RecordLayout(64, 8, 48),
         "cone": RecordLayout(152, 8), "material": RecordLayout(64, 8), "light": RecordLayout(48, 8),
+        "ray_stack": RecordLayout(88, 8), "hit_record": RecordLayout(32, 8),
+        "shading_temp": RecordLayout(72, 8), "frame_buffer": RecordLayout(4, 4),
     })
 
 

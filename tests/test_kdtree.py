@@ -16,6 +16,7 @@ CONFIGS = {
     "sah-noclip": KdTreeConfig(clip=False),
     "median": KdTreeConfig(builder="median"),
     "median-leaf4": KdTreeConfig(builder="median", leaf_size=4, max_depth=6),
+    "median-cycle": KdTreeConfig(builder="median", axis_rule="cycle", max_depth=12),
 }
 
 
@@ -41,7 +42,7 @@ def test_closest_hit_matches_brute_force(kind, config):
     assert hit_rate > 0.1  # the test exercises hits, not only misses
 
 
-@pytest.mark.parametrize("config", ["sah", "median"])
+@pytest.mark.parametrize("config", ["sah", "median", "median-cycle"])
 def test_mixed_scene_with_ray_intervals(config):
     scene = random_scene(KINDS, n=300, seed=11, size=0.8)
     tree = build_kdtree(scene, CONFIGS[config])
@@ -50,6 +51,44 @@ def test_mixed_scene_with_ray_intervals(config):
     tmin = rng.uniform(0, 2, len(o))
     tmax = tmin + rng.uniform(0, 10, len(o))
     _assert_same_hits(scene, tree, o, d, tmin=tmin, tmax=tmax)
+
+
+def _interior_axes_by_depth(tree):
+    # (depth, axis) of every interior node, walking the tree from the root
+    # (below child = next node, above child in word 1; leaves have axis 3)
+    out = []
+    todo = [(0, 0)]
+    while todo:
+        node, depth = todo.pop()
+        axis = int(tree.nodes[node, 1] & 3)
+        if axis == 3:
+            continue
+        out.append((depth, axis))
+        todo.append((node + 1, depth + 1))
+        todo.append((int(tree.nodes[node, 1] >> 2), depth + 1))
+    return out
+
+
+def test_cycling_median_tree_splits_axis_depth_mod_3():
+    scene = random_scene(KINDS, n=300, seed=11, size=0.8)
+    cycled = _interior_axes_by_depth(build_kdtree(scene, KdTreeConfig(builder="median", axis_rule="cycle",
+                                                                      max_depth=9)))
+    assert len(cycled) > 20 and max(depth for depth, _ in cycled) >= 5
+    assert all(axis == depth % 3 for depth, axis in cycled)
+    # on a scene 8 times wider in x than in y and z (16 x 2 x 2), the
+    # longest-axis rule splits x at depths 0, 1 and 2 (hand-checked), where
+    # cycling splits x, y, z
+    rng = np.random.default_rng(3)
+    b = SceneBuilder("wide")
+    b.material(Material((1.0, 1.0, 1.0), 1.0, 0.0, 1.0, 0.0, 1.0))
+    for x, y, z in rng.uniform(-1, 1, (200, 3)):
+        b.sphere((8 * x, y, z), 0.02)
+    wide = b.build()
+    longest = _interior_axes_by_depth(build_kdtree(wide, KdTreeConfig(builder="median", max_depth=9)))
+    assert all(axis == 0 for depth, axis in longest if depth < 3)
+    cycled = _interior_axes_by_depth(build_kdtree(wide, KdTreeConfig(builder="median", axis_rule="cycle",
+                                                                    max_depth=9)))
+    assert all(axis == depth % 3 for depth, axis in cycled)
 
 
 def test_rays_from_inside_overlapping_spheres():
@@ -122,7 +161,7 @@ def test_sah_tree_is_cheaper_than_median_by_its_own_measure():
 @pytest.mark.parametrize("field,value", [
     ("builder", "bvh"), ("max_depth", 0), ("max_depth", 61), ("leaf_size", 0),
     ("traversal_cost", 0.0), ("intersection_cost", float("nan")), ("empty_bonus", 1.0),
-    ("force_split", -1),
+    ("force_split", -1), ("axis_rule", "random"),
 ])
 def test_config_validation_names_field(field, value):
     with pytest.raises(ValueError, match=field):

@@ -37,7 +37,16 @@ def test_hand_packed_records():
 def test_counter_names_follow_the_enum():
     assert COUNTER_NAMES[Counter.NODE_VISITS] == "node_visits"
     assert COUNTER_NAMES[Counter.TESTS_SPHERE + 4] == "tests_cone"
-    assert len(COUNTER_NAMES) == 18
+    assert COUNTER_NAMES[Counter.PIXEL_WRITES] == "pixel_writes"
+    assert len(COUNTER_NAMES) == 22
+
+
+def test_every_kind_has_its_counter():
+    from tracer.records import COUNTER_OF_KIND
+
+    assert set(COUNTER_OF_KIND) == set(RecordKind)
+    assert len(set(COUNTER_OF_KIND.values())) == len(RecordKind)
+    assert all(name in COUNTER_NAMES for name in COUNTER_OF_KIND.values())
 
 
 def test_write_flag_round_trips_and_leaves_kind_and_id_alone():

@@ -153,8 +153,10 @@ def _partition(work, seg0, m, boxes, axis, split, planar_left):
 @njit(cache=True)
 def _build_median(inputs, params):
     # Per-node build: each node's primitives are clipped to it, and its
-    # longest axis halved (the first of equal ones); a node becomes a leaf at
-    # leaf_size primitives, at max_depth, or where a split separates nothing.
+    # longest axis (the first of equal ones), or with cycle_axes the axis
+    # depth % 3, halved; a node becomes a leaf at
+    # leaf_size primitives, at max_depth, or (unless split_to_depth) where a
+    # split separates nothing.
     n = inputs.prim_lo.shape[0]
     nn = max(n, 1)
     ci = params.intersection_cost
@@ -192,7 +194,9 @@ def _build_median(inputs, params):
             d1 = hi[1] - lo[1]
             d2 = hi[2] - lo[2]
             axis = 0
-            if d1 > d0 and d1 >= d2:
+            if params.cycle_axes:
+                axis = depth % 3
+            elif d1 > d0 and d1 >= d2:
                 axis = 1
             elif d2 > d0 and d2 > d1:
                 axis = 2
@@ -203,7 +207,7 @@ def _build_median(inputs, params):
         if axis >= 0:
             split = np.float64(split32[0])
             work, nl, nr = _partition(work, seg0, m, boxes, axis, split, True)
-        if axis < 0 or (nl == m and nr == m):
+        if axis < 0 or (nl == m and nr == m and not params.split_to_depth):
             pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, work[seg0:seg0 + m])
             leaves += 1
             if m == 0:

@@ -45,6 +45,8 @@ class BuildParams(NamedTuple):
     empty_bonus: float
     clip: bool
     force_split: int  #: ``2**62`` when off
+    cycle_axes: bool  #: median builder: split axis ``depth % 3`` instead of the longest
+    split_to_depth: bool  #: median builder: split even where the plane separates no primitive
 
 
 class ClipScratch(NamedTuple):

@@ -39,9 +39,13 @@ Builders (``KdTreeConfig.builder``):
   floating point, Sutherland-Hodgman against the child's faces can end a
   last bit off, so a shape reaching the split face is clipped again and a
   changed box (rare) gets new events like a straddler.
-* ``"median"``: the node's longest axis is halved, as a 1990s BSP did; a
-  node stops at ``leaf_size`` primitives, at ``max_depth``, or when a split
-  would not separate any primitive.
+* ``"median"``: the node's longest axis (or, with ``axis_rule="cycle"``,
+  axis ``depth % 3``: x, y, z, x, ...) is halved, as a 1990s BSP did; a
+  node stops at ``leaf_size`` primitives, at ``max_depth``, when the node is
+  flat along its split axis, or when a split would not separate any
+  primitive (with ``split_to_depth``, not then: a plain BSP of the time
+  split every node holding more than ``leaf_size`` primitives down to
+  ``max_depth``, overlapping ones included).
 """
 from __future__ import annotations
 
@@ -57,6 +61,7 @@ from tracer.kd_split import BuildInputs, BuildParams
 from tracer.scene import Scene
 
 BUILDERS = ("sah", "median")
+AXIS_RULES = ("longest", "cycle")
 MAX_TREE_DEPTH = 60  # the traversal stack holds 64 entries
 
 
@@ -92,6 +97,13 @@ class KdTreeConfig:
         overlapping primitives (SPD shells: about 90 spheres cover every
         point) only separate after several levels, which a greedy estimate
         cannot see. ``0`` disables it.
+    axis_rule : {"longest", "cycle"}
+        Median builder only: halve the node's longest axis, or cycle the
+        axes with depth (x at the root). The SAH builder judges all axes.
+    split_to_depth : bool
+        Median builder only: split a node of more than ``leaf_size``
+        primitives even where the plane separates none of them, down to
+        ``max_depth``.
     """
 
     builder: str = "sah"
@@ -102,6 +114,8 @@ class KdTreeConfig:
     empty_bonus: float = 0.5
     clip: bool = True
     force_split: int = 0
+    axis_rule: str = "longest"
+    split_to_depth: bool = False
 
     def __post_init__(self):
         if self.builder not in BUILDERS:
@@ -126,6 +140,9 @@ class KdTreeConfig:
         if int(self.force_split) != self.force_split or self.force_split < 0:
             raise ValueError(f"KdTreeConfig.force_split must be an int >= 0, got {self.force_split!r}")
         object.__setattr__(self, "force_split", int(self.force_split) if self.force_split else 2**62)
+        if self.axis_rule not in AXIS_RULES:
+            raise ValueError(f"KdTreeConfig.axis_rule must be one of {AXIS_RULES}, got {self.axis_rule!r}")
+        object.__setattr__(self, "split_to_depth", bool(self.split_to_depth))
 
     def to_dict(self) -> dict:
         """The configuration as plain Python values."""
@@ -222,7 +239,8 @@ def resolve_config(config: KdTreeConfig | None, n_elements: int) -> KdTreeConfig
 def build_params(config: KdTreeConfig) -> BuildParams:
     """The builder kernels' parameters of a resolved ``config`` (see :func:`resolve_config`)."""
     return BuildParams(config.max_depth, config.leaf_size, config.traversal_cost, config.intersection_cost,
-                       config.empty_bonus, config.clip, config.force_split)
+                       config.empty_bonus, config.clip, config.force_split, config.axis_rule == "cycle",
+                       config.split_to_depth)
 
 
 def builder_inputs(scene: Scene) -> BuildInputs:

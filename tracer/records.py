@@ -29,7 +29,7 @@ FORMAT_VERSION = 1
 
 # The budget of the 16 record kinds (4 bits), planned once for every workload:
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
-#   9-12  the study-era tracer's own data (issue 12): ray-stack entry, hit
+#   9-12  in use: the study-era tracer's own data (issue 12): ray-stack entry, hit
 #         record, shading temporaries, frame-buffer pixel;
 #   13-14 textures (issue 15): texel (a global texel offset across every
 #         texture and mip level, 27 bits = 128 M texels) and texture header;
@@ -49,6 +49,12 @@ class RecordKind(enum.IntEnum):
     CONE = 6
     MATERIAL = 7
     LIGHT = 8
+    # the study-era tracer's own data (Workload.log_ray_data); index: the
+    # stack slot, the ray's depth - 1, the ray's depth - 1, the sample
+    RAY_STACK = 9      #: a ray-stack entry: written by a push, read by a pop
+    HIT_RECORD = 10    #: the hit record of a ray tree level: written by a trace, read by shading
+    SHADING_TEMP = 11  #: shading temporaries of a level (hit point, normal, colour sum)
+    FRAME_BUFFER = 12  #: a pixel of the frame buffer, written once
 
 
 N_KINDS = len(RecordKind)
@@ -75,6 +81,10 @@ class Counter(enum.IntEnum):
     TESTS_CONE = 15
     SHADING = 16
     LIGHT_READS = 17
+    RAY_STACK_ACCESSES = 18
+    HIT_RECORD_ACCESSES = 19
+    SHADING_TEMP_ACCESSES = 20
+    PIXEL_WRITES = 21
 
 
 # Column names of the counters, in column order (the on-disk format's names).
@@ -92,6 +102,10 @@ COUNTER_OF_KIND = {
     RecordKind.CONE: "tests_cone",
     RecordKind.MATERIAL: "shading",
     RecordKind.LIGHT: "light_reads",
+    RecordKind.RAY_STACK: "ray_stack_accesses",
+    RecordKind.HIT_RECORD: "hit_record_accesses",
+    RecordKind.SHADING_TEMP: "shading_temp_accesses",
+    RecordKind.FRAME_BUFFER: "pixel_writes",
 }
 
 

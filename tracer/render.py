@@ -46,10 +46,11 @@ from numba import njit, prange
 from tracer.camera import CameraFrame, _resolve_size, camera_frame
 from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
-from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record
+from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
 from tracer.scene import Scene
 from tracer.trace import AccessTrace, TraceWriter, package_versions
 from tracer.traverse import RecordLog, TraversalStack, new_stack, traverse, tree_arrays
+from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
 #: (Havran 1999; ``reference/spd/README.md``): the reference tracer ignored
@@ -83,6 +84,8 @@ class RenderResult:
         Samples per row and rows (W + 1, H + 1 with corner rays).
     epsilon : float
         The self-intersection tolerance used (scene units).
+    workload : dict
+        The :class:`~tracer.workload.Workload` imitated, as plain values.
     """
 
     image: np.ndarray
@@ -93,6 +96,7 @@ class RenderResult:
     width: int = 0
     height: int = 0
     epsilon: float = 0.0
+    workload: dict = field(default_factory=dict)
 
     def totals(self) -> dict:
         """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
@@ -170,6 +174,8 @@ class RenderParams(NamedTuple):
     hither: float     #: primary rays ignore hits closer than this
     epsilon: float    #: secondary and shadow rays ignore hits closer than this
     max_depth: int    #: ray-tree depth (primary = 1)
+    shadow_anyhit: bool  #: shadow rays stop at the first hit found (else they find the nearest)
+    log_ray_data: bool   #: log the tracer's own per-ray data (RecordKind.RAY_STACK .. FRAME_BUFFER)
 
 
 class SampleOutputs(NamedTuple):
@@ -221,6 +227,16 @@ def _normalized(ray):
     return Ray(ox, oy, oz, dx / ln, dy / ln, dz / ln)
 
 
+@njit(cache=True, inline="always")
+def _log_access(rec, limit, pos, cnt, counter, record):
+    # one record of the tracer's own data at pos (stored while below limit),
+    # counted in cnt[counter]; returns the next position
+    if pos < limit:
+        rec[pos] = record
+    cnt[counter] += 1
+    return pos + 1
+
+
 @njit(cache=True, error_model="numpy")
 def _push_ray(rays, n, ray, weight, depth, typ):
     # put a ray of colour weight (r, g, b) on the ray stack; returns the new
@@ -246,10 +262,17 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
     # stack (scratch.rays, columns RayColumn); pushing refraction before
     # reflection reproduces the recursive order (reflection subtree first).
     # Returns the colour and the position after the sample's last record.
+    # With params.log_ray_data the tracer's own data is logged too: a push
+    # writes a ray-stack entry and a pop reads it; tracing a stacked ray
+    # writes the hit record of its depth, shading reads it, writes the
+    # level's shading temporaries, reads them for every shadow ray and once
+    # more to add the colour up.
     rec, limit = log
     cnt = scratch.counters
     rays = scratch.rays
     eps = params.epsilon
+    own = params.log_ray_data
+    shadow_anyhit = params.shadow_anyhit
     mats = shading.materials
     lights = shading.lights
     ambient = shading.ambient
@@ -258,9 +281,14 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
     cg = 0.0
     cb = 0.0
     n = _push_ray(rays, 0, primary, (1.0, 1.0, 1.0), 1.0, RayType.PRIMARY)
+    if own:
+        pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
+                          make_write_record(RecordKind.RAY_STACK, 0))
     n_lights = lights.shape[0]
     while n > 0:
         n -= 1
+        if own:
+            pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES, make_record(RecordKind.RAY_STACK, n))
         rox, roy, roz = rays[n, RayColumn.ORIGIN], rays[n, RayColumn.ORIGIN + 1], rays[n, RayColumn.ORIGIN + 2]
         rdx = rays[n, RayColumn.DIRECTION]
         rdy = rays[n, RayColumn.DIRECTION + 1]
@@ -273,12 +301,20 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
         cnt[rays_counter] += 1
         t, e, pos = traverse(tree, geo, Ray(rox, roy, roz, rdx, rdy, rdz), tmin, np.inf, False,
                              log, pos, cnt, scratch.stack)
+        level = depth - 1
+        if own:
+            pos = _log_access(rec, limit, pos, cnt, Counter.HIT_RECORD_ACCESSES,
+                              make_write_record(RecordKind.HIT_RECORD, level))
         if e < 0:
             cr += wr * background[0]
             cg += wg * background[1]
             cb += wb * background[2]
             continue
         cnt[hits_counter] += 1
+        if own:
+            pos = _log_access(rec, limit, pos, cnt, Counter.HIT_RECORD_ACCESSES, make_record(RecordKind.HIT_RECORD, level))
+            pos = _log_access(rec, limit, pos, cnt, Counter.SHADING_TEMP_ACCESSES,
+                              make_write_record(RecordKind.SHADING_TEMP, level))
         hx, hy, hz = rox + t * rdx, roy + t * rdy, roz + t * rdz
         k = np.int64(geo.element_kind[e])
         nx, ny, nz = element_normal(k, geo.element_index[e], geo, hx, hy, hz)
@@ -309,7 +345,10 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
             if ndl <= 0.0:
                 continue
             cnt[Counter.SHADOW_RAYS] += 1
-            ts, es, pos = traverse(tree, geo, Ray(hx, hy, hz, lx, ly, lz), eps, dist, True,
+            if own:
+                pos = _log_access(rec, limit, pos, cnt, Counter.SHADING_TEMP_ACCESSES,
+                                  make_record(RecordKind.SHADING_TEMP, level))
+            ts, es, pos = traverse(tree, geo, Ray(hx, hy, hz, lx, ly, lz), eps, dist, shadow_anyhit,
                                    log, pos, cnt, scratch.stack)
             if es >= 0:
                 cnt[Counter.SHADOW_BLOCKED] += 1
@@ -324,6 +363,9 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
             lr += lights[li, LightColumn.COLOR] * (diff * mr + spec)
             lg += lights[li, LightColumn.COLOR + 1] * (diff * mg + spec)
             lb += lights[li, LightColumn.COLOR + 2] * (diff * mb + spec)
+        if own:
+            pos = _log_access(rec, limit, pos, cnt, Counter.SHADING_TEMP_ACCESSES,
+                              make_record(RecordKind.SHADING_TEMP, level))
         cr += wr * lr
         cg += wg * lg
         cb += wb * lb
@@ -344,10 +386,16 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
             if k2 >= 0.0:
                 c2 = eta * cosi - math.sqrt(k2)
                 refracted = Ray(hx, hy, hz, eta * rdx + c2 * fx, eta * rdy + c2 * fy, eta * rdz + c2 * fz)
+                if own:
+                    pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
+                                      make_write_record(RecordKind.RAY_STACK, n))
                 n = _push_ray(rays, n, _normalized(refracted),
                               (wr * tr, wg * tr, wb * tr), depth + 1, RayType.REFRACTION)
         if ks > 0.0:
             reflected = Ray(hx, hy, hz, rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny, rdz - 2.0 * ddn * nz)
+            if own:
+                pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
+                                  make_write_record(RecordKind.RAY_STACK, n))
             n = _push_ray(rays, n, _normalized(reflected),
                           (wr * ks, wg * ks, wb * ks), depth + 1, RayType.REFLECTION)
     return cr, cg, cb, pos
@@ -375,6 +423,9 @@ def _trace_chunk(p0, p1, log, pos, cam, params, tree, geo, shading, out):
         cnt[:] = 0
         first = pos
         r, g, b, pos = _trace_sample(Ray(cam.eye[0], cam.eye[1], cam.eye[2], dx / ln, dy / ln, dz / ln), params, tree, geo, shading, log, pos, scratch)
+        if params.log_ray_data:
+            pos = _log_access(log.records, log.limit, pos, cnt, Counter.PIXEL_WRITES,
+                              make_write_record(RecordKind.FRAME_BUFFER, p))
         out.image[p, 0] = r
         out.image[p, 1] = g
         out.image[p, 2] = b
@@ -492,7 +543,8 @@ def _log_samples(kernel_inputs, out, memory_budget, sink):
 def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: bool = False,
            log: bool = True, kd_config: KdTreeConfig | None = None, max_depth: int | None = None,
            trace_path=None, memory_budget: int = DEFAULT_MEMORY_BUDGET,
-           metadata: dict | None = None, epsilon: float | None = None) -> RenderResult:
+           metadata: dict | None = None, epsilon: float | None = None,
+           workload: str | Workload | None = None) -> RenderResult:
     """Render ``scene`` and, with ``log``, record every scene access per pixel.
 
     Parameters
@@ -509,6 +561,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         Produce the :class:`AccessTrace` (one logged pass) or only the image and
         counters (one pass).
     kd_config : KdTreeConfig, optional
+        The tree rule; default the workload's.
     max_depth : int, optional
         Ray-tree depth (primary = 1); default ``scene.max_depth``.
     trace_path : path, optional
@@ -524,6 +577,10 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         refraction or shadow ray are ignored; default 1e-8 of the scene's
         bounding-box diagonal. :data:`SPD_EPSILON` reproduces the published
         SPD counts.
+    workload : str or Workload, optional
+        The tracer imitated, a :data:`tracer.workload.WORKLOADS` name or a
+        :class:`~tracer.workload.Workload`; default ``"modern"`` (today's
+        SAH tracer). Recorded in the trace's metadata.
 
     Returns
     -------
@@ -540,6 +597,9 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         raise ValueError(f"memory_budget must be an int >= 4 bytes, got {memory_budget!r}")
     if epsilon is not None and not (math.isfinite(epsilon) and epsilon > 0):
         raise ValueError(f"epsilon must be a positive finite distance, got {epsilon!r}")
+    workload = get_workload("modern" if workload is None else workload)
+    if kd_config is None and tree is None:
+        kd_config = workload.kd_config
     timings = {}
     t_start = time.perf_counter()
     tree, tree_arr = tree_arrays(scene, tree, kd_config)
@@ -560,7 +620,8 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     image, counters, counts = out
     offsets = np.zeros(n_pix + 1, np.int64)
     # the render kernel's arguments between the work items and the outputs
-    kernel_inputs = (cam, RenderParams(n_pix, hither, eps, depth), tree_arr, geo, shading)
+    kernel_inputs = (cam, RenderParams(n_pix, hither, eps, depth, not workload.shadow_nearest,
+                                              workload.log_ray_data), tree_arr, geo, shading)
     trace = None
     t0 = time.perf_counter()
     if not log:
@@ -574,7 +635,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         meta = {
             "scene": scene.name, "width": sx, "height": sy, "image_size": [width, height],
             "corner_rays": bool(corner_rays), "max_depth": depth, "hither": hither, "epsilon": eps,
-            "kd_config": tree.config.to_dict(), "kd_stats": tree.stats,
+            "kd_config": tree.config.to_dict(), "kd_stats": tree.stats, "workload": workload.to_dict(),
             "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
             "packages": package_versions(),
             "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
@@ -588,6 +649,10 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
                 "light": int(scene.light_position.shape[0]),
             },
         }
+        # the tracer's own data exists only where it is logged
+        own = workload.log_ray_data
+        meta["record_counts"].update({"ray_stack": (2 * depth + 2) * own, "hit_record": depth * own,
+                                      "shading_temp": depth * own, "frame_buffer": n_pix * own})
         meta.update(metadata or {})
         if trace_path is None:
             records = _GrowingRecords(memory_budget)
@@ -606,7 +671,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         timings["trace"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
-                        timings=timings, width=sx, height=sy, epsilon=eps)
+                        timings=timings, width=sx, height=sy, epsilon=eps, workload=workload.to_dict())
 
 
 def save_png(image, path) -> Path:

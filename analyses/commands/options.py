@@ -22,7 +22,8 @@ from importlib import import_module
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
-           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS"]
+           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS",
+           "WORKLOADS", "workload_options"]
 
 
 class RegistryNames(Sequence):
@@ -74,6 +75,7 @@ HIERARCHIES = RegistryNames("cachesim.config", "PRESETS")
 LAYOUTS = RegistryNames("coherence.layout", "LAYOUTS")
 COST_MODELS = RegistryNames("coherence.cost", "COST_MODELS")
 KD_BUILDERS = RegistryNames("tracer.kdtree", "BUILDERS")
+WORKLOADS = RegistryNames("tracer.workload", "WORKLOADS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
@@ -149,13 +151,29 @@ def model_options() -> argparse.ArgumentParser:
     return parent
 
 
-def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the scene's)") -> argparse.ArgumentParser:
-    """How the scene is traced: ``--kd`` builder and ``--max-depth`` of the ray tree."""
+def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the scene's)",
+                 kd_default: str | None = "sah",
+                 kd_why: str = "sah") -> argparse.ArgumentParser:
+    """How the scene is traced: ``--kd`` builder and ``--max-depth`` of the ray tree.
+
+    ``kd_default`` None leaves the tree to ``--workload`` (:func:`workload_options`);
+    ``kd_why`` says what the default is.
+    """
     parent = _parent()
-    parent.add_argument("--kd", default="sah", choices=KD_BUILDERS, metavar="BUILDER",
+    parent.add_argument("--kd", default=kd_default, choices=KD_BUILDERS, metavar="BUILDER",
                         help="kd-tree builder: %(choices)s; sah = surface area heuristic, median = spatial "
-                             "median like a 1990s BSP (default %(default)s)")
+                             f"median like a 1990s BSP (default {kd_why})")
     parent.add_argument("--max-depth", type=int, metavar="N", default=None, help=depth_help)
+    return parent
+
+
+def workload_options() -> argparse.ArgumentParser:
+    """``--workload NAME``: the tracer imitated (:data:`tracer.workload.WORKLOADS`)."""
+    parent = _parent()
+    parent.add_argument("--workload", default="modern", choices=WORKLOADS, metavar="NAME",
+                        help="tracer imitated: %(choices)s; modern = today's SAH tracer, study1997 = the "
+                             "study's mid-1990s BSP tracer (one median-tree rule for every scene, shadow rays "
+                             "that find the nearest hit, its own per-ray data logged) (default %(default)s)")
     return parent
 
 

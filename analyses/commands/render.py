@@ -6,7 +6,8 @@ import json
 import sys
 import time
 
-from analyses.commands.options import HelpFormatter, check_at_least, scene_options, size_options, tree_options
+from analyses.commands.options import (HelpFormatter, check_at_least, scene_options, size_options, tree_options,
+                                       workload_options)
 
 HELP = "render a scene with the instrumented ray tracer; report rays, tests, node visits, records"
 
@@ -26,6 +27,7 @@ examples:
   coherence render tetra --size 128 --png tetra.png
   coherence render balls --trace traces/balls-512
   coherence render shell --kd median --json
+  coherence render balls --workload study1997 --no-log
   coherence render /work/shared/reference/spd/balls.nff --corner-rays --max-depth 5 --epsilon spd
 
 The last example counts rays the way SPD's published figures do (Havran 1999:
@@ -38,7 +40,9 @@ def register(subparsers) -> None:
     """Add the ``render`` subcommand to ``subparsers``."""
     parser = subparsers.add_parser(
         "render", help=HELP, description=HELP[0].upper() + HELP[1:] + ".", epilog=EPILOG,
-        formatter_class=HelpFormatter, parents=[scene_options(), size_options(), tree_options()])
+        formatter_class=HelpFormatter, parents=[scene_options(), size_options(),
+                                                    tree_options(kd_default=None, kd_why="the workload's"),
+                                                    workload_options()])
     parser.add_argument("--png", metavar="PATH", help="save the image as PNG")
     parser.add_argument("--trace", metavar="DIR",
                         help="save the access trace to directory DIR (atomically)")
@@ -99,7 +103,7 @@ def report(result, scene_name: str, seconds: float) -> dict:
         "records": t.get("records"),
         "bytes_per_record": 4 if result.trace is not None else None,
         "epsilon": result.epsilon,
-        "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(),
+        "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "workload": result.workload,
         "timings": result.timings, "seconds": seconds,
     }
     out["intersection_tests"]["total"] = t["intersection_tests"]
@@ -144,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     result = render(scene, size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
                     epsilon=args.epsilon,
-                    kd_config=KdTreeConfig(builder=args.kd), trace_path=args.trace,
+                    kd_config=KdTreeConfig(builder=args.kd) if args.kd else None, trace_path=args.trace,
+                    workload=args.workload,
                     memory_budget=max(4, int(args.memory_budget * 2**20)),
                     metadata={"command": "coherence render " + " ".join(sys.argv[2:])})
     seconds = time.perf_counter() - start

@@ -1,0 +1,116 @@
+"""Workload presets: which tracer the renderer imitates, today's or the study's.
+
+A :class:`Workload` bundles the kd-tree rule and the behaviour levers of the
+tracer that :func:`tracer.render.render` imitates. Two presets
+(:data:`WORKLOADS`):
+
+* ``"modern"``: today's tracer, the default: SAH kd-tree, shadow rays stop
+  at the first hit found, only scene records are logged.
+* ``"study1997"``: a mid-1990s BSP tracer like the one of Havran & Žára's
+  study: a spatial-median tree with one parameter set for every scene
+  (chosen by ``benchmarks/study_tree_search.py``, see
+  ``docs/study_tree_search.csv``): axes cycled, every node of more than 32
+  objects split down to depth 16, objects sorted into children by their
+  bounding boxes (not clipped); shadow rays that look for the nearest hit;
+  and the tracer's own per-ray data logged (ray stack, hit records, shading
+  temporaries, frame-buffer writes; :mod:`tracer.records`).
+
+What a "test" is (decided before any fitting, and kept)
+-------------------------------------------------------
+The study's column is "intersection tests", and its tracer used a BSP tree.
+A test is therefore **one call of a ray-primitive intersection routine**
+(``Counter.TESTS_*``), counted every time it happens: an object that lies in
+several leaves a ray visits is tested (and counted) again, as it was in a
+tracer without mailboxes. Visits of BSP nodes are not tests: a BSP node is a
+plane, and stepping through it (Havran's "traversal step", counted apart
+from "ray-object intersection tests" in his later methodology) tests nothing
+against the ray. Bounding-box tests are not counted either: a BSP has no
+boxes to test, and the study does not mention any. The one hint the other
+way, tetra's 7.6 M equalling Haines's count of *box* tests with a
+Goldsmith-Salmon hierarchy (DESIGN.md §6), concerns a different
+acceleration structure and is taken as a coincidence. This definition is
+also what every other part of the project (the cost model, the paper's
+comparison table) calls an intersection test.
+
+Levers left out: mailboxing (neither preset uses it; today's tracer already
+tests an object again in every leaf) and a bounding-box test before each
+object test (not a test by the definition above, so it could not be chosen
+by the search; its memory cost belongs to the object record's size in
+:mod:`coherence.layout`).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from tracer.kdtree import KdTreeConfig
+
+__all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "get_workload"]
+
+
+@dataclass(frozen=True)
+class Workload:
+    """The tracer a render imitates.
+
+    Parameters
+    ----------
+    name : str
+        Recorded in every output's parameters.
+    kd_config : KdTreeConfig
+        The tree rule, the same for every scene.
+    shadow_nearest : bool
+        Shadow rays look for the nearest hit before the light (a tracer
+        that used one ``intersect`` routine for every ray) instead of
+        stopping at the first hit found.
+    log_ray_data : bool
+        Log the tracer's own per-ray data besides the scene records: ray
+        stack pushes and pops, hit-record writes and reads, shading
+        temporaries and one frame-buffer write per pixel
+        (:class:`tracer.records.RecordKind` 9-12).
+    """
+
+    name: str
+    kd_config: KdTreeConfig
+    shadow_nearest: bool = False
+    log_ray_data: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"Workload.name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.kd_config, KdTreeConfig):
+            raise ValueError(f"Workload.kd_config must be a KdTreeConfig, got {type(self.kd_config).__name__}")
+        for lever in ("shadow_nearest", "log_ray_data"):
+            if not isinstance(getattr(self, lever), bool):
+                raise ValueError(f"Workload.{lever} must be True or False, got {getattr(self, lever)!r}")
+
+    def to_dict(self) -> dict:
+        """The workload as plain Python values (for output metadata)."""
+        out = asdict(self)
+        out["kd_config"] = self.kd_config.to_dict()
+        return out
+
+
+#: The study-era tree: one parameter set for all five scenes, the least mean
+#: squared log error of tests against the study's over balls, tetra and shell
+#: in ``benchmarks/study_tree_search.py`` (table: ``docs/study_tree_search.csv``).
+STUDY_TREE = KdTreeConfig(builder="median", max_depth=16, leaf_size=32, clip=False, axis_rule="cycle",
+                          split_to_depth=True)
+
+WORKLOADS = {
+    "modern": Workload("modern", KdTreeConfig()),
+    "study1997": Workload("study1997", STUDY_TREE, shadow_nearest=True, log_ray_data=True),
+}
+
+
+def get_workload(name_or_workload) -> Workload:
+    """A preset of :data:`WORKLOADS` by name, or a :class:`Workload` as is.
+
+    Raises
+    ------
+    ValueError
+        For any other name or type.
+    """
+    if isinstance(name_or_workload, Workload):
+        return name_or_workload
+    if isinstance(name_or_workload, str) and name_or_workload in WORKLOADS:
+        return WORKLOADS[name_or_workload]
+    raise ValueError(f"workload must be one of {', '.join(WORKLOADS)} or a Workload, got {name_or_workload!r}")
