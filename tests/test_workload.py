@@ -174,3 +174,66 @@ def test_study_image_equals_modern_image_on_the_same_tree(mixed):
     modern = render(mixed, tree, size=12, workload="modern")
     study = render(mixed, tree, size=12, workload="study1997")
     assert np.array_equal(modern.image, study.image)
+
+
+def _leaf_boxes(tree):
+    # (lo, hi, count) of every leaf, walking the tree from the root box
+    leaves = []
+    todo = [(0, tree.bounds[0].copy(), tree.bounds[1].copy())]
+    split = tree.nodes.view(np.float32)
+    while todo:
+        node, lo, hi = todo.pop()
+        word = int(tree.nodes[node, 1])
+        axis = word & 3
+        if axis == 3:
+            leaves.append((lo, hi, word >> 2))
+            continue
+        plane = float(split[node, 0])
+        below_hi = hi.copy()
+        below_hi[axis] = plane
+        above_lo = lo.copy()
+        above_lo[axis] = plane
+        todo.append((node + 1, lo, below_hi))
+        todo.append((word >> 2, above_lo, hi))
+    return leaves
+
+
+def _slab_overlaps(origin, direction, lo, hi, tmin):
+    # whether the ray's interval (tmin, inf) meets the box (an obvious slab test)
+    t0, t1 = tmin, np.inf
+    for a in range(3):
+        if direction[a] == 0.0:
+            if not lo[a] <= origin[a] <= hi[a]:
+                return False
+            continue
+        ta, tb = sorted(((lo[a] - origin[a]) / direction[a], (hi[a] - origin[a]) / direction[a]))
+        t0, t1 = max(t0, ta), min(t1, tb)
+    return t0 <= t1
+
+
+@pytest.mark.parametrize("config", [WORKLOADS["study1997"].kd_config,
+                                    KdTreeConfig(builder="median", max_depth=10, leaf_size=2)])
+def test_missing_rays_test_every_object_of_every_leaf_they_cross(config):
+    # without mailboxes a ray that hits nothing tests every entry of every
+    # leaf its line crosses, however often an object is listed: the slow
+    # reference sums the leaf counts of the leaves a slab test says it meets
+    from tracer.camera import camera_rays
+
+    scene = random_scene(("sphere", "triangle"), n=60, seed=5, size=0.5, extent=3.0)
+    tree = build_kdtree(scene, config)
+    assert tree.stats["references"] > 60  # objects listed in several leaves
+    size = 12
+    result = render(scene, tree, size=size, log=False, max_depth=1, workload=Workload("w", config))
+    c = _counters(result)
+    origin, directions = camera_rays(scene, size=size)
+    leaves = _leaf_boxes(tree)
+    missed = np.flatnonzero(c["primary_hits"] == 0)
+    assert len(missed) > 10
+    crossing = 0
+    for p in missed:
+        d = directions.reshape(-1, 3)[p]
+        expected = sum(count for lo, hi, count in leaves
+                       if _slab_overlaps(origin, d, lo, hi, scene.camera.hither))
+        assert c["index_reads"][p] == expected
+        crossing += expected > 0
+    assert crossing > 5  # the check covers rays through the tree, not only past it

@@ -113,6 +113,7 @@ def report(result, scene_name: str, seconds: float) -> dict:
 def _table(rep: dict) -> str:
     r, h, it = rep["rays"], rep["hits"], rep["intersection_tests"]
     lines = [f"scene {rep['scene']}: {rep['width']}x{rep['height']} samples, "
+             f"workload {rep['workload']['name']}, "
              f"kd {rep['kd_config']['builder']} ({rep['tree']['nodes']} nodes, depth {rep['tree']['depth']})", "",
              f"  {'rays':<22}{'count':>14}{'hits':>14}"]
     lines.append(f"  {'primary':<22}{r['primary']:>14,}{h['primary']:>14,}")
