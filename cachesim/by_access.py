@@ -19,8 +19,8 @@ extra whether the line was written or not.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS,
-                           WRITE_MISSES, WRITES, _back_invalidate, _find, _insert, _set_base)
+from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, INVALIDATIONS, LRU, MISSES,
+                           WRITE_HITS, WRITE_MISSES, WRITES, _find, _insert, _set_base)
 
 
 @njit(cache=True)
@@ -60,6 +60,7 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
     n_writes = np.int64(0)
     level_hits = np.zeros(n_levels, dtype=np.int64)
     level_write_hits = np.zeros(n_levels, dtype=np.int64)
+    invalidations = np.zeros(n_levels, dtype=np.int64)
     for i in range(addresses.shape[0]):
         line0 = np.int64(addresses[i] >> shift)
         clock += 1
@@ -135,7 +136,18 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
             if evicted >= 0:
                 counts[level, EVICTIONS] += 1
                 if inclusion == INCLUSIVE and level > 0:
-                    _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets, set_mask, ways, offset)
+                    # Back-invalidation, inline: remove every line of the
+                    # levels above that lies in the evicted one.
+                    for upper in range(level):
+                        spread = rel_shift[level] - rel_shift[upper]
+                        first = evicted << spread
+                        mask = set_mask[upper]
+                        for sub in range(first, first + (np.int64(1) << spread)):
+                            base = offset[upper] + (sub & mask if mask >= 0 else sub % n_sets[upper]) * ways[upper]
+                            for way in range(base, base + ways[upper]):
+                                if tags[way] == sub:
+                                    tags[way] = -1
+                                    invalidations[upper] += 1
         previous = line0 if (allocate0 or not is_write) else np.int64(-1)
     # Only misses go down a level: accesses of level l + 1 are the misses of l,
     # for reads and writes alike.
@@ -150,6 +162,7 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
         counts[level, WRITES] += entering_writes
         counts[level, WRITE_HITS] += level_write_hits[level]
         counts[level, WRITE_MISSES] += entering_writes - level_write_hits[level]
+        counts[level, INVALIDATIONS] += invalidations[level]
         entering -= level_hits[level]
         entering_writes -= level_write_hits[level]
     return clock

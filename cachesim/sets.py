@@ -166,17 +166,3 @@ def _insert(tags, stamps, seed, base, n_ways, policy, line, clock):
     tags[victim] = line
     stamps[victim] = clock
     return evicted
-
-
-@njit(cache=True)
-def _back_invalidate(tags, counts, level, evicted, rel_shift, n_sets, set_mask, ways, offset):
-    """Remove every line of the levels above ``level`` that lies in ``evicted``."""
-    for upper in range(level):
-        spread = rel_shift[level] - rel_shift[upper]
-        first = evicted << spread
-        for line in range(first, first + (np.int64(1) << spread)):
-            base = _set_base(line, upper, n_sets, set_mask, ways, offset)
-            slot = _find(tags, base, ways[upper], line)
-            if slot >= 0:
-                tags[slot] = -1
-                counts[upper, INVALIDATIONS] += 1
