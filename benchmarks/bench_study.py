@@ -5,7 +5,9 @@ times ``coherence.study()`` with the alpha21164 hierarchy on 8 CPUs (n = 16
 time-slices two processes per CPU), and prints the time and the accesses
 simulated per second. As a peer, one run (R, 8 processes) is also simulated
 the obvious way: materialise each process's address stream and run
-``cachesim.simulate_many``. Ends with one JSON line.
+``cachesim.simulate_many``. Then one run (R, 16 processes, 2 background
+processes) under each scheduler, to show what the background's cache streams
+and the shared run queue cost. Ends with one JSON line.
 
     python benchmarks/bench_study.py [--size 512] [--cache DIR]
 """
@@ -21,7 +23,7 @@ import numpy as np
 from cachesim import alpha21164, simulate_many
 from coherence.layout import get_layout
 from coherence.mappings import MAPPINGS, get_mapping
-from coherence.simulation import Machine, simulate_run
+from coherence.simulation import SCHEDULERS, Machine, simulate_run
 from coherence.studies import place_layout, study
 from tracer.render import render
 from tracer.scenes import load
@@ -77,10 +79,18 @@ def main():
     ours_seconds = time.perf_counter() - start
     print(f"R x 8: ours {ours_seconds:.2f} s, materialise + simulate_many {peer_seconds:.2f} s "
           f"(ratio {peer_seconds / ours_seconds:.1f}x)")
+    busy = {}
+    for scheduler in SCHEDULERS:
+        start = time.perf_counter()
+        simulate_run(trace, get_mapping("R").build(trace.width, trace.height, 16), hierarchy, placed,
+                     result_cost(result), Machine(scheduler=scheduler, background_load=2))
+        busy[scheduler] = time.perf_counter() - start
+    print("R x 16 with 2 background processes: " + ", ".join(f"{name} {value:.2f} s" for name, value in busy.items()))
     print(json.dumps({"size": args.size, "runs": len(result.runs), "study_seconds": seconds,
                       "accesses": accesses, "maccesses_per_s": accesses / seconds / 1e6,
                       "r8_ours_seconds": ours_seconds, "r8_peer_seconds": peer_seconds,
-                      "peer_ratio": peer_seconds / ours_seconds}))
+                      "peer_ratio": peer_seconds / ours_seconds,
+                      **{f"r16_background_{name}_seconds": value for name, value in busy.items()}}))
 
 
 def result_cost(result):

@@ -1,26 +1,23 @@
 """Replaying a pixel-access trace under a work distribution on a simulated machine.
 
-One compiled event loop serves every mapping:
-
 - Each process renders tasks (ordered pixel lists). A static distribution
   gives every process its own tasks; a dynamic one (DB) hands the next task
   of a global queue to whichever process asks first, each hand-out costing
   ``dispatch_cycles`` of waiting (unless a take-ahead task is already held).
-- Processes are placed on CPUs (:class:`Machine`); each CPU has its own
-  cache hierarchy state, shared by the processes placed on it, which run
-  round robin in time slices of ``quantum_cycles``.
 - A pixel's reads become byte addresses through the placed memory layout
-  (every smallest-level line a record spans), run through its CPU's caches;
-  its time is its compute cycles (cost model) plus the latency of the level
-  that served each access (memory latency for the last level's misses).
-- The CPU whose clock is lowest always moves next, so dynamic hand-outs
-  happen in time order.
+  (every smallest-level line a record spans), run through the caches of the
+  CPU the process runs on; its time is its compute cycles (cost model) plus
+  the latency of the level that served each access (memory latency for the
+  last level's misses).
+- The machine's operating system (:class:`Machine`, :mod:`coherence.scheduler`)
+  decides which process runs on which CPU when: one run queue shared by all
+  CPUs (processes move between CPUs at the end of time slices, and find the
+  caches their new CPU's previous processes left), or static placement (a
+  process never moves). Other users' processes sit in the same run queues,
+  take CPU time and disturb the caches.
 
-Real (wall) time with other users' load follows processor sharing: with
-``k`` of our processes still running and ``B`` always-runnable background
-processes on ``C`` CPUs, each of ours progresses at ``min(1, C / (k + B))``
-of a CPU (the OS gives every process, not every user, a share). Background
-processes are not simulated in the caches.
+User time and real time come from that one schedule: a process's user time is
+the cycles it ran, real time is when the last of our processes finished.
 """
 from __future__ import annotations
 
@@ -30,67 +27,140 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
-from numba import njit
 
 from cachesim import CacheState, Hierarchy
 from cachesim import kernels as K
 from coherence.cost import CostModel
-from coherence.layout import PlacedLayout, RecordPlacement, record_lines
 from coherence.distribution import Distribution
+from coherence.layout import PlacedLayout, RecordPlacement
+from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
+                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, RunQueues,
+                                 run_schedule)
+from rtcommon.validate import require_int, require_number
 
+SCHEDULERS = ("shared-queue", "static")
 PLACEMENTS = ("round-robin", "neighbours")
 
-# Columns of the per-process cycle totals the event loop writes.
-COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
-N_CYCLE_COLUMNS = 4
+#: Bytes one background slice reads by default (see :class:`Machine`).
+DEFAULT_BACKGROUND_FOOTPRINT = 1 << 20
+
+# Background processes' address regions: far above any memory layout's
+# (MemoryLayout.base < 2**48), one 2**48-byte region each, the stream's
+# start placed at a seeded offset in its first 2**40 bytes.
+BACKGROUND_BASE = 1 << 56
+BACKGROUND_SPACING = 1 << 48
+BACKGROUND_OFFSET_RANGE = 1 << 40
 
 
 @dataclass(frozen=True)
 class Machine:
-    """The simulated multiprocessor.
+    """The simulated multiprocessor and its operating system.
 
     Parameters
     ----------
     n_cpus : int
         CPUs, each with a private cache hierarchy.
     quantum_cycles : float
-        Time slice when several processes share a CPU; ``0`` runs each to
-        completion before the next starts.
+        Time slice: at its end a process gives its CPU to a waiting one, if
+        any (``0``: a process runs until it finishes; needs no background).
+    scheduler : {"shared-queue", "static"}
+        ``shared-queue`` (default): one run queue for all CPUs, as a
+        time-sharing Unix of the study's era kept; a process runs on whichever
+        CPU is free when its turn comes, and its cache contents stay behind
+        on the CPU it left. ``static``: every process is pinned to one CPU
+        (``placement``) and CPUs share nothing.
     placement : {"round-robin", "neighbours"}
-        Process ``p`` goes to CPU ``p % n_cpus`` (round robin) or processes
-        ``p`` and ``p + 1`` share a CPU (``p // ceil(n / n_cpus)``).
+        Static scheduler only: process ``p`` goes to CPU ``p % n_cpus``
+        (round robin) or processes ``p`` and ``p + 1`` share a CPU
+        (``p // ceil(n / n_cpus)``). Background process ``b`` goes to CPU
+        ``(n + b) % n_cpus``, after ours.
     background_load : int
-        Always-runnable processes of other users (for real time only).
+        Always-runnable processes of other users, in the same run queue(s)
+        as ours: they take CPU time in whole slices and read
+        ``background_footprint`` bytes per slice through the CPU's caches.
+    background_footprint : int
+        Distinct bytes a background process reads in one slice, as a stream
+        of lines in its own address region, continuing where its previous
+        slice stopped (so it never finds its own data warm either). Default
+        1 MiB, fixed by reasoning before any result was seen: another user's
+        job of the time (a compile, a numerical code) streaming about
+        100 MB/s reads about 1 MB in a 10 ms slice. That is over ten times
+        the 96 KB S-cache, so a background slice leaves nothing of ours in
+        the D- and S-cache, and a quarter of the 4 MB B-cache, so ours keeps
+        most of its B-cache contents. The B-cache share is the uncertain
+        part; change it here.
+    background_seed : int
+        Seed of each background stream's start address (which cache sets it
+        begins on).
     switch_cycles : float
-        Cost of a context switch between two of our processes on a CPU.
+        Cycles a CPU spends starting a process other than its last one.
     """
 
     n_cpus: int = 8
     quantum_cycles: float = 3e6
+    scheduler: str = "shared-queue"
     placement: str = "round-robin"
     background_load: int = 0
+    background_footprint: int = DEFAULT_BACKGROUND_FOOTPRINT
+    background_seed: int = 0
     switch_cycles: float = 0.0
 
     def __post_init__(self):
-        if isinstance(self.n_cpus, bool) or not isinstance(self.n_cpus, (int, np.integer)) or self.n_cpus < 1:
-            raise ValueError(f"Machine.n_cpus must be an integer >= 1, got {self.n_cpus!r}")
+        require_int("Machine.n_cpus", self.n_cpus, 1)
         for name in ("quantum_cycles", "switch_cycles"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float, np.number)) or not value >= 0 or not np.isfinite(value):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not value >= 0 \
+                    or not np.isfinite(value):
                 raise ValueError(f"Machine.{name} must be a finite number >= 0, got {value!r}")
+        if self.scheduler not in SCHEDULERS:
+            raise ValueError(f"Machine.scheduler must be one of {SCHEDULERS}, got {self.scheduler!r}")
         if self.placement not in PLACEMENTS:
             raise ValueError(f"Machine.placement must be one of {PLACEMENTS}, got {self.placement!r}")
-        if isinstance(self.background_load, bool) or not isinstance(self.background_load, (int, np.integer)) \
-                or self.background_load < 0:
-            raise ValueError(f"Machine.background_load must be an integer >= 0, got {self.background_load!r}")
+        if self.scheduler != "static" and self.placement != PLACEMENTS[0]:
+            raise ValueError(f"Machine.placement={self.placement!r} applies to scheduler='static' only "
+                             f"(the {self.scheduler} scheduler moves processes between CPUs)")
+        require_int("Machine.background_load", self.background_load, 0)
+        require_int("Machine.background_footprint", self.background_footprint, 0)
+        require_int("Machine.background_seed", self.background_seed, 0)
+        if self.background_load > 0 and self.quantum_cycles == 0:
+            raise ValueError("Machine.quantum_cycles must be > 0 with a background load: a background "
+                             "process never finishes, so without time slices ours would never run")
 
     def cpu_of(self, n_processes: int) -> np.ndarray:
-        """CPU of each process, int64 (n_processes,)."""
+        """Static scheduler: CPU of each of our processes, int64 (n_processes,)."""
         processes = np.arange(n_processes, dtype=np.int64)
         if self.placement == "round-robin":
             return processes % self.n_cpus
         per_cpu = -(-n_processes // self.n_cpus)
         return processes // per_cpu
+
+    def run_queues(self, n_processes: int) -> RunQueues:
+        """The run queues of ``n_processes`` of ours and the background load.
+
+        Processes ``0 .. n-1`` are ours, ``n .. n+B-1`` the background's. At
+        time 0 the background processes enter their queues first (they were
+        running before our run started), then ours in process order.
+        """
+        n_background = self.background_load
+        if self.scheduler == "static":
+            background_cpu = (n_processes + np.arange(n_background, dtype=np.int64)) % self.n_cpus
+            process_queue = np.concatenate((self.cpu_of(n_processes), background_cpu)).astype(np.int64)
+            n_queues = int(process_queue.max()) + 1
+        else:
+            process_queue = np.zeros(n_processes + n_background, dtype=np.int64)
+            n_queues = 1
+        start_order = np.concatenate((np.arange(n_processes, n_processes + n_background),
+                                      np.arange(n_processes))).astype(np.int64)
+        return RunQueues(process_queue, start_order, n_queues, float(self.quantum_cycles),
+                         float(self.switch_cycles))
+
+    def background(self, line_shift: int) -> BackgroundLoad:
+        """Where each background process's stream starts, in lines of ``2**line_shift`` bytes."""
+        rng = np.random.default_rng(self.background_seed)
+        offsets = rng.integers(0, BACKGROUND_OFFSET_RANGE >> line_shift, self.background_load, dtype=np.int64)
+        bases = (BACKGROUND_BASE + BACKGROUND_SPACING * np.arange(self.background_load, dtype=np.int64)) >> line_shift
+        footprint_lines = -(-int(self.background_footprint) // (1 << line_shift))
+        return BackgroundLoad((bases + offsets).astype(np.int64), footprint_lines)
 
 
 class PixelReads(NamedTuple):
@@ -159,27 +229,6 @@ class Schedule(NamedTuple):
     take_ahead: int
 
 
-class CpuSharing(NamedTuple):
-    """Which processes share each CPU, and how.
-
-    Attributes
-    ----------
-    cpu_processes : ndarray of int64, shape (n,)
-        Processes grouped by CPU.
-    cpu_offsets : ndarray of int64, shape (C + 1,)
-        CPU ``c`` runs ``cpu_processes[cpu_offsets[c]:cpu_offsets[c + 1]]``.
-    quantum : float
-        Time slice in cycles (``0``: each runs to completion).
-    switch_cycles : float
-        Cost of switching between two of our processes.
-    """
-
-    cpu_processes: np.ndarray
-    cpu_offsets: np.ndarray
-    quantum: float
-    switch_cycles: float
-
-
 @dataclass(frozen=True)
 class Run:
     """Result of one simulated run.
@@ -191,7 +240,7 @@ class Run:
     task_owner : ndarray of int64, shape (T,)
         Process that rendered each task.
     real_cycles : float
-        Wall time of the run under the machine's background load.
+        Wall time of the run: when the last of our processes finished.
     """
 
     processes: pd.DataFrame
@@ -217,6 +266,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         Record addresses (see :meth:`MemoryLayout.place`).
     cost : CostModel
     machine : Machine
+        CPUs, scheduler, time slice and background load.
     counter_names : sequence of str, optional
         Names of the trace's counter columns (default: the tracer's).
     compute : ndarray of float64, shape (P,), optional
@@ -225,8 +275,10 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     Returns
     -------
     Run
-        ``processes`` columns: process, cpu, tasks, pixels, the trace's
+        ``processes`` columns: process, cpu, migrations, tasks, pixels, the trace's
         counters summed, ``<level>_accesses``/``_hits``/``_misses`` per level,
+        (cpu is the CPU of its first slice, -1 if it never ran; migrations
+        counts the slices it ran on another CPU than its previous one),
         memory_accesses, compute_cycles, memory_cycles, dispatch_cycles,
         user_cycles, user_seconds, finish_cycles.
     """
@@ -245,11 +297,6 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
 
     n_processes = distribution.n_processes
     _warn_idle_processes(distribution)
-    cpu_of = machine.cpu_of(n_processes)
-    n_cpus = int(min(machine.n_cpus, n_processes))
-    order = np.argsort(cpu_of, kind="stable")
-    cpu_offsets = np.searchsorted(cpu_of[order], np.arange(n_cpus + 1)).astype(np.int64)
-
     if distribution.dynamic:
         own_offsets = np.zeros(n_processes + 1, dtype=np.int64)
         own_tasks = np.zeros(0, dtype=np.int64)
@@ -258,32 +305,39 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         own_tasks = np.argsort(owner, kind="stable").astype(np.int64)
         own_offsets = np.searchsorted(owner[own_tasks], np.arange(n_processes + 1)).astype(np.int64)
 
+    queues = machine.run_queues(n_processes)
+    n_all = n_processes + machine.background_load
+    n_cpus = queues.n_queues if machine.scheduler == "static" else min(machine.n_cpus, n_all)
     state = CacheState(hierarchy)
     n_levels = len(hierarchy.levels)
-    # Caches per CPU, counters per process.
+    # Caches per CPU, counters per process (ours, then the background's).
     caches = K.CacheArrays(np.tile(state.tags, (n_cpus, 1)), np.tile(state.stamps, (n_cpus, 1)),
-                           np.zeros((n_processes, n_levels, K.N_COUNTERS), dtype=np.int64))
-    counts = caches.counts
+                           np.zeros((n_all, n_levels, K.N_COUNTERS), dtype=np.int64))
+    counts = caches.counts[:n_processes]
     latency = np.array([level.latency for level in hierarchy.levels] + [hierarchy.memory_latency],
                        dtype=np.float64)
     line_shift = min(level.line_size for level in hierarchy.levels).bit_length() - 1
 
     out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)
+    out_placement = np.zeros((n_processes, N_PLACEMENT_COLUMNS), dtype=np.int64)
+    out_placement[:, FIRST_CPU] = -1
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
-    _run(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
-                    placed.placement, line_shift),
-         state.geometry, caches, PixelCost(compute, latency),
-         Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
-                  distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
-         CpuSharing(order, cpu_offsets, float(machine.quantum_cycles), float(machine.switch_cycles)),
-         out_cycles, task_owner)
+    run_schedule(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
+                            placed.placement, line_shift),
+                 state.geometry, caches, PixelCost(compute, latency),
+                 Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
+                          distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
+                 queues, machine.background(line_shift), out_cycles, out_placement, task_owner)
+    if not distribution.dynamic:
+        task_owner[:] = distribution.task_process  # empty tasks after a process's last pixel included
 
     pixel_owner = np.empty(n_pixels, dtype=np.int64)
     task_sizes = np.diff(distribution.task_offsets)
     pixel_owner[distribution.task_pixels] = np.repeat(task_owner, task_sizes)
     frame = {
         "process": np.arange(n_processes, dtype=np.int64),
-        "cpu": cpu_of,
+        "cpu": out_placement[:, FIRST_CPU],
+        "migrations": out_placement[:, MIGRATIONS],
         "tasks": np.bincount(task_owner, minlength=n_processes).astype(np.int64),
         "pixels": np.bincount(pixel_owner, minlength=n_processes).astype(np.int64),
     }
@@ -303,8 +357,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
     frame["finish_cycles"] = out_cycles[:, FINISH_CYCLES]
     processes = pd.DataFrame(frame)
-    real = processor_sharing_time(processes["user_cycles"].to_numpy(), machine.n_cpus, machine.background_load)
-    return Run(processes, task_owner, real)
+    return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()))
 
 
 def _warn_idle_processes(distribution: Distribution) -> None:
@@ -327,7 +380,11 @@ def _warn_idle_processes(distribution: Distribution) -> None:
 
 
 def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> float:
-    """Wall time of jobs of the given CPU times under processor sharing.
+    """Wall time of jobs of the given CPU times under ideal processor sharing.
+
+    A quick estimate (``analyses.report`` uses it for the idle machine's
+    real-time speed-up); :func:`simulate_run`'s real time comes from its
+    schedule instead.
 
     With ``k`` jobs left and ``background_load`` endless jobs on ``n_cpus``
     CPUs, each job runs at ``min(1, n_cpus / (k + background_load))``.
@@ -341,194 +398,3 @@ def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> fl
         wall += (finish - done) / rate
         done = finish
     return wall
-
-
-@njit(cache=True, nogil=True)
-def _run(reads, geometry, caches, cost, schedule, cpus, out_cycles, task_owner):
-    """The event loop (see the module docstring).
-
-    Parameters
-    ----------
-    reads : PixelReads
-    geometry : cachesim.kernels.CacheGeometry
-    caches : cachesim.kernels.CacheArrays
-        ``tags``/``stamps`` (C, W): one state per CPU; ``counts``
-        (n, L, N_COUNTERS): counters per process. Updated in place.
-    cost : PixelCost
-    schedule : Schedule
-    cpus : CpuSharing
-    out_cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
-        Receives compute, memory, dispatch and finish cycles per process.
-    task_owner : ndarray of int64, shape (T,)
-        Receives the process that rendered each task.
-    """
-    # Bundle fields are read once here: a read inside the per-pixel loop
-    # would cost a reference-count update each time.
-    counts = caches.counts
-    tags = caches.tags
-    stamps = caches.stamps
-    records = reads.records
-    pixel_offsets = reads.pixel_offsets
-    placement = reads.placement
-    line_shift = reads.line_shift
-    compute = cost.compute
-    latency = cost.latency
-    task_offsets = schedule.task_offsets
-    task_pixels = schedule.task_pixels
-    own_offsets = schedule.own_offsets
-    dynamic = schedule.dynamic
-    cpu_processes = cpus.cpu_processes
-    cpu_offsets = cpus.cpu_offsets
-    quantum = cpus.quantum
-    n_processes = counts.shape[0]
-    n_cpus = cpu_offsets.shape[0] - 1
-    n_levels = counts.shape[1]
-    cpu_clock = np.zeros(n_cpus)
-    cache_clock = np.zeros(n_cpus, dtype=np.int64)
-    cpu_current = cpu_offsets[:n_cpus].copy()  # index into cpu_processes
-    slice_used = np.zeros(n_cpus)
-    cpu_live = cpu_offsets[1:] - cpu_offsets[:-1]
-    done = np.zeros(n_processes, dtype=np.bool_)
-    own_next = own_offsets[:n_processes].copy()
-    # The task each process renders (-1: none) and where it is in it.
-    current_task = np.full(n_processes, -1, dtype=np.int64)
-    position = np.zeros(n_processes, dtype=np.int64)
-    # Dynamic take-ahead: tasks held, a small ring per process; and the
-    # global queue's next task (an array, so that _take_task can advance it).
-    held = np.full((n_processes, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
-    held_count = np.zeros(n_processes, dtype=np.int64)
-    next_task = np.zeros(1, dtype=np.int64)
-    buffer = np.empty(4096, dtype=np.uint64)
-    work = K.chunk_buffers()
-    served = np.zeros(0, dtype=np.uint8)
-    hits_before = np.zeros(n_levels, dtype=np.int64)
-    while True:
-        cpu = _lowest_clock_cpu(cpu_clock, cpu_live)
-        if cpu < 0:
-            break
-        clock = cpu_clock[cpu]
-        slot = cpu_current[cpu]
-        process = cpu_processes[slot]
-        if done[process] or (quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1):
-            slot = _next_live_slot(cpu_processes, cpu_offsets[cpu], cpu_offsets[cpu + 1], slot, done)
-            if cpu_processes[slot] != process:
-                clock += cpus.switch_cycles
-            process = cpu_processes[slot]
-            cpu_current[cpu] = slot
-            slice_used[cpu] = 0.0
-        cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
-        process_counts = counts[process]
-        while True:
-            task = current_task[process]
-            if task < 0 or position[process] == task_offsets[task + 1]:
-                if task >= 0 and dynamic:
-                    current_task[process] = -1
-                    break  # back to the event loop: the next hand-out in time order
-                task, waited = _take_task(process, schedule, own_next, held, held_count, next_task, task_owner)
-                clock += waited
-                out_cycles[process, DISPATCH_CYCLES] += waited
-                slice_used[cpu] += waited
-                if task < 0:
-                    _retire(process, cpu, clock, done, cpu_live, out_cycles)
-                    break
-                task_owner[task] = process
-                current_task[process] = task
-                position[process] = task_offsets[task]
-                continue  # the task may be empty (more processes than rows or pixels)
-            pixel = task_pixels[position[process]]
-            position[process] += 1
-            buffer, n_addresses = record_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
-                                               placement, line_shift, buffer)
-            for level in range(n_levels):
-                hits_before[level] = process_counts[level, K.HITS]
-            misses_before = process_counts[n_levels - 1, K.MISSES]
-            cache_clock[cpu] = K.simulate_into(buffer[:n_addresses], geometry, cache, cache_clock[cpu],
-                                               served, False, work)
-            memory = _memory_cycles(process_counts, hits_before, misses_before, latency)
-            cycles = compute[pixel] + memory
-            out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
-            out_cycles[process, MEMORY_CYCLES] += memory
-            clock += cycles
-            slice_used[cpu] += cycles
-            if (not dynamic and position[process] == task_offsets[task + 1]
-                    and own_next[process] == own_offsets[process + 1]):
-                # A static process is done with its last pixel, not when it
-                # next gets the CPU.
-                _retire(process, cpu, clock, done, cpu_live, out_cycles)
-                break
-            if quantum > 0 and slice_used[cpu] >= quantum and cpu_live[cpu] > 1:
-                break
-        cpu_clock[cpu] = clock
-
-
-@njit(cache=True, inline="always")
-def _lowest_clock_cpu(cpu_clock, cpu_live):
-    """The CPU with live processes whose clock is lowest (-1: all done)."""
-    cpu = -1
-    for c in range(cpu_clock.shape[0]):
-        if cpu_live[c] > 0 and (cpu < 0 or cpu_clock[c] < cpu_clock[cpu]):
-            cpu = c
-    return cpu
-
-
-@njit(cache=True, inline="always")
-def _next_live_slot(cpu_processes, first, stop, slot, done):
-    """Round robin: the slot of the next live process of a CPU after ``slot``."""
-    count = stop - first
-    for step in range(1, count + 1):
-        candidate = first + (slot - first + step) % count
-        if not done[cpu_processes[candidate]]:
-            break
-    return candidate
-
-
-@njit(cache=True, inline="always")
-def _retire(process, cpu, clock, done, cpu_live, out_cycles):
-    """``process`` has no work left: it finished at ``clock``."""
-    done[process] = True
-    cpu_live[cpu] -= 1
-    out_cycles[process, FINISH_CYCLES] = clock
-
-
-@njit(cache=True, nogil=True)
-def _take_task(process, schedule, own_next, held, held_count, next_task, task_owner):
-    """The next task of ``process`` (-1: none left) and the cycles it waited for it.
-
-    Static: the process's next own task (``own_next`` advances). Dynamic: a
-    held take-ahead task, else a hand-out from the global queue
-    (``next_task[0]`` advances; costs ``dispatch_cycles``); then the
-    take-ahead is refilled from the queue, its tasks owned at once.
-    """
-    task = -1
-    waited = 0.0
-    if schedule.dynamic:
-        n_tasks = schedule.task_offsets.shape[0] - 1
-        if held_count[process] > 0:
-            task = held[process, 0]
-            for h in range(held_count[process] - 1):
-                held[process, h] = held[process, h + 1]
-            held_count[process] -= 1
-        elif next_task[0] < n_tasks:
-            task = next_task[0]
-            next_task[0] += 1
-            waited = schedule.dispatch_cycles
-        while task >= 0 and held_count[process] < schedule.take_ahead and next_task[0] < n_tasks:
-            held[process, held_count[process]] = next_task[0]
-            task_owner[next_task[0]] = process
-            held_count[process] += 1
-            next_task[0] += 1
-    elif own_next[process] < schedule.own_offsets[process + 1]:
-        task = schedule.own_tasks[own_next[process]]
-        own_next[process] += 1
-    return task, waited
-
-
-@njit(cache=True, inline="always")
-def _memory_cycles(process_counts, hits_before, misses_before, latency):
-    """Latency of the accesses counted since the snapshot: each level's new
-    hits at its latency, the last level's new misses at memory's."""
-    n_levels = process_counts.shape[0]
-    memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
-    for level in range(n_levels):
-        memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
-    return memory

@@ -80,7 +80,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         Process counts; 1 is always added (speed-ups need it).
     hierarchy, layout, cost : object or preset name
     machine : Machine, optional
-        CPUs, time slice, placement and background load (default: 8 CPUs).
+        CPUs, time slice, scheduler and background load (default: 8 idle
+        CPUs sharing one run queue; see :class:`~coherence.simulation.Machine`).
     scene : tracer.scene.Scene, optional
         For exact polygon sizes in the layout.
     progress : bool

@@ -138,7 +138,8 @@ def test_processor_sharing():
 
 def test_machine_validation_and_placement():
     assert Machine(n_cpus=4).cpu_of(8).tolist() == [0, 1, 2, 3, 0, 1, 2, 3]
-    assert Machine(n_cpus=4, placement="neighbours").cpu_of(8).tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
+    assert Machine(n_cpus=4, scheduler="static", placement="neighbours").cpu_of(8).tolist() == [0, 0, 1, 1, 2, 2,
+                                                                                               3, 3]
     with pytest.raises(ValueError, match="Machine.n_cpus"):
         Machine(n_cpus=0)
     with pytest.raises(ValueError, match="Machine.placement"):

@@ -1,0 +1,363 @@
+"""The operating system of the simulated machine: run queues, time slices, background load.
+
+One compiled event loop (:func:`run_schedule`) runs every mapping on every
+scheduler. Its rules, in the order it applies them:
+
+- **Processes.** Ours (``0 .. n-1``) render pixels; other users' background
+  processes (``n .. n+B-1``) are always runnable and never finish.
+- **Run queues.** Every process waits in one FIFO run queue. With the
+  ``shared-queue`` scheduler there is one queue for all CPUs (a process runs
+  on whichever CPU is free when its turn comes); with ``static`` each CPU has
+  its own queue of the processes pinned to it. At time 0 the queues are
+  filled in :attr:`RunQueues.start_order` (background processes first: they
+  were running before our run started), and free CPUs take their heads in
+  CPU order.
+- **Time slices.** A process runs until its slice of ``quantum`` cycles ends
+  (checked after each pixel: a pixel is never split), it finishes, or (a
+  dynamic process) its task ends and it must ask the master for the next.
+  At a slice end it goes to the tail of its queue only if another process is
+  waiting there; the CPU then takes the queue's head. Otherwise it runs on
+  (an OS does not preempt a process nobody waits for). A CPU whose process
+  finished takes its queue's head, or stays idle if the queue is empty.
+- **Caches stay with the CPU.** A process that moves starts on the caches
+  its new CPU's previous processes left. Cache counters are kept per process.
+- **Background slices.** A background process runs for exactly one quantum
+  and reads ``footprint_lines`` distinct lines of its own address region, a
+  fresh stretch each slice (see :class:`BackgroundLoad`): it evicts our data
+  from the CPU's caches as another user's job would.
+- **Context switches.** When a CPU starts a process other than the one it
+  ran last, ``switch_cycles`` pass (counted in no process's user time).
+- **Event order.** The CPU whose clock is lowest always moves next (ties: the
+  lowest CPU index), so queue hand-overs and dynamic hand-outs happen in
+  time order. The run is over when the last of our processes finishes.
+
+User time of a process = its compute cycles + its memory cycles (on whichever
+CPU's caches it ran) + its dispatch waits; real time = when the last of ours
+finished.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from cachesim import kernels as K
+from coherence.layout import record_lines
+
+# Columns of the per-process cycle totals the event loop writes.
+COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
+N_CYCLE_COLUMNS = 4
+# Columns of the per-process placement record.
+FIRST_CPU, MIGRATIONS = 0, 1
+N_PLACEMENT_COLUMNS = 2
+# A CPU that runs nothing.
+NO_PROCESS = -1
+
+
+class RunQueues(NamedTuple):
+    """Who waits where, and how long a slice is.
+
+    Attributes
+    ----------
+    process_queue : ndarray of int64, shape (n + B,)
+        The run queue each process waits in (ours first, then background).
+    start_order : ndarray of int64, shape (n + B,)
+        Processes in the order they enter their queues at time 0.
+    n_queues : int
+        1 for a shared queue, the CPU count for static placement (queue
+        ``c`` is CPU ``c``'s).
+    quantum : float
+        Time slice in cycles (``0``: a process runs until it finishes).
+    switch_cycles : float
+        Cycles a CPU spends starting a process other than its last one.
+    """
+
+    process_queue: np.ndarray
+    start_order: np.ndarray
+    n_queues: int
+    quantum: float
+    switch_cycles: float
+
+
+class BackgroundLoad(NamedTuple):
+    """Other users' processes and the lines their slices read.
+
+    Attributes
+    ----------
+    first_line : ndarray of int64, shape (B,)
+        First line number (address >> ``line_shift``) of each background
+        process's stream; slice ``k`` of process ``b`` reads lines
+        ``first_line[b] + k * footprint_lines`` onwards, ``footprint_lines``
+        of them.
+    footprint_lines : int
+        Distinct lines one background slice reads.
+    """
+
+    first_line: np.ndarray
+    footprint_lines: int
+
+
+@njit(cache=True, nogil=True)
+def run_schedule(reads, geometry, caches, cost, schedule, queues, background, out_cycles, out_placement,
+                 task_owner):
+    """The event loop (see the module docstring).
+
+    Parameters
+    ----------
+    reads : coherence.simulation.PixelReads
+    geometry : cachesim.kernels.CacheGeometry
+    caches : cachesim.kernels.CacheArrays
+        ``tags``/``stamps`` (C, W): one state per CPU; ``counts``
+        (n + B, L, N_COUNTERS): counters per process. Updated in place.
+    cost : coherence.simulation.PixelCost
+    schedule : coherence.simulation.Schedule
+    queues : RunQueues
+    background : BackgroundLoad
+    out_cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
+        Receives compute, memory, dispatch and finish cycles per process.
+    out_placement : ndarray of int64, shape (n, N_PLACEMENT_COLUMNS)
+        Receives each process's first CPU (-1: never ran) and migrations.
+    task_owner : ndarray of int64, shape (T,)
+        Receives the process that rendered each task.
+    """
+    # Bundle fields are read once here: a read inside the per-pixel loop
+    # would cost a reference-count update each time.
+    counts = caches.counts
+    tags = caches.tags
+    stamps = caches.stamps
+    records = reads.records
+    pixel_offsets = reads.pixel_offsets
+    placement = reads.placement
+    line_shift = reads.line_shift
+    compute = cost.compute
+    latency = cost.latency
+    task_offsets = schedule.task_offsets
+    task_pixels = schedule.task_pixels
+    own_offsets = schedule.own_offsets
+    dynamic = schedule.dynamic
+    process_queue = queues.process_queue
+    quantum = queues.quantum
+    switch_cycles = queues.switch_cycles
+    first_line = background.first_line
+    footprint_lines = background.footprint_lines
+    n_ours = out_cycles.shape[0]
+    n_all = process_queue.shape[0]
+    n_cpus = tags.shape[0]
+    n_queues = queues.n_queues
+    n_levels = counts.shape[1]
+
+    # Run queues: FIFO rings, one row per queue.
+    queue_items = np.empty((n_queues, n_all), dtype=np.int64)
+    queue_head = np.zeros(n_queues, dtype=np.int64)
+    queue_length = np.zeros(n_queues, dtype=np.int64)
+    ours_waiting = np.zeros(n_queues, dtype=np.int64)
+    for process in queues.start_order:
+        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
+
+    cpu_clock = np.zeros(n_cpus)
+    cache_clock = np.zeros(n_cpus, dtype=np.int64)
+    running = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
+    last_ran = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
+    slice_used = np.zeros(n_cpus)
+    active = np.ones(n_cpus, dtype=np.bool_)
+    previous_cpu = np.full(n_ours, -1, dtype=np.int64)
+    background_slices = np.zeros(n_all - n_ours, dtype=np.int64)
+    ours_left = n_ours
+
+    own_next = own_offsets[:n_ours].copy()
+    # The task each process renders (-1: none) and where it is in it.
+    current_task = np.full(n_ours, -1, dtype=np.int64)
+    position = np.zeros(n_ours, dtype=np.int64)
+    # Dynamic take-ahead: tasks held, a small ring per process; and the
+    # global queue's next task (an array, so that _take_task can advance it).
+    held = np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
+    held_count = np.zeros(n_ours, dtype=np.int64)
+    next_task = np.zeros(1, dtype=np.int64)
+    buffer = np.empty(max(4096, footprint_lines), dtype=np.uint64)
+    work = K.chunk_buffers()
+    served = np.zeros(0, dtype=np.uint8)
+    hits_before = np.zeros(n_levels, dtype=np.int64)
+    while ours_left > 0:
+        cpu = _lowest_clock_cpu(cpu_clock, active)
+        if cpu < 0:
+            break
+        clock = cpu_clock[cpu]
+        queue = cpu if n_queues > 1 else 0
+        process = running[cpu]
+        # A decision point: a free CPU, or a slice that ended.
+        slice_over = process >= 0 and quantum > 0 and slice_used[cpu] >= quantum
+        if process < 0 or slice_over:
+            if queue_length[queue] > 0:
+                if process >= 0:
+                    _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process,
+                          n_ours)
+                process = _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours)
+            elif process < 0:
+                active[cpu] = False  # nothing will ever wait here again
+                continue
+            running[cpu] = process
+            slice_used[cpu] = 0.0
+            if last_ran[cpu] >= 0 and last_ran[cpu] != process:
+                clock += switch_cycles
+            last_ran[cpu] = process
+        if process >= n_ours:
+            if ours_waiting[queue] == 0 and (n_queues > 1 or queue_length[queue] == 0):
+                active[cpu] = False  # none of ours can reach this CPU again
+                continue
+            b = process - n_ours
+            start = first_line[b] + background_slices[b] * footprint_lines
+            for i in range(footprint_lines):
+                buffer[i] = np.uint64((start + i) << line_shift)
+            background_slices[b] += 1
+            cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
+            cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
+                                               served, False, work)
+            clock += quantum
+            slice_used[cpu] = quantum
+            cpu_clock[cpu] = clock
+            continue
+
+        if previous_cpu[process] < 0:
+            out_placement[process, FIRST_CPU] = cpu
+        elif previous_cpu[process] != cpu:
+            out_placement[process, MIGRATIONS] += 1
+        previous_cpu[process] = cpu
+        cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
+        process_counts = counts[process]
+        finished = False
+        while True:
+            task = current_task[process]
+            if task < 0:
+                task, waited = _next_task(process, schedule, own_next, held, held_count, next_task, task_owner)
+                clock += waited
+                out_cycles[process, DISPATCH_CYCLES] += waited
+                slice_used[cpu] += waited
+                if task < 0:
+                    finished = True
+                    break
+                current_task[process] = task
+                position[process] = task_offsets[task]
+            pixel = task_pixels[position[process]]
+            position[process] += 1
+            buffer, n_addresses = record_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
+                                               placement, line_shift, buffer)
+            for level in range(n_levels):
+                hits_before[level] = process_counts[level, K.HITS]
+            misses_before = process_counts[n_levels - 1, K.MISSES]
+            cache_clock[cpu] = K.simulate_into(buffer[:n_addresses], geometry, cache, cache_clock[cpu],
+                                               served, False, work)
+            memory = _memory_cycles(process_counts, hits_before, misses_before, latency)
+            cycles = compute[pixel] + memory
+            out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
+            out_cycles[process, MEMORY_CYCLES] += memory
+            clock += cycles
+            slice_used[cpu] += cycles
+            if position[process] == task_offsets[task + 1]:
+                current_task[process] = -1
+                if dynamic:
+                    break  # back to the event loop: the next hand-out in time order
+                if own_next[process] == own_offsets[process + 1] or not _has_pixels(
+                        schedule, own_next[process], own_offsets[process + 1]):
+                    # A static process is done with its last pixel, not when
+                    # it next gets the CPU.
+                    finished = True
+                    break
+            if quantum > 0 and slice_used[cpu] >= quantum:
+                break
+        if finished:
+            out_cycles[process, FINISH_CYCLES] = clock
+            running[cpu] = NO_PROCESS
+            ours_left -= 1
+        cpu_clock[cpu] = clock
+
+
+@njit(cache=True, nogil=True)
+def _has_pixels(schedule, first, stop):
+    """Whether static own tasks ``own_tasks[first:stop]`` hold any pixel."""
+    for k in range(first, stop):
+        task = schedule.own_tasks[k]
+        if schedule.task_offsets[task + 1] > schedule.task_offsets[task]:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _push(queue_items, queue_head, queue_length, ours_waiting, queue, process, n_ours):
+    """Append ``process`` to the tail of run queue ``queue``."""
+    capacity = queue_items.shape[1]
+    queue_items[queue, (queue_head[queue] + queue_length[queue]) % capacity] = process
+    queue_length[queue] += 1
+    if process < n_ours:
+        ours_waiting[queue] += 1
+
+
+@njit(cache=True, inline="always")
+def _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours):
+    """Remove and return the head of run queue ``queue`` (which is not empty)."""
+    process = queue_items[queue, queue_head[queue]]
+    queue_head[queue] = (queue_head[queue] + 1) % queue_items.shape[1]
+    queue_length[queue] -= 1
+    if process < n_ours:
+        ours_waiting[queue] -= 1
+    return process
+
+
+@njit(cache=True, inline="always")
+def _lowest_clock_cpu(cpu_clock, active):
+    """The active CPU whose clock is lowest, the lowest index on ties (-1: none)."""
+    cpu = -1
+    for c in range(cpu_clock.shape[0]):
+        if active[c] and (cpu < 0 or cpu_clock[c] < cpu_clock[cpu]):
+            cpu = c
+    return cpu
+
+
+@njit(cache=True, nogil=True)
+def _next_task(process, schedule, own_next, held, held_count, next_task, task_owner):
+    """The next non-empty task of ``process`` (-1: none left) and the cycles it waited.
+
+    Static: the process's next own task (``own_next`` advances). Dynamic: a
+    held take-ahead task, else a hand-out from the global queue
+    (``next_task[0]`` advances; costs ``dispatch_cycles``); then the
+    take-ahead is refilled from the queue, its tasks owned at once. Empty
+    tasks (more processes than rows, say) are owned and skipped.
+    """
+    waited = 0.0
+    while True:
+        task = -1
+        if schedule.dynamic:
+            n_tasks = schedule.task_offsets.shape[0] - 1
+            if held_count[process] > 0:
+                task = held[process, 0]
+                for h in range(held_count[process] - 1):
+                    held[process, h] = held[process, h + 1]
+                held_count[process] -= 1
+            elif next_task[0] < n_tasks:
+                task = next_task[0]
+                next_task[0] += 1
+                waited += schedule.dispatch_cycles
+            while task >= 0 and held_count[process] < schedule.take_ahead and next_task[0] < n_tasks:
+                held[process, held_count[process]] = next_task[0]
+                task_owner[next_task[0]] = process
+                held_count[process] += 1
+                next_task[0] += 1
+        elif own_next[process] < schedule.own_offsets[process + 1]:
+            task = schedule.own_tasks[own_next[process]]
+            own_next[process] += 1
+        if task < 0:
+            return task, waited
+        task_owner[task] = process
+        if schedule.task_offsets[task + 1] > schedule.task_offsets[task]:
+            return task, waited
+
+
+@njit(cache=True, inline="always")
+def _memory_cycles(process_counts, hits_before, misses_before, latency):
+    """Latency of the accesses counted since the snapshot: each level's new
+    hits at its latency, the last level's new misses at memory's."""
+    n_levels = process_counts.shape[0]
+    memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
+    for level in range(n_levels):
+        memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
+    return memory
