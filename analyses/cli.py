@@ -65,7 +65,9 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; return its exit status.
 
-    2 for a user error (printed in one line), 130 after Ctrl-C (one line),
+    2 for a user error (printed in one line), 130 after Ctrl-C (one line; a
+    real command line, ``argv`` None, then dies by SIGINT at once, which its
+    shell reports as 130),
     141 (128 + SIGPIPE, as a C tool killed by it) without a word when the
     reader of the output went away (a closed pipe: ``| head``).
     """
@@ -97,7 +99,30 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print(f"coherence {args.command}: interrupted", file=sys.stderr)
+        if argv is None:
+            _exit_now(130)
         return 130
+
+
+def _exit_now(status: int) -> None:
+    """Leave at once, the way an interrupted Unix tool does: killed by SIGINT (the shell says 130).
+
+    After Ctrl-C inside a compiled parallel kernel, tearing down numba's
+    worker threads at interpreter shutdown can crash (rc -11); dying by the
+    signal skips that shutdown. The unwinding has already removed
+    temporaries (and any left are named by PID, so the next run removes them).
+    """
+    import os
+    import signal
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    os.kill(os.getpid(), signal.SIGINT)
+    sys.exit(status)  # pragma: no cover - only if the signal could not be delivered
 
 
 def _error_text(error: Exception) -> str:

@@ -18,7 +18,7 @@ from analyses.output import check_output_folder
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
-from rtcommon.files import write_bytes_atomic
+from rtcommon.files import write_files_atomic
 
 __all__ = ["speedup_figure", "crossover_figure", "paper_summary", "paper_html", "write_paper"]
 
@@ -155,13 +155,13 @@ def write_paper(result: PaperResult, out="paper") -> Path:
     if boundary is not None:
         pngs["crossover"] = figure_png(crossover_figure(boundary))
     summary = paper_summary(result)
-    write_bytes_atomic(path / "paper.csv", _csv(result.runs).encode())
-    write_bytes_atomic(path / "scenes.csv", _csv(result.table).encode())
-    write_bytes_atomic(path / "predictions.csv", _csv(result.predictions).encode())
+    # one unit: every file is made before any is renamed into place (an interrupt leaves the old set)
+    files = {path / "paper.csv": _csv(result.runs).encode(), path / "scenes.csv": _csv(result.table).encode(),
+             path / "predictions.csv": _csv(result.predictions).encode()}
     if boundary is not None:
-        write_bytes_atomic(path / "crossover.csv", _csv(result.crossover).encode())
-    write_bytes_atomic(path / "paper.json", (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode())
-    for name, data in pngs.items():
-        write_bytes_atomic(path / f"{name}.png", data)
-    write_bytes_atomic(path / "index.html", paper_html(result, pngs).encode("utf-8"))
+        files[path / "crossover.csv"] = _csv(result.crossover).encode()
+    files[path / "paper.json"] = (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()
+    files.update({path / f"{name}.png": data for name, data in pngs.items()})
+    files[path / "index.html"] = paper_html(result, pngs).encode("utf-8")
+    write_files_atomic(files)
     return path

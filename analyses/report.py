@@ -41,7 +41,7 @@ from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_html import report_html
 from coherence.mappings import DEFAULT_MAPPINGS
-from rtcommon.files import write_text_atomic
+from rtcommon.files import write_files_atomic
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
@@ -171,7 +171,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     from coherence.mappings import get_mapping
     from coherence.simulation import Machine
 
-    from analyses.traces import _scene_identity, cached_trace
+    from analyses.traces import _scene_identity, cached_trace, check_cache_dir
 
     # everything that can be wrong with the arguments fails here, before rendering
     mapping_objects = [get_mapping(m) for m in mappings]
@@ -186,6 +186,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     cost = get_cost_model(cost)
     machine = Machine(n_cpus=n_cpus, background_load=background)
     _scene_identity(scene)  # unknown name or missing file
+    check_cache_dir(cache_dir)
     if out is not None:
         prepare_output_folder(out)
 
@@ -443,11 +444,13 @@ def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, n
 
 
 def write_report(report: Report, out) -> Path:
-    """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out``, each atomically."""
+    """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out`` as one unit (see
+    :func:`rtcommon.files.write_files_atomic`)."""
     path = prepare_output_folder(out)
-    write_text_atomic(path / "results.csv", report.results.to_csv(index=False, lineterminator="\n"))
-    write_text_atomic(path / "summary.json", json.dumps(report.summary, indent=2, allow_nan=False) + "\n")
-    write_text_atomic(path / "index.html", report.html)
+    # one unit: all three are complete before any is renamed into place
+    write_files_atomic({path / "results.csv": report.results.to_csv(index=False, lineterminator="\n"),
+                        path / "summary.json": json.dumps(report.summary, indent=2, allow_nan=False) + "\n",
+                        path / "index.html": report.html})
     return path
 
 

@@ -33,10 +33,11 @@ def report_html(scene, info, parameters, scene_summary, tree, totals, runs, proc
     bar = tqdm(total=8, desc="figures", unit="figure", disable=not progress, leave=False, file=sys.stderr)
     figures = {}
 
-    def draw(key, figsize, painter, ncols=1):
+    def draw(key, figsize, painter, ncols=1, per_column=False):
+        # per_column painters take the row of axes even when it holds one (a report of one mapping)
         fig = Figure(figsize=figsize)
         axes = fig.subplots(1, ncols, squeeze=False)[0]
-        painter(axes if ncols > 1 else axes[0])
+        painter(axes if ncols > 1 or per_column else axes[0])
         figures[key] = figure_png(fig)
         bar.update(1)
 
@@ -67,7 +68,7 @@ def report_html(scene, info, parameters, scene_summary, tree, totals, runs, proc
             mapping.picture(verdict_n, trace.width, trace.height, ax=ax)
             ax.title.set_fontsize(8)
 
-    draw("pictures", (2.6 * len(mapping_objects), 2.9), pictures, ncols=len(mapping_objects))
+    draw("pictures", (2.6 * len(mapping_objects), 2.9), pictures, ncols=len(mapping_objects), per_column=True)
     at_verdict = processes[processes["n_processes"] == verdict_n]
     draw("processes", (10, 3.8), lambda ax: plots.plot_process_times(at_verdict, ax, order=names))
 

@@ -337,22 +337,31 @@ def long_form(table: pd.DataFrame, study: WhatIf) -> pd.DataFrame:
     return long.sort_values(keys + ["metric"], kind="stable").reset_index(drop=True)
 
 
-def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]:
-    """Write ``whatif-<name>.csv`` (long form, with .meta.json) and a figure."""
+def save_whatif(table: pd.DataFrame, study: WhatIf, folder, curves: pd.DataFrame | None = None) -> tuple[Path, Path]:
+    """Write ``whatif-<name>.csv`` (long form, with .meta.json), a figure and, given ``curves``,
+    ``whatif-<name>-lru.csv`` (with .meta.json), all as one unit.
+
+    Every file's bytes are made first (the figure too) and then renamed into
+    place together (:func:`rtcommon.files.write_files_atomic`), so an
+    interrupted run leaves the previous set or the new one, never a new CSV
+    beside an old figure; temporary names are unique, so concurrent runs into
+    one folder do not collide.
+    """
     from matplotlib.figure import Figure
 
     from analyses.html import figure_png
     from analyses.maps import plot_loss_lines, plot_loss_map
-    from rtcommon.files import write_bytes_atomic
-    from coherence.provenance import provenance, write_csv_atomic
+    from coherence.provenance import provenance
+    from rtcommon.files import write_files_atomic
 
     folder = Path(folder)
-    csv = write_csv_atomic(long_form(table, study), folder / f"whatif-{study.name}.csv",
-                           provenance(study=study.name, scene=study.scene, size=study.size,
-                                      mappings=list(study.mappings), n_processes=study.n_processes,
-                                      hierarchy=study.hierarchy, cost=study.cost, layout=study.layout,
-                                      n_cpus=study.n_cpus, background=study.background,
-                                      grid={key: [str(v) for v in values] for key, values in study.grid.items()}))
+    csv = folder / f"whatif-{study.name}.csv"
+    files = _table_files(long_form(table, study), csv,
+                         provenance(study=study.name, scene=study.scene, size=study.size,
+                                    mappings=list(study.mappings), n_processes=study.n_processes,
+                                    hierarchy=study.hierarchy, cost=study.cost, layout=study.layout,
+                                    n_cpus=study.n_cpus, background=study.background,
+                                    grid={key: [str(v) for v in values] for key, values in study.grid.items()}))
     keys = list(study.grid)
     if len(keys) >= 2:
         mappings = list(dict.fromkeys(table["mapping"]))
@@ -366,8 +375,27 @@ def save_whatif(table: pd.DataFrame, study: WhatIf, folder) -> tuple[Path, Path]
         figure = Figure(figsize=(7, 4.5))
         plot_loss_lines(table, keys[0], ax=figure.subplots())
     png = folder / f"whatif-{study.name}.png"
-    write_bytes_atomic(png, figure_png(figure, dpi=100))
+    files[png] = figure_png(figure, dpi=100)
+    if curves is not None:
+        files.update(_table_files(curves, lru_csv_path(study, folder),
+                                  provenance(study=study.name, scene=study.scene, size=study.size,
+                                             layout=study.layout, n_processes=study.n_processes,
+                                             note="fully associative LRU, exact from reuse distances")))
+    write_files_atomic(files)
     return csv, png
+
+
+def lru_csv_path(study: WhatIf, folder) -> Path:
+    """Where :func:`save_whatif` writes the exact LRU curves."""
+    return Path(folder) / f"whatif-{study.name}-lru.csv"
+
+
+def _table_files(table: pd.DataFrame, path: Path, meta: dict) -> dict:
+    # the same bytes as coherence.provenance.write_csv_atomic writes, to be written with the other files
+    import json
+
+    return {path: table.to_csv(index=False, lineterminator="\n"),
+            path.with_name(path.name + ".meta.json"): json.dumps(meta, indent=2) + "\n"}
 
 
 def _run_dask(tasks, address, progress):

@@ -88,7 +88,7 @@ def test_bad_npy_is_rejected_with_the_file_name(tmp_path, capsys, array, message
 
 def test_missing_corrupt_and_empty_files(tmp_path, capsys):
     assert main(["cachesim", str(tmp_path / "none.npy")]) == 2
-    assert "no such address file" in capsys.readouterr().err
+    assert "no such file" in capsys.readouterr().err
     corrupt = tmp_path / "corrupt.npy"
     corrupt.write_bytes(b"not numpy")
     assert main(["cachesim", str(corrupt)]) == 2

@@ -43,7 +43,7 @@ def test_max_depth_and_nff_out(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["scene", "teapot"], "unknown scene 'teapot': expected one of balls, tetra, shell"),
     (["scene", "missing.nff"], "scene file not found: 'missing.nff'"),
-    (["scene", "tetra", "--max-depth", "-2"], "max_depth must be >= 0, got -2"),
+    (["scene", "tetra", "--max-depth", "-2"], "--max-depth must be in [1, 64], got -2"),
 ])
 def test_user_errors_print_one_line_without_traceback(argv, message, capsys):
     assert cli.main(argv) == 2

@@ -45,7 +45,7 @@ def test_errors_are_clear(saved, tmp_path, capsys):
     assert main(["simulate", str(folder), "--mapping", "Q"]) == 2
     assert "unknown mapping 'Q'" in capsys.readouterr().err
     assert main(["simulate", str(folder), "--cpus", "0"]) == 2
-    assert "Machine.n_cpus" in capsys.readouterr().err
+    assert "--cpus must be >= 1, got 0" in capsys.readouterr().err
     assert main(["simulate", str(folder), "--csv", str(tmp_path / "no" / "r.csv")]) == 2
     assert "does not exist" in capsys.readouterr().err
 

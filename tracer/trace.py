@@ -41,6 +41,7 @@ from tracer.records import (  # noqa: F401  (re-exported: the format's names)
 CHECKSUM_ALGORITHM = "xxh3_64"
 _ARRAYS = ("pixel_offsets", "records", "counters")
 _CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
+_META_CHECKSUM = "meta.json.xxh3"  # XXH3-64 of meta.json's bytes
 
 
 class TraceIntegrityError(ValueError):
@@ -135,8 +136,9 @@ class AccessTrace:
     def save(self, directory) -> Path:
         """Write the trace to ``directory`` atomically.
 
-        Files: ``pixel_offsets.npy``, ``records.npy``, ``counters.npy`` and
-        ``meta.json`` (which holds a checksum of each array). They are
+        Files: ``pixel_offsets.npy``, ``records.npy``, ``counters.npy``,
+        ``meta.json`` (which holds a checksum of each array) and
+        ``meta.json.xxh3`` (the checksum of ``meta.json``). They are
         written to a temporary sibling directory that is renamed into place,
         so a reader never sees a half-written trace. Records are copied in
         chunks (a memmapped trace is not loaded).
@@ -315,22 +317,20 @@ def _index_limits(metadata: dict) -> np.ndarray:
 
 def _read_meta(directory: Path) -> dict:
     where = f"trace {str(directory)!r}"
+    data = (directory / "meta.json").read_bytes()
+    if (directory / _META_CHECKSUM).is_file():
+        if (directory / _META_CHECKSUM).read_text(encoding="ascii", errors="replace").strip() != \
+                xxhash.xxh3_64_hexdigest(data):
+            raise TraceIntegrityError(f"{where}: meta.json does not match its checksum (file damaged)")
     try:
-        meta = json.loads((directory / "meta.json").read_text(encoding="utf-8"))
+        meta = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise TraceIntegrityError(f"{where}: meta.json is damaged ({error})") from None
     if not isinstance(meta, dict):
         raise TraceIntegrityError(f"{where}: meta.json is damaged (not an object)")
-    stored = meta.pop("meta_checksum", None)
-    if stored is not None and stored != _meta_checksum(meta):
-        raise TraceIntegrityError(f"{where}: meta.json does not match its checksum (file damaged)")
     if meta.get("format_version") != FORMAT_VERSION:
         raise TraceIntegrityError(f"{where}: unsupported format_version {meta.get('format_version')!r}")
     return meta
-
-
-def _meta_checksum(meta: dict) -> str:
-    return xxhash.xxh3_64_hexdigest(json.dumps(meta, sort_keys=True).encode("utf-8"))
 
 
 def _temp_sibling(directory: Path) -> Path:
@@ -345,10 +345,10 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
             "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums}}
-    # The checksum covers the JSON as it reads back (numpy values become plain ones).
-    meta = json.loads(json.dumps(meta, default=json_default))
-    meta["meta_checksum"] = _meta_checksum(meta)
-    (tmp / "meta.json").write_text(json.dumps(meta, indent=1))
+    data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
+    (tmp / "meta.json").write_bytes(data)
+    # beside it rather than inside, so meta.json stays a plain, comparable record of the render
+    (tmp / _META_CHECKSUM).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
 
 
 def _publish(tmp: Path, directory: Path) -> None:

@@ -58,12 +58,18 @@ def run(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
+    from analyses.commands import checks
     from cachesim import get_hierarchy, read_addresses, simulate
     from coherence.provenance import provenance, write_csv_atomic
 
+    # every user error surfaces here, before the stream is read
+    checks.check_input_file("ADDRESSES", args.addresses)
+    if Path(args.hierarchy).suffix.lower() in (".toml", ".json"):
+        checks.check_input_file("--hierarchy", args.hierarchy)
     hierarchy = get_hierarchy(args.hierarchy)
-    if args.csv and not Path(args.csv).parent.is_dir():
-        raise FileNotFoundError(f"{args.csv}: folder {Path(args.csv).parent} does not exist")
+    if args.csv:
+        checks.check_output_file("--csv", args.csv)
+        checks.check_output_file("--csv", args.csv + ".meta.json")
     addresses = read_addresses(args.addresses)
     result = simulate(addresses, hierarchy)
     table = result.to_frame()

@@ -13,13 +13,17 @@ import shutil
 import stat
 from pathlib import Path
 
-#: Bytes held in memory per pixel by a render or a replay: the image (3
-#: float64), per-pixel counters (18 int64), offsets, costs and work lists of
-#: the simulation, with room for numpy's temporaries. Measured peak at 512x512
-#: and 1024x1024 (balls, tetra) was below this; see the tests.
-BYTES_PER_PIXEL = 1024
-#: Records (4 bytes each) per pixel assumed for a trace on disk when no pilot
-#: render is made (more than any built-in scene at depth 2-5 needs).
+#: Bytes a render holds in memory per pixel: the image (3 float64), 18 int64
+#: counters, offsets and record counts, with room for temporaries. Measured:
+#: balls without logging peaks at 204 MB at 256x256 and 374 MB at 1024x1024,
+#: about 180 bytes per pixel beyond the fixed start-up.
+RENDER_BYTES_PER_PIXEL = 256
+#: Bytes a replay (simulate, report, whatif, paper) holds per pixel: the
+#: trace's offsets and counters, the mappings' pixel orders, per-pixel costs
+#: and the report's maps, for every trace held at once.
+REPLAY_BYTES_PER_PIXEL = 512
+#: Image size of the pilot render that estimates a trace's bytes per pixel.
+PILOT_SIZE = 32
 GIB = 2 ** 30
 
 
@@ -42,8 +46,9 @@ def available_memory() -> int | None:
         return None
 
 
-def check_memory(option: str, size: int, *, extra_bytes: int = 0, images: int = 1) -> None:
-    """Refuse an image size whose per-pixel arrays cannot fit in memory.
+def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_PER_PIXEL, extra_bytes: int = 0,
+                 images: int = 1) -> None:
+    """Refuse an image size whose per-pixel arrays cannot fit in the memory available now.
 
     Parameters
     ----------
@@ -51,15 +56,32 @@ def check_memory(option: str, size: int, *, extra_bytes: int = 0, images: int = 
         How the message names the size (``--size``).
     size : int
         Image width and height.
+    bytes_per_pixel : int
+        :data:`RENDER_BYTES_PER_PIXEL` or :data:`REPLAY_BYTES_PER_PIXEL`.
     extra_bytes : int
         Further bytes held at once (records kept in memory).
     images : int
-        Per-pixel array sets held at once (several traces of a study).
+        Per-pixel array sets held at once.
+
+    Raises
+    ------
+    ValueError
+        ``"--size 20000 needs about 190.7 GB of memory, 21.6 GB available"``.
     """
-    needed = images * size * size * BYTES_PER_PIXEL + extra_bytes
+    needed = images * size * size * bytes_per_pixel + extra_bytes
     available = available_memory()
     if available is not None and needed > available:
         raise ValueError(f"{option} {size} needs about {_gb(needed)} of memory, {_gb(available)} available")
+
+
+def check_scene_argument(scene, option: str = "SCENE") -> None:
+    """A scene given as a path must be a regular file (a FIFO would hang the reader)."""
+    from tracer.study import PAPER_SCENES, canonical_scene_name
+
+    if scene is None or canonical_scene_name(str(scene)) in PAPER_SCENES:
+        return
+    if os.path.lexists(scene):
+        check_input_file(option, scene)
 
 
 def check_disk(option: str, folder, needed: int) -> None:

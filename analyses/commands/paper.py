@@ -73,7 +73,12 @@ def run(args: argparse.Namespace) -> int:
     from tracer.scenes import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
+    from analyses.commands.checks import check_memory
+    from analyses.traces import check_cache_dir
+
     check_at_least(args, size=1, background=0)
+    check_memory("--size", args.size)
+    check_cache_dir(args.cache)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
     counts = check_process_counts(args.processes if args.processes else DEFAULT_PROCESSES)
     mappings = chosen_mappings(args)

@@ -8,6 +8,7 @@ import time
 
 from analyses.commands.options import (HelpFormatter, check_at_least, scene_options, size_options, tree_options,
                                        workload_options)
+from rtcommon.files import write_bytes_atomic
 
 HELP = "render a scene with the instrumented ray tracer; report rays, tests, node visits, records"
 
@@ -76,6 +77,18 @@ def _epsilon(text: str) -> float:
     return value
 
 
+def _png_bytes(image) -> bytes:
+    """The PNG that ``tracer.render.save_png`` writes, as bytes (written atomically by the caller)."""
+    import io
+
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    buffer = io.BytesIO()
+    plt.imsave(buffer, np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0), format="png")
+    return buffer.getvalue()
+
+
 def _load_scene(name: str, max_depth):
     try:
         from tracer.scenes import load
@@ -134,28 +147,47 @@ def _table(rep: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from analyses.commands import checks
     from tracer.kdtree import KdTreeConfig
     from tracer.render import render, save_png
 
+    # every user error surfaces here, before the scene is built or a ray is traced
     check_at_least(args, size=1)
+    checks.check_range("--max-depth", args.max_depth, 1, 64)
     if args.no_log and args.trace:
         raise ValueError("--trace needs logging; drop --no-log")
-    if not args.memory_budget > 0:
+    if not args.memory_budget > 0 or args.memory_budget != args.memory_budget:
         raise ValueError(f"--memory-budget must be > 0 MB, got {args.memory_budget}")
+    budget = max(4, int(min(args.memory_budget, 2.0 ** 50) * 2**20))
+    if args.png:
+        checks.check_output_file("--png", args.png)
+    if args.trace:
+        checks.check_trace_folder("--trace", args.trace)
+    checks.check_scene_argument(args.scene)
+    samples = args.size + 1 if args.corner_rays else args.size
+    in_memory = 0 if (args.no_log or args.trace) else budget
+    checks.check_memory("--size", samples, bytes_per_pixel=checks.RENDER_BYTES_PER_PIXEL, extra_bytes=in_memory)
     print(f"loading {args.scene} ...", file=sys.stderr)
     scene = _load_scene(args.scene, args.max_depth)
+    kd_config = KdTreeConfig(builder=args.kd) if args.kd else None
+    tree = None
+    if args.trace:
+        pilot = render(scene, size=checks.PILOT_SIZE, kd_config=kd_config, epsilon=args.epsilon,
+                       workload=args.workload)
+        per_sample = 4 * pilot.trace.n_records / pilot.trace.n_pixels
+        checks.check_disk("--trace", args.trace, int(1.25 * per_sample * samples * samples))
+        tree = pilot.tree
+        del pilot
     print(f"rendering {scene.name} at {args.size}x{args.size} "
           f"({'with' if not args.no_log else 'without'} access logging) ...", file=sys.stderr)
     start = time.perf_counter()
-    result = render(scene, size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
-                    epsilon=args.epsilon,
-                    kd_config=KdTreeConfig(builder=args.kd) if args.kd else None, trace_path=args.trace,
-                    workload=args.workload,
-                    memory_budget=max(4, int(args.memory_budget * 2**20)),
+    result = render(scene, tree, size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
+                    epsilon=args.epsilon, kd_config=kd_config, trace_path=args.trace, workload=args.workload,
+                    memory_budget=budget,
                     metadata={"command": "coherence render " + " ".join(sys.argv[2:])})
     seconds = time.perf_counter() - start
     if args.png:
-        save_png(result.image, args.png)
+        write_bytes_atomic(args.png, _png_bytes(result.image))
         print(f"wrote {args.png}", file=sys.stderr)
     if args.trace:
         print(f"wrote trace {args.trace}", file=sys.stderr)

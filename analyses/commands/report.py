@@ -67,7 +67,13 @@ def run(args: argparse.Namespace) -> int:
 
     from analyses.report import build_report, write_report
 
-    check_at_least(args, size=1, max_processes=1, cpus=1, background=0)
+    from analyses.commands import checks
+
+    # every user error surfaces here or in build_report, before rendering
+    check_at_least(args, size=1, max_processes=1, cpus=1, background=0, processes=1)
+    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    checks.check_scene_argument(args.scene)
+    checks.check_memory("--size", args.size)
     out = args.out or f"report-{Path(args.scene).stem.lower()}"
     progress = sys.stderr.isatty()
     report = build_report(args.scene, args.size, mappings=chosen_mappings(args), max_processes=args.max_processes,

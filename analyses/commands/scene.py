@@ -75,8 +75,14 @@ def format_summary(summary: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from analyses.commands import checks
     from tracer.scenes import load
 
+    # every user error surfaces here, before the scene is built
+    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    if args.nff_out is not None:
+        checks.check_output_file("--nff-out", args.nff_out)
+    checks.check_scene_argument(args.scene)
     scene = load(args.scene, max_depth=args.max_depth)
     summary = scene.summary()
     if args.nff_out is not None:

@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
+    from analyses.commands import checks
     from cachesim import get_hierarchy
     from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
     from coherence.provenance import provenance, write_csv_atomic
@@ -63,13 +64,27 @@ def run(args: argparse.Namespace) -> int:
     from coherence.studies import study
     from tracer.trace import AccessTrace
 
+    # every user error surfaces here, before the trace is read
+    checks.check_range("--processes", args.processes, 1)
+    checks.check_range("--cpus", args.cpus, 1)
+    checks.check_range("--background", args.background, 0)
+    checks.check_range("--quantum", args.quantum, 0, float("inf"))
+    if Path(args.hierarchy).suffix.lower() in (".toml", ".json"):
+        checks.check_input_file("--hierarchy", args.hierarchy)
     hierarchy = get_hierarchy(args.hierarchy)
     mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
     machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, placement=args.placement,
                       background_load=args.background)
-    for option in (args.csv, args.processes_csv):
-        if option and not Path(option).parent.is_dir():
-            raise FileNotFoundError(f"{option}: folder {Path(option).parent} does not exist")
+    for option, path in (("--csv", args.csv), ("--processes-csv", args.processes_csv)):
+        if path:
+            checks.check_output_file(option, path)
+            checks.check_output_file(option, path + ".meta.json")
+    if args.csv and args.processes_csv and Path(args.csv).resolve() == Path(args.processes_csv).resolve():
+        raise ValueError("--csv and --processes-csv name the same file")
+    trace_path = Path(args.trace)
+    if trace_path.exists() and not trace_path.is_dir():
+        raise NotADirectoryError(f"TRACE {args.trace!r} is a file; expected a folder written by "
+                                 "'coherence render --trace'")
     trace = AccessTrace.load(args.trace)
     result = study(trace, mappings, args.processes, hierarchy=hierarchy, layout=args.layout, cost=args.cost,
                    machine=machine, progress=sys.stderr.isatty())

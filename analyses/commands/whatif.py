@@ -80,9 +80,18 @@ def build_study(args):
             raise ValueError(f"unknown study {args.study!r}: choose one of {', '.join(BUILTIN)}")
         study = BUILTIN[args.study]
     elif args.file:
+        from analyses.commands.checks import check_input_file
+
+        check_input_file("--file", args.file)
         study = load_study_file(args.file)
     else:
-        study = WhatIf(name="grid", grid=dict(parse_grid_flag(flag) for flag in args.grid))
+        pairs = [parse_grid_flag(flag) for flag in args.grid]
+        names = [name for name, _ in pairs]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ValueError(f"--grid {repeated[0]} is given more than once; list every value in one flag "
+                             f"({repeated[0]}=V1,V2,...)")
+        study = WhatIf(name="grid", grid=dict(pairs))
     overrides = {key: value for key, value in (("scene", args.scene), ("size", args.size),
                                                ("n_processes", args.processes)) if value is not None}
     if args.mappings:
@@ -92,7 +101,6 @@ def build_study(args):
 
 def run(args: argparse.Namespace) -> int:
     import sys
-    from pathlib import Path
 
     if args.list:
         from analyses.whatif import BUILTIN
@@ -100,31 +108,43 @@ def run(args: argparse.Namespace) -> int:
         for name, study in BUILTIN.items():
             print(f"{name:<11} " + "; ".join(f"{key} = {values}" for key, values in study.grid.items()))
         return 0
+    from analyses.commands import checks
+    from analyses.output import check_output_folder
+    from analyses.traces import check_cache_dir
+
+    # every user error surfaces here, before any trace is rendered
+    checks.check_range("--jobs", args.jobs, 1)
+    checks.check_range("--processes", args.processes, 1)
+    checks.check_range("--size", args.size, 1)
+    checks.check_scene_argument(args.scene, "--scene")
     study = build_study(args)
     from coherence.mappings import get_mapping
 
     for name in study.mappings:
         get_mapping(name)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out} is a file, not a folder")
+    if args.dask:
+        require_distributed()
+    check_cache_dir(args.cache)
+    checks.check_memory("--size", study.size)
+    out = check_output_folder(args.out)
     out.mkdir(parents=True, exist_ok=True)
-
-    from analyses.whatif import exact_lru_curves, run_whatif, save_whatif
+    from analyses.whatif import exact_lru_curves, lru_csv_path, run_whatif, save_whatif
 
     table = run_whatif(study, cache_dir=args.cache, dask=args.dask, n_jobs=args.jobs,
                        progress=sys.stderr.isatty())
-    csv, png = save_whatif(table, study, out)
     curves = exact_lru_curves(study, cache_dir=args.cache)
+    csv, png = save_whatif(table, study, out, curves)
     if curves is not None:
-        from coherence.provenance import provenance, write_csv_atomic
-
-        lru = write_csv_atomic(curves, out / f"whatif-{study.name}-lru.csv",
-                               provenance(study=study.name, scene=study.scene, size=study.size,
-                                          layout=study.layout, n_processes=study.n_processes,
-                                          note="fully associative LRU, exact from reuse distances"))
-        print(f"exact fully associative LRU misses at the grid's sizes: {lru}")
+        print(f"exact fully associative LRU misses at the grid's sizes: {lru_csv_path(study, out)}")
     shown = [*study.grid, "mapping", "imbalance_loss", "coherence_loss", "verdict"]
     print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
     print(f"wrote {csv} and {png}")
     return 0
+
+
+def require_distributed() -> None:
+    """Raise ValueError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise ValueError("--dask needs the 'distributed' package: pip install 'raytrace-coherence[cluster]'") from None
