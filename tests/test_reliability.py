@@ -386,8 +386,8 @@ def test_broken_pipe_exits_quietly(tmp_path):
     assert process.returncode == 141 and err == ""
 
 
-# The no-work crash of the simulation kernel (issue 13 item 1) is another change's; these cases
-# stay here so the table covers it, and run apart so that a segfault does not hide the others.
+# A process without work once crashed the simulation kernel (issue 13 item 1); these cases run
+# apart so that a segfault there would not hide the others.
 NO_WORK_CASES = [
     (["report", "tetra", "--size", "15", "--mappings", "S", "--max-processes", "16", "--out", "small"], 0, ""),
     (["simulate", "trace8", "--mapping", "S", "--processes", "9"], 0, ""),
@@ -395,7 +395,6 @@ NO_WORK_CASES = [
 ]
 
 
-@pytest.mark.xfail(reason="issue 13 item 1: a process without work (in coherence/simulation.py)", strict=False)
 def test_processes_without_work_do_not_crash(scratch):
     results = run_cli_cases(scratch, [(case[0], {}) for case in NO_WORK_CASES])
     assert [result["status"] for result in results] == [case[1] for case in NO_WORK_CASES]
