@@ -149,7 +149,7 @@ def _table(rep: dict) -> str:
 def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
     from tracer.kdtree import KdTreeConfig
-    from tracer.render import render, save_png
+    from tracer.render import render
 
     # every user error surfaces here, before the scene is built or a ray is traced
     check_at_least(args, size=1)
