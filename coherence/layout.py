@@ -9,36 +9,36 @@ its bytes span, so a 96-byte triangle read costs three or four 32-byte lines.
 
 Presets (sizes in bytes, alignment in brackets):
 
-==========  =====================================  =========================================
-kind        ``compact`` (float32, today's tracer)  ``alpha1997`` (double-precision C structs)
-==========  =====================================  =========================================
-kd node     8 [8]: split float + child/axis word   24 [8]: double split, int axis, pad, pointer
-index       4 [4]: int32 primitive number         8 [8]: 64-bit object pointer
-sphere      16 [16]: centre, radius               64 [8]: 16 B header (type, material
-                                                  pointer), centre, radius, radius squared
-triangle    36 [4]: three vertices                96 [8]: header, three vertices, plane offset
-polygon     4 + 12 n [4]: count, n vertices       64 + 24 n [8]: header, normal, offset,
-                                                  count, pointer; then n vertices
-patch       4 + 24 n [4]: count, vertices,        64 + 48 n [8]: as polygon, with a normal
-            normals                               per vertex
-cone        32 [16]: base, radii, apex            152 [8]: header, base, apex, radii, frame
-material    32 [16]: colour, kd, ks, shine, t,    64 [8]: doubles
+==========  =====================================  ==========================================
+kind        ``compact`` (float32, today's tracer)  ``alpha1997`` (a 1990s C tracer's structs)
+==========  =====================================  ==========================================
+kd node     8 [8]: split float + child/axis word   40 [8]: split, axis, two child pointers,
+                                                   object-list pointer
+index       4 [4]: int32 primitive number          16 [8]: linked-list entry (object, next)
+sphere      16 [16]: centre, radius                104 [8]: 64 B header (type, material
+                                                   pointer, bounding box) + centre, radii
+triangle    36 [4]: three vertices                 176 [8]: header, vertices, plane, axis
+polygon     4 + 12 n [4]: count, n vertices        112 + 24 n [8]: header, plane, count,
+                                                   vertex pointer; then n vertices
+patch       4 + 24 n [4]: count, vertices,         112 + 48 n [8]: as polygon, with a normal
+            normals                                per vertex
+cone        32 [16]: base, radii, apex             160 [8]: header, base, apex, axis, radii
+material    32 [16]: colour, kd, ks, shine, t,     88 [8]: two colours, five coefficients
             ior
-light       24 [8]: position, colour              48 [8]: doubles
-ray stack   44 [4]: origin, direction, weight,    88 [8]: the same in doubles
+light       24 [8]: position, colour               48 [8]: position, colour
+ray stack   44 [4]: origin, direction, weight,     96 [8]: the same in doubles, tmin, tmax
             depth, type
-hit record  16 [8]: distance, element             32 [8]: double t, object pointer, pad
-shading     36 [4]: hit point, normal, colour     72 [8]: the same in doubles
-temps       sum
-frame buf.  12 [4]: float RGB                     4 [4]: 8-bit RGBA pixel
-==========  =====================================  =========================================
+hit record  16 [8]: distance, element              72 [8]: t, point, normal, object, flag
+shading     36 [4]: hit point, normal, colour      96 [8]: light and reflected directions,
+temps       sum                                    colour, three dot products
+frame buf.  12 [4]: float RGB                      3 [1]: 24-bit RGB pixel
+==========  =====================================  ==========================================
 
 The last four kinds are the tracer's own per-ray data, logged only by the
-``study1997`` workload (:mod:`tracer.workload`); their ``alpha1997`` sizes
-are placeholders until that table is rewritten for issue 12.
-
-The 1997 sizes are a plausible layout of a C tracer of the time on the 64-bit
-Alpha, not the study's code (which is not public).
+``study1997`` workload (:mod:`tracer.workload`). The ``alpha1997`` sizes are
+those of ``docs/memory_image.md``, where every struct is spelled out with its
+reasons; they were fixed before any fitting. The study's code is not public:
+this is a plausible tracer of its time on the 64-bit Alpha, not its code.
 """
 from __future__ import annotations
 
@@ -386,13 +386,14 @@ def _compact() -> MemoryLayout:
 
 
 def _alpha1997() -> MemoryLayout:
+    # docs/memory_image.md: DEC C on the Alpha (LP64), one struct per record
     return MemoryLayout(name="alpha1997", records={
-        "kd_node": RecordLayout(24, 8), "index_entry": RecordLayout(8, 8),
-        "sphere": RecordLayout(64, 8), "triangle": RecordLayout(96, 8),
-        "polygon": RecordLayout(64, 8, 24), "patch": RecordLayout(64, 8, 48),
-        "cone": RecordLayout(152, 8), "material": RecordLayout(64, 8), "light": RecordLayout(48, 8),
-        "ray_stack": RecordLayout(88, 8), "hit_record": RecordLayout(32, 8),
-        "shading_temp": RecordLayout(72, 8), "frame_buffer": RecordLayout(4, 4),
+        "kd_node": RecordLayout(40, 8), "index_entry": RecordLayout(16, 8),
+        "sphere": RecordLayout(104, 8), "triangle": RecordLayout(176, 8),
+        "polygon": RecordLayout(112, 8, 24), "patch": RecordLayout(112, 8, 48),
+        "cone": RecordLayout(160, 8), "material": RecordLayout(88, 8), "light": RecordLayout(48, 8),
+        "ray_stack": RecordLayout(96, 8), "hit_record": RecordLayout(72, 8),
+        "shading_temp": RecordLayout(96, 8), "frame_buffer": RecordLayout(3, 1),
     })
 
 

@@ -167,13 +167,14 @@ def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the sc
     return parent
 
 
-def workload_options() -> argparse.ArgumentParser:
-    """``--workload NAME``: the tracer imitated (:data:`tracer.workload.WORKLOADS`)."""
+def workload_options(default: str = "modern", why: str = "") -> argparse.ArgumentParser:
+    """``--workload NAME``: the tracer imitated (:data:`tracer.workload.WORKLOADS`); ``why`` explains the default."""
     parent = _parent()
-    parent.add_argument("--workload", default="modern", choices=WORKLOADS, metavar="NAME",
+    parent.add_argument("--workload", default=default, choices=WORKLOADS, metavar="NAME",
                         help="tracer imitated: %(choices)s; modern = today's SAH tracer, study1997 = the "
                              "study's mid-1990s BSP tracer (one median-tree rule for every scene, shadow rays "
-                             "that find the nearest hit, its own per-ray data logged) (default %(default)s)")
+                             "that find the nearest hit, its own per-ray data logged) (default %(default)s"
+                             + (f": {why})" if why else ")"))
     return parent
 
 

@@ -4,13 +4,16 @@ from __future__ import annotations
 import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least,
-                                       machine_options, mappings_options, size_options)
+                                       machine_options, mappings_options, size_options, workload_options)
 
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
 
 EPILOG = """\
 For each scene (default all five: balls tetra shell room fluid) the trace is
-rendered once and cached (see 'coherence report --help' for the cache). One
+rendered once and cached (see 'coherence report --help' for the cache) with
+the study-era workload: a spatial-median BSP with one rule for every scene,
+the study's kind of shadow rays, and the tracer's own per-ray data, laid out
+as a 1990s C tracer's structs (alpha1997 layout, docs/memory_image.md). One
 sequential run with the strip mapping S gives the operation counters and the
 simulated memory cycles; three costs are then fitted, each within 5-5000
 cycles, by least squares of relative errors to the study's sequential S times
@@ -51,7 +54,9 @@ def register(subparsers) -> None:
                               "processes as on the study's shared machine", cpus=False)
     parser = subparsers.add_parser("paper", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter,
-                                   parents=[size_options(), mappings_options(), machine, cache_options()])
+                                   parents=[size_options(), mappings_options(), machine, cache_options(),
+                                            workload_options("study1997", "the study's tracer, whose test counts "
+                                                             "and memory image the calibration needs")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
     parser.add_argument("--scenes", nargs="+", metavar="SCENE",
                         help="study scenes (default: all of %(scenes)s)")
@@ -88,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty()
     result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
                        background=args.background, cache_dir=args.cache, progress=progress,
-                       crossover=args.crossover)
+                       crossover=args.crossover, workload=args.workload)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
           "speedup_user.png", file=sys.stderr)
