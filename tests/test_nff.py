@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -43,12 +44,12 @@ def test_view_background_lights_and_material():
 
 
 def test_light_colour_is_optional_before_any_keyword():
-    scene = parse_nff("l 1 2 3\nf 1 1 1 1 0 0 0 1\nl 0 0 9\ns 0 0 0 1\nl 1 1 1 0.2 0.2 0.2")
+    scene = parse_nff(VIEW + "l 1 2 3\nf 1 1 1 1 0 0 0 1\nl 0 0 9\ns 0 0 0 1\nl 1 1 1 0.2 0.2 0.2")
     np.testing.assert_array_equal(scene.light_color, [[1, 1, 1], [1, 1, 1], [0.2, 0.2, 0.2]])
 
 
 def test_sphere_and_cone_with_numbers_split_over_lines_and_negative_radii():
-    scene = parse_nff("s 1 2\n3 0.5\nc 0 0 0 1\n  0 0 2 -0.5\nc 0 0 0 -1 0 0 3 0\n")
+    scene = parse_nff(VIEW + "s 1 2\n3 0.5\nc 0 0 0 1\n  0 0 2 -0.5\nc 0 0 0 -1 0 0 3 0\n")
     assert list(scene.element_kind) == [ElementKind.SPHERE, ElementKind.CONE, ElementKind.CONE]
     np.testing.assert_array_equal(scene.sphere_center, [[1, 2, 3]])
     np.testing.assert_array_equal(scene.sphere_radius, [0.5])
@@ -58,7 +59,7 @@ def test_sphere_and_cone_with_numbers_split_over_lines_and_negative_radii():
 
 
 def test_polygons_triangles_and_patches_in_file_order():
-    text = ("p 3\n0 0 0\n1 0 0\n0 1 0\n"
+    text = (VIEW + "p 3\n0 0 0\n1 0 0\n0 1 0\n"
             "p 5 0 0 0 2 0 0 3 1 0 1 2 0 -1 1 0\n"
             "pp 3\n0 0 1 0 0 1\n1 0 1 0 0 1\n0 1 1 0.1 0 1\n"
             "pp 4\n0 0 2 0 0 1\n1 0 2 0 0 1\n1 1 2 0 0 1\n0 1 2 0 0 1\n")
@@ -74,33 +75,35 @@ def test_polygons_triangles_and_patches_in_file_order():
 
 
 def test_comments_are_ignored_anywhere():
-    scene = parse_nff("# header\ns 0 0 0 1 # trailing\n# s 5 5 5 5\ns 1#glued\n1 1 1\n")
+    scene = parse_nff("# header\n" + VIEW + "s 0 0 0 1 # trailing\n# s 5 5 5 5\ns 1#glued\n1 1 1\n")
     assert scene.n_elements == 2
     np.testing.assert_array_equal(scene.sphere_center[1], [1, 1, 1])
 
 
 def test_materials_are_shared_and_numbered_by_first_use():
-    scene = parse_nff("f 1 0 0 1 0 0 0 1\nf 0 1 0 1 0 0 0 1\ns 0 0 0 1\n"
+    scene = parse_nff(VIEW + "f 1 0 0 1 0 0 0 1\nf 0 1 0 1 0 0 0 1\ns 0 0 0 1\n"
                       "f 1 0 0 1 0 0 0 1\ns 0 0 0 1\nf 0 1 0 1 0 0 0 1\ns 0 0 0 1\n")
     assert list(scene.element_material) == [0, 1, 0]
     np.testing.assert_array_equal(scene.material_color, [[0, 1, 0], [1, 0, 0]])
 
 
 def test_objects_without_material_get_white_diffuse():
-    scene = parse_nff("s 0 0 0 1")
+    scene = parse_nff(VIEW + "s 0 0 0 1")
     assert scene.material_kd[0] == 1 and scene.material_ks[0] == 0
     np.testing.assert_array_equal(scene.material_color, [[1, 1, 1]])
 
 
 def test_max_depth_comment_and_override():
-    assert parse_nff("# max_depth 3\ns 0 0 0 1").max_depth == 3
-    assert parse_nff("# max_depth 3\ns 0 0 0 1", max_depth=7).max_depth == 7
-    assert parse_nff("s 0 0 0 1 # max_depth 3").max_depth == 5  # only a whole-line comment
+    assert parse_nff("# max_depth 3\n" + VIEW + "s 0 0 0 1").max_depth == 3
+    assert parse_nff("# max_depth 3\n" + VIEW + "s 0 0 0 1", max_depth=7).max_depth == 7
+    assert parse_nff(VIEW + "s 0 0 0 1 # max_depth 3").max_depth == 5  # only a whole-line comment
+    assert parse_nff("# max_depth \u0663\n" + VIEW + "s 0 0 0 1").max_depth == 5  # ASCII digits only
 
 
-def test_empty_text_is_an_empty_scene():
-    scene = parse_nff("# nothing\n")
-    assert scene.n_elements == 0 and scene.summary()["bounding_box"] is None
+@pytest.mark.parametrize("text", ["", "# nothing\n", "\n\n  \n", VIEW, VIEW + "l 1 1 1\nf 1 1 1 1 0 0 0 1\n"])
+def test_a_scene_without_objects_is_an_error(text):
+    with pytest.raises(NFFError, match="at least one object .* the scene is empty"):
+        parse_nff(text, "empty.nff")
 
 
 # ---------------------------------------------------------------- errors
@@ -123,7 +126,20 @@ def test_empty_text_is_an_empty_scene():
     ("from 0 0 1", 1, 1, "'v' before the view parameter 'from'"),
     ("v\nangle 180", 2, 7, "an angle in (0, 180) degrees"),
     ("v\nresolution 512 51.2", 2, 16, "a positive integer (resolution height)"),
-    ("v\nfrom 0 0 0\nat 0 0 0", 1, 1, "a valid view"),
+    ("v\nfrom 0 0 0\nat 0 0 0\ns 0 0 0 1", 1, 1, "a complete view: missing 'up', 'angle', 'hither', 'resolution'"),
+    ("v\nfrom 0 0 1\nat 0 0 0\nup 0 0 2\nangle 40\nhither 1\nresolution 8 8\ns 0 0 0 1", 4, 1,
+     "an 'up' direction not parallel to the view direction"),
+    ("v\nfrom 0 0 1\nat 0 0 0\nup 0 0 0\nangle 40\nhither 1\nresolution 8 8\ns 0 0 0 1", 4, 1,
+     "an 'up' direction not parallel"),
+    ("s 0 0 0 1\ns 1 1 1 1", 1, 1, "a view ('v' with from, at, up, angle, hither, resolution)"),
+    ("s 1_0 0 0 1", 1, 3, "a number (s: x y z radius)"),                    # Python-only syntax
+    ("s \u0661 0 0 1", 1, 3, "a number (s: x y z radius)"),                # Arabic-Indic digit
+    ("s 0x10 0 0 1", 1, 3, "a number"),
+    ("s 0 0 0 inf", 1, 9, "a number"),
+    ("s 0 0 0 1e", 1, 9, "a number"),
+    ("p \u0663 0 0 0 1 0 0 0 1 0", 1, 3, "a vertex count after 'p'"),
+    ("v\nresolution 1_0 10", 2, 12, "a positive integer (resolution width)"),
+    ("pp 3\n0 0 0 0 0 1\n1 0 0 0 0 0\n0 1 0 0 0 1", 1, 1, "a non-zero normal at every vertex"),
     ("s 0 0 0 -1", 1, 9, "a positive sphere radius"),
     ("c 0 0 0 1 0 0 0 2", 1, 11, "degenerate cone"),
     ("b 0 0", 1, 6, "a number (r g b of the background)"),
@@ -201,7 +217,7 @@ def scenes(draw):
     for _ in range(draw(st.integers(0, 3))):
         builder.light(draw(st.tuples(finite, finite, finite)),
                       draw(st.sampled_from([(1.0, 1.0, 1.0), (0.5, 0.2, 0.1)])))
-    for _ in range(draw(st.integers(0, 8))):
+    for _ in range(draw(st.integers(1, 8))):
         builder.material(Material(draw(st.tuples(finite, finite, finite)),
                                   *draw(st.tuples(finite, finite, finite, finite, finite))))
         kind = draw(st.sampled_from(["s", "p", "pp", "c"]))
@@ -275,3 +291,99 @@ def test_reference_round_trip(tmp_path):
     again = read_nff(write_nff(scene, tmp_path / "balls.nff"))
     assert scenes_equal(scene, again)
     assert math.isclose(again.sphere_radius[1], 0.166667)
+
+
+# ------------------------------------------------------- strictness and warnings
+def test_errors_found_after_the_tokens_name_the_line_crlf_too():
+    text = VIEW.replace("up 0 0 1", "up 1 2 3") + "s 0 0 0 1\n"
+    with pytest.raises(NFFError, match=r"^cam\.nff:4:1: expected an 'up' direction not parallel"):
+        parse_nff(text.replace("\n", "\r\n"), "cam.nff")
+
+
+def test_non_planar_polygons_and_flat_cones_warn_once_with_file_and_line():
+    bent = "p 4\n0 0 0\n1 0 0\n1 1 0.5\n0 1 0\n"
+    text = VIEW + "s 0 0 0 1\n" + bent + bent + "c 0 0 0 0 0 0 1 0\n"
+    with pytest.warns(UserWarning) as caught:
+        scene = parse_nff(text, "bent.nff")
+    messages = sorted(str(w.message) for w in caught)
+    assert len(messages) == 2 and messages[0] == "bent.nff:19: cone has both radii 0 (it is invisible)"
+    # the corners lie 1/8 above and below the plane through their centroid, tilted a little by the bend
+    assert re.fullmatch(r"bent\.nff:9: polygon is not planar \(a vertex lies 0\.1[12] of its size off its "
+                        r"plane\); 1 more like it", messages[1]), messages[1]
+    assert scene.counts()["polygon"] == 2
+
+
+def test_planar_reference_scenes_and_huge_coordinates_are_quiet():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy overflow warnings included
+        scene = parse_nff(VIEW + "p 3 0 0 0 1e300 0 0 0 1e300 0\np 4 0 0 1 1e300 0 1 1e300 1e300 1 0 1e300 1\n")
+        assert scene.counts()["triangle"] == 1 and scene.counts()["polygon"] == 1
+        if REFERENCE.is_dir():
+            for name in ("balls", "tetra", "shells"):
+                read_nff(REFERENCE / f"{name}.nff")
+
+
+def test_read_nff_refuses_a_fifo_without_blocking(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "pipe.nff")
+    with pytest.raises(ValueError, match="not a regular file"):
+        read_nff(tmp_path / "pipe.nff")
+
+
+def _either(reader, text):
+    try:
+        return reader(text)
+    except NFFError as error:
+        return ("error", error.line, error.column, error.expected)
+
+
+def _positioned(text):
+    from tracer.nff import _normalise_line_breaks, _parse_positioned
+    from tracer.nff_fast import assemble
+
+    parts, _ = _parse_positioned(_normalise_line_breaks(text), "<string>")
+    return assemble(parts, "scene", 5)
+
+
+_WORDS = ["v", "from", "at", "up", "angle", "hither", "resolution", "b", "l", "f", "s", "c", "p", "pp",
+          "0", "1", "-1", "2.5", ".5", "1e3", "3", "4", "0.25", "1_0", "inf", "x", "#", "\n", "\u0663", "\r\n"]
+
+
+@settings(max_examples=300, deadline=2000)
+@given(st.lists(st.sampled_from(_WORDS), max_size=60), st.booleans())
+def test_fuzzed_text_gives_a_scene_or_an_nff_error_and_both_readers_agree(words, with_view):
+    import warnings
+
+    text = (VIEW if with_view else "") + " ".join(words)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        fast = _either(parse_nff, text)
+        slow = _either(_positioned, text)
+    if isinstance(fast, tuple):
+        assert fast == slow
+    else:
+        assert not isinstance(slow, tuple) and scenes_equal(fast, slow)
+
+
+@settings(max_examples=150, deadline=2000)
+@given(st.integers(0, 10**6), st.sampled_from(["delete", "flip", "insert"]), st.text(max_size=3))
+def test_damaged_files_never_give_a_traceback(position, damage, extra):
+    import warnings
+
+    text = format_nff(_every_kind_scene())
+    at = position % len(text)
+    if damage == "delete":
+        text = text[:at] + text[at + 1:]
+    elif damage == "flip":
+        text = text[:at] + chr(ord(text[at]) ^ 0x10) + text[at + 1:]
+    else:
+        text = text[:at] + extra + text[at:]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            parse_nff(text)
+        except NFFError:
+            pass

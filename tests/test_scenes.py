@@ -213,7 +213,7 @@ def test_load_nff_keeps_file_depth_unless_overridden(tmp_path):
     assert load(path).max_depth == 5
     assert load(str(path), max_depth=1).max_depth == 1
     plain = tmp_path / "plain.nff"
-    plain.write_text("s 0 0 0 1\n")
+    plain.write_text("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\ns 0 0 0 1\n")
     assert load(plain).max_depth == 5
 
 

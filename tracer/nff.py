@@ -20,6 +20,21 @@ two). ``#`` starts a comment to the end of the line. Directives:
 ``pp n`` + n ``x y z nx ny nz`` polygon patch with vertex normals (PATCH)
 ==============================  ==============================================
 
+The reader is strict, as a C reader of the format would be: the view
+(``v`` with all six of ``from``, ``at``, ``up``, ``angle``, ``hither`` and
+``resolution``) is required, a scene without objects is an error, and numbers
+follow C's syntax (``[+-]digits[.digits][e[+-]digits]``; no ``1_0``, no
+non-ASCII digits, no ``inf`` or ``nan``). A non-planar polygon or a cone with
+both radii 0 gets one warning per file naming file and line; an error found
+after the tokens were read (a zero-length vertex normal, ``up`` parallel to
+the view direction, a degenerate polygon) still names file, line and column.
+
+Speed: a file is read by a fast pass (split on whitespace, convert numbers
+in slices, check the geometry with numpy at the end); only when that pass
+meets something wrong, or needs a line number for a warning, does the
+positional reader run to say where (``benchmarks/bench_nff.py`` compares
+:func:`read_nff` with a plain split-and-float pass).
+
 NFF has no recursion depth. :func:`write_nff` records the scene's depth in a
 comment line ``# max_depth N`` and the reader honours such a line; without it
 the depth is the SPD procedure's 5 (the :class:`~tracer.scene.Scene` default).
@@ -33,22 +48,18 @@ back to the same float64.
 from __future__ import annotations
 
 import os
-import re
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from tracer.scene import Camera, ElementKind, Material, Scene, SceneBuilder
+from tracer.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
+                             OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS, Fallback, SceneParts,
+                             assemble, parse_fast, polygon_measures, view_direction_problem)
+from tracer.scene import Camera, ElementKind, Scene
 
 __all__ = ["NFFError", "parse_nff", "read_nff", "write_nff"]
-
-_TOKEN = re.compile(r"\S+")
-_DEPTH_PRAGMA = re.compile(r"^\s*#\s*max_depth\s+(\d+)\s*$")
-_VIEW_KEYWORDS = ("from", "at", "up", "angle", "hither", "resolution")
-_OBJECT_KEYWORDS = ("c", "s", "p", "pp")
-_KEYWORDS = ("v", *_VIEW_KEYWORDS, "b", "l", "f", *_OBJECT_KEYWORDS)
-
 
 class NFFError(ValueError):
     """A malformed NFF file.
@@ -75,22 +86,30 @@ class NFFError(ValueError):
         super().__init__(f"{file}:{line}:{column}: expected {expected}, found {what}")
 
 
+def _normalise_line_breaks(text: str) -> str:
+    # every break str.splitlines() knows becomes "\n", so line numbers agree everywhere
+    if text.isascii() and not any(mark in text for mark in "\r\x0b\x0c\x1c\x1d\x1e"):
+        return text  # the common case, without a regular-expression pass
+    return LINE_BREAKS.sub("\n", text)
+
+
+def _depth_pragma(text: str) -> int | None:
+    found = DEPTH_PRAGMA.findall(text)
+    return int(found[-1]) if found else None
+
+
 class _Tokens:
-    """Tokens of an NFF text with their 1-based line and column."""
+    """Tokens of an NFF text with their 1-based line and column (the positional reader's input)."""
 
     def __init__(self, text: str, source: str):
         self.source = source
         self.items: list[tuple[str, int, int]] = []
-        self.max_depth: int | None = None
-        lines = text.splitlines()
+        lines = text.split("\n")
         for number, line in enumerate(lines, start=1):
             hash_at = line.find("#")
             if hash_at >= 0:
-                pragma = _DEPTH_PRAGMA.match(line[hash_at:])
-                if pragma and not line[:hash_at].strip():
-                    self.max_depth = int(pragma.group(1))
                 line = line[:hash_at]
-            for match in _TOKEN.finditer(line):
+            for match in TOKEN.finditer(line):
                 self.items.append((match.group(), number, match.start() + 1))
         last = lines[-1] if lines else ""
         self.end = (max(len(lines), 1), len(last) + 1)
@@ -116,10 +135,7 @@ class _Tokens:
 
     def number(self, expected: str) -> float:
         token = self.next(expected)
-        try:
-            value = float(token)
-        except ValueError:
-            value = float("nan")
+        value = float(token) if C_NUMBER.fullmatch(token) else float("nan")
         if not np.isfinite(value):
             raise self.error(expected, self.pos - 1)
         return value
@@ -129,72 +145,39 @@ class _Tokens:
 
     def integer(self, expected: str) -> int:
         token = self.next(expected)
-        if not re.fullmatch(r"[+-]?\d+", token):
+        if not C_INTEGER.fullmatch(token):
             raise self.error(expected, self.pos - 1)
         return int(token)
 
 
-def _is_degenerate(vertices: np.ndarray) -> bool:
-    """Zero area (Newell normal vanishes relative to the polygon's extent)."""
-    shifted = np.roll(vertices, -1, axis=0)
-    normal = np.array([
-        np.sum((vertices[:, 1] - shifted[:, 1]) * (vertices[:, 2] + shifted[:, 2])),
-        np.sum((vertices[:, 2] - shifted[:, 2]) * (vertices[:, 0] + shifted[:, 0])),
-        np.sum((vertices[:, 0] - shifted[:, 0]) * (vertices[:, 1] + shifted[:, 1])),
-    ])
-    extent = float(np.max(np.ptp(vertices, axis=0)))
-    return extent == 0.0 or float(np.linalg.norm(normal)) <= 1e-12 * extent * extent
+# ------------------------------------------------------------- the positional reader
+def _parse_positioned(text: str, source: str) -> tuple[SceneParts, list[int]]:
+    """Read NFF token by token, knowing every token's line and column: the reader that says where.
 
-
-def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
-              max_depth: int | None = None) -> Scene:
-    """Parse NFF text into a :class:`~tracer.scene.Scene`.
-
-    Parameters
-    ----------
-    text : str
-        The NFF document.
-    source : str
-        Name used in error messages (a path, or ``"<string>"``).
-    name : str, optional
-        Scene name; default the stem of ``source``.
-    max_depth : int, optional
-        Recursion depth; default the file's ``# max_depth N`` line, else 5.
-
-    Returns
-    -------
-    Scene
-        Elements numbered in file order.
-
-    Raises
-    ------
-    NFFError
-        On the first malformed token, with file, line, column and what was
-        expected; no partial scene is returned.
+    Returns the scene's parts (see :func:`assemble`) and, per element, the
+    index of its keyword token. Raises :class:`NFFError` at the first fault.
     """
     tokens = _Tokens(text, source)
-    if name is None:
-        name = "scene" if source.startswith("<") else (Path(source).stem or "scene")
-    builder = SceneBuilder(name)
+    parts = SceneParts()
     view: dict | None = None
     view_at = 0
-    seen_object = False
+    view_tokens: dict = {}
+    first_object = None
 
     while not tokens.at_end():
         start = tokens.pos
         keyword = tokens.next("a keyword")
-        if keyword in _OBJECT_KEYWORDS:
-            seen_object = True
-        if keyword == "v" or keyword in _VIEW_KEYWORDS:
-            if seen_object:
-                raise tokens.error("the view ('v ...') before the first object (view after objects)",
-                                   start)
+        if keyword in OBJECT_KEYWORDS and first_object is None:
+            first_object = start
+        if keyword == "v" or keyword in VIEW_KEYWORDS:
+            if first_object is not None:
+                raise tokens.error("the view ('v ...') before the first object (view after objects)", start)
             if keyword == "v":
-                view = {}
-                view_at = start
+                view, view_at, view_tokens = {}, start, {}
                 continue
             if view is None:
                 raise tokens.error(f"'v' before the view parameter {keyword!r}", start)
+            view_tokens[keyword] = start
         if keyword == "from":
             view["eye"] = tokens.numbers(3, "a number (x y z of 'from')")
         elif keyword == "at":
@@ -216,56 +199,131 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
                 raise tokens.error("a positive resolution", tokens.pos - 2)
             view["resolution"] = (width, height)
         elif keyword == "b":
-            builder.background = tokens.numbers(3, "a number (r g b of the background)")
+            parts.background = tokens.numbers(3, "a number (r g b of the background)")
         elif keyword == "l":
             position = tokens.numbers(3, "a number (x y z of the light)")
             color = (1.0, 1.0, 1.0)
-            if not tokens.at_end() and tokens.items[tokens.pos][0] not in _KEYWORDS:
+            if not tokens.at_end() and tokens.items[tokens.pos][0] not in KEYWORDS:
                 color = tokens.numbers(3, "a number (r g b of the light) or a keyword")
-            builder.light(position, color)
+            parts.lights.append((*position, *color))
         elif keyword == "f":
-            values = tokens.numbers(8, "a number (f: r g b Kd Ks shine T ior)")
-            builder.material(Material(values[:3], *values[3:]))
+            parts.material = tokens.numbers(8, "a number (f: r g b Kd Ks shine T ior)")
         elif keyword == "s":
-            *center, radius = tokens.numbers(4, "a number (s: x y z radius)")
-            if radius <= 0.0:
+            values = tokens.numbers(4, "a number (s: x y z radius)")
+            if values[3] <= 0.0:
                 raise tokens.error("a positive sphere radius", tokens.pos - 1)
-            builder.sphere(center, radius)
+            parts.add_sphere(values, start)
         elif keyword == "c":
             values = tokens.numbers(8, "a number (c: base x y z r, apex x y z r)")
             if values[:3] == values[4:7]:
-                raise tokens.error("a cone apex different from its base (degenerate cone)",
-                                   tokens.pos - 4)
-            builder.cone(values[:3], values[3], values[4:7], values[7])
+                raise tokens.error("a cone apex different from its base (degenerate cone)", tokens.pos - 4)
+            parts.add_cone(values, start)
         elif keyword in ("p", "pp"):
             count = tokens.integer(f"a vertex count after {keyword!r}")
             if count < 3:
-                raise tokens.error("a polygon with at least 3 vertices (too few vertices)",
-                                   tokens.pos - 1)
+                raise tokens.error("a polygon with at least 3 vertices (too few vertices)", tokens.pos - 1)
             per_vertex = 3 if keyword == "p" else 6
             what = "x y z" if keyword == "p" else "x y z nx ny nz"
-            values = np.array(tokens.numbers(per_vertex * count,
-                                             f"a number ({keyword} {count}: {count} x {what})"))
-            values = values.reshape(count, per_vertex)
-            if _is_degenerate(values[:, :3]):
+            values = tokens.numbers(per_vertex * count, f"a number ({keyword} {count}: {count} x {what})")
+            table = np.array(values).reshape(count, per_vertex)
+            degenerate, _ = polygon_measures(table[:, :3], np.array([0, count]))
+            if degenerate[0]:
                 raise tokens.error("a polygon with non-zero area (degenerate polygon)", start)
-            if keyword == "p":
-                builder.polygon(values)
-            else:
-                builder.patch(values[:, :3], values[:, 3:])
-        elif keyword not in ("v", *_VIEW_KEYWORDS):
-            raise tokens.error("a keyword (one of " + ", ".join(_KEYWORDS) + ")", start)
+            if keyword == "pp" and not np.all(np.any(table[:, 3:] != 0.0, axis=1)):
+                raise tokens.error("a non-zero normal at every vertex of 'pp' (zero normal)", start)
+            parts.add_polygon(keyword, count, values, start)
+        elif keyword not in ("v", *VIEW_KEYWORDS):
+            raise tokens.error("a keyword (one of " + ", ".join(KEYWORDS) + ")", start)
 
-    if view is not None:
-        try:
-            builder.camera = Camera(**view)
-        except ValueError as error:
-            raise tokens.error(f"a valid view ({error})", view_at) from None
-    if max_depth is not None:
-        builder.max_depth = int(max_depth)
-    elif tokens.max_depth is not None:
-        builder.max_depth = tokens.max_depth
-    return builder.build()
+    if not parts.kinds:
+        raise tokens.error("at least one object (s, p, pp or c): the scene is empty", len(tokens.items))
+    if view is None:
+        raise tokens.error("a view ('v' with from, at, up, angle, hither, resolution) before the first object",
+                           first_object)
+    missing = [keyword for keyword in VIEW_KEYWORDS if CAMERA_FIELDS[keyword] not in view]
+    if missing:
+        raise tokens.error("a complete view: missing " + ", ".join(repr(m) for m in missing), view_at)
+    if view_direction_problem(view):
+        raise tokens.error("an 'up' direction not parallel to the view direction (from -> at)", view_tokens["up"])
+    try:
+        parts.camera = Camera(**view)
+    except ValueError as error:
+        raise tokens.error(f"a valid view ({error})", view_at) from None
+    return parts, parts.tokens
+
+
+def _warn_about(scene: Scene, element_tokens: list, text: str, source: str) -> None:
+    """One warning per kind of oddity in a file, naming the first one's line."""
+    findings = []
+    kinds = scene.element_kind
+    for kind, vertices, offsets in ((ElementKind.POLYGON, scene.polygon_vertices, scene.polygon_offsets),
+                                    (ElementKind.PATCH, scene.patch_vertices, scene.patch_offsets)):
+        _, deviation = polygon_measures(vertices, offsets)
+        bent = np.flatnonzero(deviation > PLANARITY_TOLERANCE)
+        if bent.size:
+            element = np.flatnonzero(kinds == kind)[bent[0]]
+            findings.append((element, f"{'polygon' if kind == ElementKind.POLYGON else 'patch'} is not planar "
+                                      f"(a vertex lies {deviation[bent[0]]:.2g} of its size off its plane)",
+                             bent.size))
+    flat = np.flatnonzero((scene.cone_base_radius == 0.0) & (scene.cone_apex_radius == 0.0))
+    if flat.size:
+        element = np.flatnonzero(kinds == ElementKind.CONE)[flat[0]]
+        findings.append((element, "cone has both radii 0 (it is invisible)", flat.size))
+    if not findings:
+        return
+    items = _Tokens(text, source).items
+    for element, what, count in findings:
+        _, line, _ = items[element_tokens[element]]
+        more = f"; {count - 1} more like it" if count > 1 else ""
+        warnings.warn(f"{source}:{line}: {what}{more}", stacklevel=4)
+
+
+def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
+              max_depth: int | None = None) -> Scene:
+    """Parse NFF text into a :class:`~tracer.scene.Scene`.
+
+    Parameters
+    ----------
+    text : str
+        The NFF document.
+    source : str
+        Name used in error messages (a path, or ``"<string>"``).
+    name : str, optional
+        Scene name; default the stem of ``source``.
+    max_depth : int, optional
+        Recursion depth; default the file's ``# max_depth N`` line, else 5.
+
+    Returns
+    -------
+    Scene
+        Elements numbered in file order; materials numbered by first use (as
+        :class:`~tracer.scene.SceneBuilder` numbers them).
+
+    Raises
+    ------
+    NFFError
+        On the first fault, with file, line, column and what was expected;
+        no partial scene is returned.
+
+    Warns
+    -----
+    UserWarning
+        Once per kind, naming file and line: a polygon or patch that is not
+        planar, a cone with both radii 0.
+    """
+    if name is None:
+        name = "scene" if source.startswith("<") else (Path(source).stem or "scene")
+    text = _normalise_line_breaks(text)
+    pragma = _depth_pragma(text)
+    depth = int(max_depth) if max_depth is not None else (pragma if pragma is not None else 5)
+    try:
+        parts = parse_fast(text)
+        scene = assemble(parts, name, depth)
+    except Fallback:
+        parts, _ = _parse_positioned(text, source)  # raises the error with its position
+        scene = assemble(parts, name, depth)
+    _warn_about(scene, parts.tokens, text, source)
+    return scene
 
 
 def read_nff(path, *, max_depth: int | None = None) -> Scene:
@@ -284,15 +342,23 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
     ------
     FileNotFoundError
         If ``path`` does not exist.
+    IsADirectoryError, ValueError
+        If it is a folder, or not a regular file (a FIFO would block).
     NFFError
         If the file is malformed.
     """
+    import stat
+
     path = Path(path)
-    if not path.is_file():
-        if path.exists():
-            raise IsADirectoryError(f"not an NFF file: {str(path)!r}")
-        raise FileNotFoundError(f"no such NFF file: {str(path)!r}")
-    text = path.read_text(encoding="utf-8", errors="replace")
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"no such NFF file: {str(path)!r}") from None
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(f"not an NFF file: {str(path)!r} is a folder")
+    if not stat.S_ISREG(mode):
+        raise ValueError(f"not an NFF file: {str(path)!r} is not a regular file")
+    text = path.read_bytes().decode("utf-8", errors="replace")
     return parse_nff(text, str(path), name=path.stem, max_depth=max_depth)
 
 
