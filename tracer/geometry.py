@@ -25,10 +25,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from tracer.polygons import CONVEX, hit_convex, hit_polygon, polygon_even_odd_axes  # noqa: F401 (re-exported)
 from tracer.scene import ElementKind, Scene
 
 INF = np.inf
-
 class Geometry(NamedTuple):
     """The element table and per-primitive arrays the kernels read (see :func:`prepare_geometry`).
 
@@ -45,6 +45,7 @@ class Geometry(NamedTuple):
     polygon_offsets: np.ndarray   #: (P + 1,) int64
     polygon_vertices: np.ndarray  #: (V, 3)
     polygon_normal: np.ndarray    #: (P, 3) unit Newell normal (counter-clockwise front)
+    polygon_even_odd_axis: np.ndarray  #: (P,) int64 :data:`CONVEX`, or the axis a concave one drops
     patch_offsets: np.ndarray     #: (Q + 1,) int64
     patch_vertices: np.ndarray    #: (W, 3)
     patch_vnormals: np.ndarray    #: (W, 3) unit vertex normals
@@ -138,6 +139,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     po = np.ascontiguousarray(scene.polygon_offsets, dtype=np.int64)
     pv = f(scene.polygon_vertices, (-1, 3))
     pn = _newell(po, pv, "polygon_vertices")
+    p_axes = polygon_even_odd_axes(po, pv, pn)
     qo = np.ascontiguousarray(scene.patch_offsets, dtype=np.int64)
     qv = f(scene.patch_vertices, (-1, 3))
     qvn = f(scene.patch_normals, (-1, 3))
@@ -153,7 +155,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     r0 = f(scene.cone_base_radius, (-1,))
     r1 = f(scene.cone_apex_radius, (-1,))
     sign = np.where((r0 < 0) | ((r0 == 0) & (r1 < 0)), -1.0, 1.0)
-    return Geometry(ekind, eidx, sc, sr, tri, tn, po, pv, pn, qo, qv, qvn, qn,
+    return Geometry(ekind, eidx, sc, sr, tri, tn, po, pv, pn, p_axes, qo, qv, qvn, qn,
                     np.ascontiguousarray(cb), np.ascontiguousarray(axis), np.ascontiguousarray(height),
                     np.abs(r0), np.abs(r1), sign)
 
@@ -296,35 +298,6 @@ def hit_triangle(tri, i, ray, tmin, tmax):
 
 
 @njit(cache=True, error_model="numpy")
-def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
-    """Test ``ray`` and convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal`` (P, 3))."""
-    ox, oy, oz, dx, dy, dz = ray
-    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-    denom = nx * dx + ny * dy + nz * dz
-    if denom == 0.0:
-        return INF
-    a = offsets[i]
-    b = offsets[i + 1]
-    t = (nx * (vertices[a, 0] - ox) + ny * (vertices[a, 1] - oy) + nz * (vertices[a, 2] - oz)) / denom
-    if not (t > tmin and t < tmax):
-        return INF
-    hx, hy, hz = ox + t * dx, oy + t * dy, oz + t * dz
-    for k in range(a, b):
-        k1 = k + 1 if k + 1 < b else a
-        ex = vertices[k1, 0] - vertices[k, 0]
-        ey = vertices[k1, 1] - vertices[k, 1]
-        ez = vertices[k1, 2] - vertices[k, 2]
-        wx = hx - vertices[k, 0]
-        wy = hy - vertices[k, 1]
-        wz = hz - vertices[k, 2]
-        # (e x w) . n must not be negative for a point inside (CCW about n)
-        s = (ey * wz - ez * wy) * nx + (ez * wx - ex * wz) * ny + (ex * wy - ey * wx) * nz
-        if s < 0.0:
-            return INF
-    return t
-
-
-@njit(cache=True, error_model="numpy")
 def hit_cone(geo, i, ray, tmin, tmax):
     """Test ``ray`` and the lateral surface of truncated cone ``i`` of ``geo`` (no caps)."""
     base, axis, height, r0s, r1s = geo.cone_base, geo.cone_axis, geo.cone_height, geo.cone_r0, geo.cone_r1
@@ -384,7 +357,8 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
     if kind == ElementKind.TRIANGLE:
         return hit_triangle(geo.triangle_v0e1e2, idx, ray, tmin, tmax)
     if kind == ElementKind.POLYGON:
-        return hit_convex(geo.polygon_offsets, geo.polygon_vertices, geo.polygon_normal, idx, ray, tmin, tmax)
+        return hit_polygon(geo.polygon_offsets, geo.polygon_vertices, geo.polygon_normal, geo.polygon_even_odd_axis,
+                           idx, ray, tmin, tmax)
     if kind == ElementKind.PATCH:
         return hit_convex(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, idx, ray, tmin, tmax)
     return hit_cone(geo, idx, ray, tmin, tmax)
