@@ -5,6 +5,28 @@ import os
 from pathlib import Path
 
 
+def check_free_space(what: str, folder, needed: int) -> None:
+    """Refuse when ``needed`` bytes will not fit on the file system holding ``folder`` (or its nearest parent).
+
+    Raises
+    ------
+    ValueError
+        ``"<what> needs about 31.2 GB of disk space in '/data', 12.0 GB free"``.
+    """
+    import shutil
+
+    probe = Path(folder).expanduser().absolute()
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    try:
+        free = shutil.disk_usage(probe).free
+    except OSError:
+        return
+    if needed > free:
+        raise ValueError(f"{what} needs about {needed / 2**30:.1f} GB of disk space in {str(probe)!r}, "
+                         f"{free / 2**30:.1f} GB free")
+
+
 def check_output_folder(out) -> Path:
     """Raise unless ``out`` is, or can become, a writable folder; create nothing.
 

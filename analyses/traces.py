@@ -64,7 +64,8 @@ CACHE_ENV = "COHERENCE_CACHE"
 
 _INFO = "render.json"
 _KD_BUILDERS = ("sah", "median")
-_PRIVATE_CACHES: dict = {}  # read-only cache root -> this process's temporary stand-in
+_PRIVATE_CACHES: dict = {}
+_PILOT_SIZE = 32  # image size of the render that estimates a trace's bytes per pixel  # read-only cache root -> this process's temporary stand-in
 
 
 def cache_root(cache_dir=None) -> Path:
@@ -293,13 +294,24 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
     from tracer.kdtree import KdTreeConfig
     from tracer.render import render, save_png
 
+    kd_config = KdTreeConfig(builder=explicit_kd) if explicit_kd else None
+    tree = None
+    if size > _PILOT_SIZE:  # the trace streams to disk: see first that it will fit
+        from analyses.output import check_free_space
+
+        pilot = render(scene, size=_PILOT_SIZE, kd_config=kd_config, workload=workload)
+        bytes_per_pixel = 4 * pilot.trace.n_records / pilot.trace.n_pixels
+        check_free_space(f"the trace of {scene.name} at {size}x{size}", entry.parent,
+                         int(1.25 * bytes_per_pixel * size * size))
+        tree = pilot.tree  # the same tree the render would build
+        del pilot
     tmp = make_temp_dir(entry)
     try:
         bar = tqdm(total=1, desc=f"rendering {scene.name} {size}x{size} (logging accesses)", unit="image",
                    disable=not progress, leave=False, file=sys.stderr)
         start = time.perf_counter()
-        result = render(scene, size=size, kd_config=KdTreeConfig(builder=explicit_kd) if explicit_kd else None,
-                        trace_path=tmp / "trace", metadata={"cache_key": key}, workload=workload)
+        result = render(scene, tree, size=size, kd_config=kd_config, trace_path=tmp / "trace",
+                        metadata={"cache_key": key}, workload=workload)
         seconds = time.perf_counter() - start
         bar.update(1)
         bar.close()

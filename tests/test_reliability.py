@@ -406,3 +406,17 @@ NO_WORK_CASES = [
 def test_processes_without_work_do_not_crash(scratch):
     results = run_cli_cases(scratch, [(case[0], {}) for case in NO_WORK_CASES])
     assert [result["status"] for result in results] == [case[1] for case in NO_WORK_CASES]
+
+
+def test_a_trace_that_will_not_fit_on_disk_is_refused_before_rendering(tmp_path, monkeypatch):
+    import shutil
+
+    from analyses import output
+
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=10_000))
+    with pytest.raises(ValueError, match=r"the trace of tetra at 64x64 needs about .* GB of disk space in .*, "
+                                         r"0\.0 GB free"):
+        traces.cached_trace("tetra", 64, cache_dir=tmp_path, progress=False)
+    assert not list((tmp_path / "traces").iterdir())
+    output.check_free_space("small", tmp_path, 5_000)  # what fits passes

@@ -9,7 +9,6 @@ prints ``coherence CMD: error: ...`` and exits with 2 before any work.
 from __future__ import annotations
 
 import os
-import shutil
 import stat
 from pathlib import Path
 
@@ -86,15 +85,9 @@ def check_scene_argument(scene, option: str = "SCENE") -> None:
 
 def check_disk(option: str, folder, needed: int) -> None:
     """Refuse when ``needed`` bytes will not fit on the file system holding ``folder``."""
-    probe = Path(folder).expanduser().absolute()
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
-    try:
-        free = shutil.disk_usage(probe).free
-    except OSError:
-        return
-    if needed > free:
-        raise ValueError(f"{option} needs about {_gb(needed)} of disk space in {str(probe)!r}, {_gb(free)} free")
+    from analyses.output import check_free_space
+
+    check_free_space(option, folder, needed)
 
 
 def check_input_file(option: str, path) -> Path:
