@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_kind
+from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
 
@@ -360,6 +360,42 @@ def record_lines(records, start, stop, placement, line_shift, buffer):
             buffer[k] = np.uint64(line << line_shift)
             k += 1
     return buffer, k
+
+
+@njit(cache=True, nogil=True)
+def record_lines_and_writes(records, start, stop, placement, line_shift, buffer, writes):
+    """:func:`record_lines` that also says which line accesses are writes.
+
+    ``writes`` (bool, shape ``buffer.shape``) receives each address's write
+    flag: every line of a record whose write flag is set
+    (:func:`tracer.records.record_is_write`) is written. Both buffers grow
+    together when full.
+
+    Returns
+    -------
+    buffer : ndarray of uint64
+    writes : ndarray of bool
+    count : int
+    """
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    k = 0
+    for i in range(start, stop):
+        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+        write = record_is_write(records[i])
+        for line in range(first, last + 1):
+            if k == buffer.shape[0]:
+                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
+                grown[:k] = buffer
+                buffer = grown
+                grown_writes = np.empty(2 * writes.shape[0], dtype=np.bool_)
+                grown_writes[:k] = writes
+                writes = grown_writes
+            buffer[k] = np.uint64(line << line_shift)
+            writes[k] = write
+            k += 1
+    return buffer, writes, k
 
 
 @njit(cache=True, nogil=True)

@@ -146,3 +146,26 @@ def test_render_metadata_counts_every_record_kind():
     assert counts[RecordKind.LIGHT] == scene.light_position.shape[0]
     read = record_counts_of(type("T", (), {"records": trace.records, "metadata": {}})())
     assert all(read[kind] <= counts[kind] for kind in RecordKind)
+
+
+def test_record_lines_and_writes_flag_every_line_of_a_written_record():
+    from coherence.layout import record_lines, record_lines_and_writes
+    from tracer.records import pack
+
+    rng = np.random.default_rng(11)
+    placed = get_layout("alpha1997").place({kind: 50 for kind in RecordKind})
+    kinds = rng.integers(0, len(RecordKind), 400)
+    ids = rng.integers(0, 50, 400)
+    writes = rng.random(400) < 0.3
+    records = pack(kinds, ids, writes)
+    shift = 5
+    lines, count = record_lines(records, 0, 400, placed.placement, shift, np.empty(4, dtype=np.uint64))
+    got, flags, n = record_lines_and_writes(records, 0, 400, placed.placement, shift,
+                                            np.empty(4, dtype=np.uint64), np.empty(4, dtype=np.bool_))
+    assert n == count and np.array_equal(got[:n], lines[:count])
+    # by hand: each record's flag once per line it spans
+    expected = []
+    for record, write in zip(records, writes):
+        one, k = record_lines(np.array([record]), 0, 1, placed.placement, shift, np.empty(8, dtype=np.uint64))
+        expected += [bool(write)] * k
+    assert flags[:n].tolist() == expected
