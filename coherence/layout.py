@@ -376,14 +376,20 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
     buffer : ndarray of uint64
     writes : ndarray of bool
     count : int
+        Addresses written.
+    n_writes : int
+        How many of them are writes.
     """
     record_start = placement.record_start
     record_size = placement.record_size
     kind_first = placement.kind_first
     k = 0
+    n_writes = 0
     for i in range(start, stop):
         first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
         write = record_is_write(records[i])
+        if write:
+            n_writes += last - first + 1
         for line in range(first, last + 1):
             if k == buffer.shape[0]:
                 grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
@@ -395,7 +401,7 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
             buffer[k] = np.uint64(line << line_shift)
             writes[k] = write
             k += 1
-    return buffer, writes, k
+    return buffer, writes, k, n_writes
 
 
 @njit(cache=True, nogil=True)

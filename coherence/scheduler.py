@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit
 
 from cachesim import kernels as K
-from coherence.layout import record_lines
+from coherence.layout import record_lines_and_writes
 
 # Columns of the per-process cycle totals the event loop writes.
 COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
@@ -175,6 +175,8 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
     held_count = np.zeros(n_ours, dtype=np.int64)
     next_task = np.zeros(1, dtype=np.int64)
     buffer = np.empty(max(4096, footprint_lines), dtype=np.uint64)
+    write_flags = np.empty(buffer.shape[0], dtype=np.bool_)
+    no_writes = np.zeros(0, dtype=np.bool_)
     work = K.chunk_buffers()
     served = np.zeros(0, dtype=np.uint8)
     hits_before = np.zeros(n_levels, dtype=np.int64)
@@ -240,14 +242,17 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
                 position[process] = task_offsets[task]
             pixel = task_pixels[position[process]]
             position[process] += 1
-            buffer, n_addresses = record_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
-                                               placement, line_shift, buffer)
+            buffer, write_flags, n_addresses, n_writes = record_lines_and_writes(
+                records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement, line_shift, buffer,
+                write_flags)
             for level in range(n_levels):
-                hits_before[level] = process_counts[level, K.HITS]
-            misses_before = process_counts[n_levels - 1, K.MISSES]
-            cache_clock[cpu] = K.simulate_into(buffer[:n_addresses], geometry, cache, cache_clock[cpu],
-                                               served, False, work)
-            memory = _memory_cycles(process_counts, hits_before, misses_before, latency)
+                hits_before[level] = process_counts[level, K.HITS] - process_counts[level, K.WRITE_HITS]
+            misses_before = process_counts[n_levels - 1, K.MISSES] - process_counts[n_levels - 1, K.WRITE_MISSES]
+            # a pixel without writes keeps the read-only (fast) path
+            cache_clock[cpu] = K.simulate_writes_into(buffer[:n_addresses],
+                                                      write_flags[:n_addresses] if n_writes else no_writes,
+                                                      geometry, cache, cache_clock[cpu], served, False, work)
+            memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
             cycles = compute[pixel] + memory
             out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
             out_cycles[process, MEMORY_CYCLES] += memory
@@ -354,10 +359,19 @@ def _next_task(process, schedule, own_next, held, held_count, next_task, task_ow
 
 @njit(cache=True, inline="always")
 def _memory_cycles(process_counts, hits_before, misses_before, latency):
-    """Latency of the accesses counted since the snapshot: each level's new
-    hits at its latency, the last level's new misses at memory's."""
+    """Latency of the reads counted since the snapshot: each level's new read
+    hits at its latency, the last level's new read misses at memory's.
+
+    Writes are left out here: the 21164 retires a store into its write
+    buffer (the D-cache is write-through), so a store costs the first
+    level's latency whatever serves it; the caller adds that. The levels
+    still allocate on writes as the hierarchy says (cachesim.by_access).
+    """
     n_levels = process_counts.shape[0]
-    memory = (process_counts[n_levels - 1, K.MISSES] - misses_before) * latency[n_levels]
+    last = n_levels - 1
+    memory = (process_counts[last, K.MISSES] - process_counts[last, K.WRITE_MISSES] - misses_before) \
+        * latency[n_levels]
     for level in range(n_levels):
-        memory += (process_counts[level, K.HITS] - hits_before[level]) * latency[level]
+        memory += (process_counts[level, K.HITS] - process_counts[level, K.WRITE_HITS] - hits_before[level]) \
+            * latency[level]
     return memory

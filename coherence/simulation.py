@@ -4,11 +4,16 @@
   gives every process its own tasks; a dynamic one (DB) hands the next task
   of a global queue to whichever process asks first, each hand-out costing
   ``dispatch_cycles`` of waiting (unless a take-ahead task is already held).
-- A pixel's reads become byte addresses through the placed memory layout
+- A pixel's records become byte addresses through the placed memory layout
   (every smallest-level line a record spans), run through the caches of the
   CPU the process runs on; its time is its compute cycles (cost model) plus
-  the latency of the level that served each access (memory latency for the
-  last level's misses).
+  the latency of the level that served each read (memory latency for the
+  last level's misses). Written records (the write flag of
+  :mod:`tracer.records`: the study-era tracer's ray stack, hit records and
+  frame buffer) are writes to the caches, which allocate them as the
+  hierarchy says; a write costs the first level's latency, as a store
+  retired into the 21164's write buffer does. A hierarchy with a data TLB
+  is refused: the replay does not model it yet.
 - The machine's operating system (:class:`Machine`, :mod:`coherence.scheduler`)
   decides which process runs on which CPU when: one run queue shared by all
   CPUs (processes move between CPUs at the end of time slices, and find the
@@ -285,6 +290,10 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if counter_names is None:
         from tracer.trace import COUNTER_NAMES as counter_names
     n_pixels = trace.width * trace.height
+    if hierarchy.tlb is not None:
+        raise ValueError(f"hierarchy {hierarchy.name!r} has a data TLB, which the schedule replay does not model "
+                         "yet (its misses would be left out silently): use a hierarchy without one, e.g. "
+                         "alpha21164; cachesim.simulate models it")
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")

@@ -11,6 +11,7 @@ from collections import deque
 import numpy as np
 
 from reference_cache import ReferenceLevel
+from tracer.records import WRITE_FLAG
 
 BACKGROUND_BASE = 1 << 56
 BACKGROUND_SPACING = 1 << 48
@@ -25,8 +26,11 @@ class ReferenceCaches:
         self.levels = [ReferenceLevel(level, index) for index, level in enumerate(hierarchy.levels)]
         self.clock = 0
 
-    def access(self, address):
-        """Run one byte address through the levels; return the level that served it (L: memory)."""
+    def access(self, address, write=False):
+        """Run one byte access through the levels; return the level that served it (L: memory).
+
+        A write fills only the levels that allocate on writes (``write_allocate``).
+        """
         self.clock += 1
         levels = self.levels
         lines = [address // level.line_size for level in levels]
@@ -47,6 +51,8 @@ class ReferenceCaches:
                     break
             return served
         for index in range(served - 1, -1, -1):
+            if write and not self.hierarchy.levels[index].write_allocate:
+                continue
             evicted = levels[index].insert(lines[index], self.clock)
             if evicted is not None and self.hierarchy.inclusion == "inclusive":
                 for upper in range(index):
@@ -200,14 +206,14 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
             pixel = remaining[p].popleft()
             memory = 0.0
             records = trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]
-            for address in placed.addresses(records, line_size):
-                served = state["caches"].access(int(address))
+            for address, write in zip(placed.addresses(records, line_size), _line_writes(records, placed, line_size)):
+                served = state["caches"].access(int(address), write)
                 for level in range(min(served + 1, n_levels)):
                     if level == served:
                         result["hits"][p][level] += 1
                     else:
                         result["misses"][p][level] += 1
-                memory += latency[served]
+                memory += latency[0] if write else latency[served]  # a store goes to the write buffer
             result["compute"][p] += compute[pixel]
             result["memory"][p] += memory
             state["clock"] += compute[pixel] + memory
@@ -228,3 +234,12 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     result["task_owner"] = task_owner
     result["real"] = max(result["finish"])
     return result
+
+
+def _line_writes(records, placed, line_size):
+    """Each line access's write flag: a written record's flag, once per line it spans."""
+    flags = []
+    for record in records:
+        lines = len(placed.addresses(np.array([record], dtype=np.uint32), line_size))
+        flags += [bool(int(record) & WRITE_FLAG)] * lines
+    return flags

@@ -160,7 +160,7 @@ def test_record_lines_and_writes_flag_every_line_of_a_written_record():
     records = pack(kinds, ids, writes)
     shift = 5
     lines, count = record_lines(records, 0, 400, placed.placement, shift, np.empty(4, dtype=np.uint64))
-    got, flags, n = record_lines_and_writes(records, 0, 400, placed.placement, shift,
+    got, flags, n, n_writes = record_lines_and_writes(records, 0, 400, placed.placement, shift,
                                             np.empty(4, dtype=np.uint64), np.empty(4, dtype=np.bool_))
     assert n == count and np.array_equal(got[:n], lines[:count])
     # by hand: each record's flag once per line it spans
@@ -168,4 +168,4 @@ def test_record_lines_and_writes_flag_every_line_of_a_written_record():
     for record, write in zip(records, writes):
         one, k = record_lines(np.array([record]), 0, 1, placed.placement, shift, np.empty(8, dtype=np.uint64))
         expected += [bool(write)] * k
-    assert flags[:n].tolist() == expected
+    assert flags[:n].tolist() == expected and n_writes == sum(expected)

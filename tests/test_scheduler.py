@@ -9,7 +9,7 @@ from coherence.cost import CostModel
 from coherence.layout import RecordLayout, get_layout
 from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip
 from coherence.simulation import Machine, simulate_run
-from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
 from reference_scheduler import reference_schedule
 from trace_factory import SMALL, random_trace
@@ -192,3 +192,33 @@ def test_machine_validation():
     with pytest.raises(ValueError, match="Machine.background_load"):
         Machine(background_load=1.5)
     assert Machine(scheduler="static", placement="neighbours").cpu_of(4).tolist() == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("inclusion", ["inclusive", "non-inclusive"])
+@pytest.mark.parametrize("mapping", ["S", "P", "DB"])
+def test_writes_equal_the_reference(mapping, inclusion):
+    """Written records (ray stack, frame buffer) through a write-through, no-write-allocate L1."""
+    trace = random_trace(width=8, height=6, seed=21)
+    rng = np.random.default_rng(21)
+    kinds, ids = unpack(trace.records)
+    written = pack(kinds, ids, rng.random(ids.size) < 0.3)
+    trace = AccessTrace(trace.pixel_offsets, written, trace.counters, trace.width, trace.height, {})
+    l1, l2 = SMALL.levels
+    hierarchy = Hierarchy((replace(l1, write_allocate=False), l2), memory_latency=SMALL.memory_latency,
+                          inclusion=inclusion)
+    run = compare(trace, mapping, 3, hierarchy, Machine(n_cpus=2, quantum_cycles=4000.0, background_load=1,
+                                                        background_footprint=512))
+    # the writes changed what the caches did: the same trace read-only gives other counts
+    reads_only = AccessTrace(trace.pixel_offsets, pack(kinds, ids), trace.counters, trace.width, trace.height, {})
+    other = simulate_run(reads_only, MAPPINGS[mapping].build(8, 6, 3), hierarchy, placed_for(), COST,
+                         Machine(n_cpus=2, quantum_cycles=4000.0, background_load=1, background_footprint=512),
+                         compute=COST.compute_cycles(trace.counters, COUNTER_NAMES))
+    assert run.processes["memory_cycles"].tolist() != other.processes["memory_cycles"].tolist()
+
+
+def test_a_hierarchy_with_a_tlb_is_refused_not_ignored():
+    from cachesim import get_hierarchy
+
+    trace = random_trace(width=4, height=4, seed=1)
+    with pytest.raises(ValueError, match="TLB"):
+        simulate_run(trace, Strip().build(4, 4, 2), get_hierarchy("alpha21164-dtb"), placed_for(), COST, Machine())
