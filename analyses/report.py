@@ -130,8 +130,8 @@ def _process_counts(max_processes, n_processes) -> list[int]:
 
 def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, max_processes: int = 16,
                  n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
-                 layout="compact", cost="alpha8400", kd: str = "sah", max_depth: int | None = None,
-                 cache_dir=None, out=None, progress: bool = True) -> Report:
+                 layout="compact", cost="alpha8400", kd: str | None = None, max_depth: int | None = None,
+                 cache_dir=None, out=None, progress: bool = True, workload: str = "modern") -> Report:
     """Render (or load) a scene's trace, simulate the mappings and assemble the report.
 
     Parameters
@@ -151,10 +151,14 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     n_cpus : int
         CPUs of the simulated machine.
     hierarchy, layout, cost : preset name or object
-    kd : {"sah", "median"}
+    kd : {"sah", "median"}, optional
+        kd-tree builder; default the workload's (sah for ``modern``).
     max_depth : int, optional
     cache_dir : path, optional
         Trace cache folder (see :func:`analyses.traces.cached_trace`).
+    workload : str
+        The tracer imitated (:data:`tracer.workload.WORKLOADS`: ``modern``,
+        the default, or the study's ``study1997``).
     out : path, optional
         Output folder to create and check for writing once the arguments
         are valid, before the long work (:func:`write_report` writes it).
@@ -172,6 +176,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     from coherence.simulation import Machine
 
     from analyses.traces import _scene_identity, cached_trace, check_cache_dir
+    from tracer.workload import get_workload
 
     # everything that can be wrong with the arguments fails here, before rendering
     mapping_objects = [get_mapping(m) for m in mappings]
@@ -185,13 +190,14 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     layout = get_layout(layout)
     cost = get_cost_model(cost)
     machine = Machine(n_cpus=n_cpus, background_load=background)
+    kd = kd or get_workload(workload).kd_config.builder
     _scene_identity(scene)  # unknown name or missing file
     check_cache_dir(cache_dir)
     if out is not None:
         prepare_output_folder(out)
 
     scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
-                                          progress=progress)
+                                          progress=progress, workload=workload)
     return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
                      size, kd, progress)
 
@@ -232,7 +238,8 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     results = _results_table(summary_scene, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes,
                              curves, cost_map, verdict, verdict_n, top_n)
     parameters = {
-        "scene": scene.name, "size": int(size), "kd": kd, "max_depth": int(scene.max_depth),
+        "scene": scene.name, "size": int(size), "kd": kd, "workload": info.get("workload", "modern"),
+        "max_depth": int(scene.max_depth),
         "mappings": names, "n_processes": counts, "verdict_n_processes": verdict_n,
         "background_load": int(machine.background_load), "n_cpus": int(machine.n_cpus),
         "machine": result.parameters["machine"], "hierarchy": hierarchy.to_dict(), "layout": layout.name,

@@ -114,6 +114,25 @@ def test_summary_records_parameters_versions_and_headline(reports):
     assert "numpy" in summary["versions"] and "raytrace-coherence" in summary["versions"]
     assert set(summary["headline"]["8"]) == {"S", "P", "B", "DB"}
     assert summary["verdict"]["decided_by"] in ("load balance", "coherence", "dispatch overhead")
+    assert parameters["workload"] == "modern" and parameters["kd"] == "sah"
+
+
+def test_report_with_the_study_workload(tmp_path):
+    from tracer.records import RecordKind, unpack
+    from tracer.trace import AccessTrace
+    from tracer.workload import WORKLOADS
+
+    out = tmp_path / "out"
+    assert main(["report", "tetra", "--size", "16", "--processes", "2", "--mappings", "S", "R", "--workload",
+                 "study1997", "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
+    parameters = json.loads((out / "summary.json").read_text())["parameters"]
+    assert parameters["workload"] == "study1997"
+    assert parameters["kd"] == WORKLOADS["study1997"].kd_config.builder
+    # the cached trace is the study tracer's: it logs the frame buffer, one write per pixel
+    entry = next((tmp_path / "cache" / "traces").glob("tetra-16-study1997-*"))
+    trace = AccessTrace.load(entry / "trace")
+    kinds, _ = unpack(trace.records)
+    assert (kinds == RecordKind.FRAME_BUFFER).sum() == 16 * 16
 
 
 def test_trace_cache_hit_and_key(tmp_path, monkeypatch):

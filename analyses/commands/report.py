@@ -5,7 +5,7 @@ import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least,
                                        machine_options, mappings_options, model_options, scene_options,
-                                       size_options, tree_options)
+                                       size_options, tree_options, workload_options)
 
 HELP = "per-scene report: did load balance or cache coherence decide the speed-up, and why?"
 
@@ -49,8 +49,10 @@ def register(subparsers) -> None:
                               background_why="a busy shared machine like the study's, so that real time shows "
                               "what sharing costs; 'coherence paper' uses 2 so that a lone process runs at full "
                               "speed, as its calibration needs")
-    parents = [scene_options(default="balls"), size_options(), tree_options(), mappings_options(), machine,
-               model_options(), cache_options()]
+    parents = [scene_options(default="balls"), size_options(),
+               tree_options(kd_default=None, kd_why="the workload's: sah for modern, the study's median tree for "
+                            "study1997"), workload_options(), mappings_options(), machine, model_options(),
+               cache_options()]
     parser = subparsers.add_parser("report", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter, parents=parents)
     parser.add_argument("--out", metavar="DIR", help="output folder (default report-SCENE)")
@@ -79,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     report = build_report(args.scene, args.size, mappings=chosen_mappings(args), max_processes=args.max_processes,
                           n_processes=args.processes, background=args.background, n_cpus=args.cpus,
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
-                          max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress)
+                          max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
+                          workload=args.workload)
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
