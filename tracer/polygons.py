@@ -55,19 +55,31 @@ def polygon_even_odd_axes(offsets: np.ndarray, vertices: np.ndarray, normals: np
     return axes
 
 
-@njit(cache=True, error_model="numpy")
-def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
-    """Test ``ray`` and convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal`` (P, 3))."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _plane_distance(offsets, vertices, normal, i, ray, tmin, tmax):
+    """``t`` where ``ray`` meets polygon ``i``'s plane, or ``INF`` if parallel or outside ``(tmin, tmax)``."""
     ox, oy, oz, dx, dy, dz = ray
     nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
     denom = nx * dx + ny * dy + nz * dz
     if denom == 0.0:
         return INF
     a = offsets[i]
-    b = offsets[i + 1]
     t = (nx * (vertices[a, 0] - ox) + ny * (vertices[a, 1] - oy) + nz * (vertices[a, 2] - oz)) / denom
     if not (t > tmin and t < tmax):
         return INF
+    return t
+
+
+@njit(cache=True, error_model="numpy")
+def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
+    """Test ``ray`` and convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal`` (P, 3))."""
+    t = _plane_distance(offsets, vertices, normal, i, ray, tmin, tmax)
+    if t == INF:
+        return INF
+    ox, oy, oz, dx, dy, dz = ray
+    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
+    a = offsets[i]
+    b = offsets[i + 1]
     hx, hy, hz = ox + t * dx, oy + t * dy, oz + t * dz
     for k in range(a, b):
         k1 = k + 1 if k + 1 < b else a
@@ -95,16 +107,12 @@ def hit_polygon(offsets, vertices, normal, even_odd_axis, i, ray, tmin, tmax):
     drop = even_odd_axis[i]
     if drop == CONVEX:
         return hit_convex(offsets, vertices, normal, i, ray, tmin, tmax)
-    ox, oy, oz, dx, dy, dz = ray
-    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-    denom = nx * dx + ny * dy + nz * dz
-    if denom == 0.0:
+    t = _plane_distance(offsets, vertices, normal, i, ray, tmin, tmax)
+    if t == INF:
         return INF
+    ox, oy, oz, dx, dy, dz = ray
     a = offsets[i]
     b = offsets[i + 1]
-    t = (nx * (vertices[a, 0] - ox) + ny * (vertices[a, 1] - oy) + nz * (vertices[a, 2] - oz)) / denom
-    if not (t > tmin and t < tmax):
-        return INF
     hit = (ox + t * dx, oy + t * dy, oz + t * dz)
     u_axis = 1 if drop == 0 else 0
     v_axis = 1 if drop == 2 else 2
