@@ -32,12 +32,10 @@ not depend on logging (same arithmetic, bit for bit).
 """
 from __future__ import annotations
 
-import enum
 import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -47,9 +45,11 @@ from tracer.camera import CameraFrame, _resolve_size, camera_frame
 from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
+from tracer.render_types import (N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, N_RAY_COLUMNS, LightColumn, MaterialColumn,
+                                 RayColumn, RayType, RenderParams, SampleOutputs, SampleScratch, Shading, WorkItems)
 from tracer.scene import Scene
 from tracer.trace import AccessTrace, TraceWriter, package_versions
-from tracer.traverse import RecordLog, TraversalStack, new_stack, traverse, tree_arrays
+from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
 from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
@@ -113,100 +113,6 @@ class RenderResult:
 # --------------------------------------------------------------------------
 # kernels
 # --------------------------------------------------------------------------
-
-class RayType(enum.IntEnum):
-    """Kinds of rays on the ray stack (shadow rays are traced at once, never stacked)."""
-
-    PRIMARY = 0
-    REFLECTION = 1
-    REFRACTION = 2
-
-
-class RayColumn(enum.IntEnum):
-    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`_trace_sample`."""
-
-    ORIGIN = 0     # x; y and z follow
-    DIRECTION = 3  # x, unit; y and z follow
-    WEIGHT = 6     # red; green and blue follow
-    DEPTH = 9      # primary = 1
-    TYPE = 10      # a RayType value
-
-
-N_RAY_COLUMNS = 11
-
-
-class MaterialColumn(enum.IntEnum):
-    """Columns of :attr:`Shading.materials` (M, N_MATERIAL_COLUMNS)."""
-
-    COLOR = 0  # red; green and blue follow
-    KD = 3
-    KS = 4
-    SHINE = 5
-    TRANSMIT = 6
-    IOR = 7
-
-
-class LightColumn(enum.IntEnum):
-    """Columns of :attr:`Shading.lights` (L, N_LIGHT_COLUMNS)."""
-
-    POSITION = 0  # x; y and z follow
-    COLOR = 3  # red, scaled like the ambient level (Shading.ambient); green and blue follow
-
-
-N_MATERIAL_COLUMNS = 8
-N_LIGHT_COLUMNS = 6
-
-
-class Shading(NamedTuple):
-    """What shading reads: materials per element, and the lights (see :func:`_shading`)."""
-
-    element_material: np.ndarray  #: (n,) int64 row of ``materials`` of each element
-    materials: np.ndarray         #: (M, N_MATERIAL_COLUMNS) float64, columns MaterialColumn
-    lights: np.ndarray            #: (L, N_LIGHT_COLUMNS) float64, columns LightColumn
-    ambient: float                #: ambient level, SPD's ``sqrt(L) / (2 L)`` (0.5 without lights)
-    background: np.ndarray        #: (3,) float64 colour of rays that hit nothing
-
-
-class RenderParams(NamedTuple):
-    """Per-render scalars, as the kernels read them."""
-
-    n_samples: int    #: samples in the image (W x H, or (W + 1) x (H + 1) with corner rays)
-    hither: float     #: primary rays ignore hits closer than this
-    epsilon: float    #: secondary and shadow rays ignore hits closer than this
-    max_depth: int    #: ray-tree depth (primary = 1)
-    shadow_anyhit: bool  #: shadow rays stop at the first hit found (else they find the nearest)
-    log_ray_data: bool   #: log the tracer's own per-ray data (RecordKind.RAY_STACK .. FRAME_BUFFER)
-
-
-class SampleOutputs(NamedTuple):
-    """Per-sample outputs of the render kernels."""
-
-    image: np.ndarray     #: (n_samples, 3) float64 linear RGB
-    counters: np.ndarray  #: (n_samples, N_COUNTERS) int64
-    counts: np.ndarray    #: (n_samples,) int64 records produced
-
-
-class WorkItems(NamedTuple):
-    """Parallel work items of :func:`_render_kernel`: ``CHUNK`` samples each.
-
-    Item ``k`` covers samples ``start[k] .. start[k] + CHUNK`` (fewer at the
-    end) and logs them into ``records[base[k] : base[k] + capacity[k]]``;
-    ``used[k]`` is how many records it produced (more than ``capacity[k]``:
-    the slot overflowed, nothing past it stored).
-    """
-
-    start: np.ndarray     #: (K,) int64 first sample
-    base: np.ndarray      #: (K,) int64 first record position of the slot
-    capacity: np.ndarray  #: (K,) int64 slot size
-    used: np.ndarray      #: (K,) int64 output
-
-
-class SampleScratch(NamedTuple):
-    """Per-thread scratch of :func:`_trace_sample` (allocated once per work item)."""
-
-    counters: np.ndarray  #: (N_COUNTERS,) int64 of the sample being traced
-    stack: TraversalStack
-    rays: np.ndarray      #: (2 max_depth + 2, N_RAY_COLUMNS) float64 ray stack
 
 
 @njit(cache=True, inline="always")
