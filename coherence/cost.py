@@ -30,7 +30,19 @@ OPERATIONS = {
     "test_cone": ("tests_cone",),
     "shading": ("shading",),
     "light_read": ("light_reads",),
+    "test_root": ("root_tests",),
 }
+
+#: Cycles of one double-precision square root on the Alpha 21164, charged on
+#: top of a test that takes one (``test_root``). The 21164 has no
+#: square-root instruction (SQRTT came with the 21264's FIX extension), so
+#: a root is a library call. The GNU C library's Alpha routine written for
+#: EV4/EV5 (a table-seeded Newton-Raphson iteration) runs a chain of 18
+#: dependent floating-point operations of the 21164's 4-cycle result latency
+#: (72 cycles) after a table load and two moves between the register files
+#: through memory (the 21164 has no direct move): about 90 cycles with the
+#: call. A fact of the machine, fixed in advance, never fitted.
+SQUARE_ROOT_CYCLES_21164 = 90.0
 
 
 @dataclass(frozen=True)
@@ -52,6 +64,12 @@ class CostModel:
         Cycles per light of a shaded hit, on top of ``shading`` (0 in the
         stock presets, which count lights in ``shading``; fitted models tie
         it to the other costs, see :mod:`coherence.calibration`).
+    test_root : float
+        Cycles added to an intersection test that takes a square root (a
+        sphere or cone with real roots): what a machine without a
+        square-root instruction pays on that path
+        (:data:`SQUARE_ROOT_CYCLES_21164`; 0 by default and in ``modern``,
+        whose test costs are averages over both paths).
     clock_hz : float
         CPU clock rate, to turn cycles into seconds.
     name : str
@@ -67,6 +85,7 @@ class CostModel:
     test_cone: float = 500.0
     shading: float = 1500.0
     light_read: float = 0.0
+    test_root: float = 0.0
     clock_hz: float = 300e6
     name: str = "custom"
 
@@ -166,8 +185,10 @@ def alpha8400() -> CostModel:
     Cycle counts are first guesses scaled to the study's slow tracer (about
     500 cycles per intersection test all told); refit them with
     :meth:`CostModel.calibrate` against DESIGN.md §2's sequential times.
+    A test that takes a square root pays the 21164's software root on top
+    (:data:`SQUARE_ROOT_CYCLES_21164`).
     """
-    return CostModel(name="alpha8400")
+    return CostModel(test_root=SQUARE_ROOT_CYCLES_21164, name="alpha8400")
 
 
 def modern() -> CostModel:

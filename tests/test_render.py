@@ -11,7 +11,7 @@ import tracer.render as render_module
 from tracer.camera import camera_rays
 from tracer.closest import closest_hit
 from tracer.render import render, save_png
-from tracer.records import INDEX_MASK
+from tracer.records import FORMAT_VERSION, INDEX_MASK
 from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, pack, unpack
 
 
@@ -142,7 +142,7 @@ def test_trace_save_load_round_trip(tmp_path, mixed):
     meta = back.metadata
     assert meta["scene"] == scene.name and meta["note"] == "round trip"
     assert meta["kd_config"]["builder"] == "sah" and "numba" in meta["packages"]
-    assert json.loads((path / "meta.json").read_text())["format_version"] == 1
+    assert json.loads((path / "meta.json").read_text())["format_version"] == FORMAT_VERSION
     # saving again over the same path replaces it and leaves no temporaries
     res.trace.save(path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t"]

@@ -249,7 +249,13 @@ def element_clip_shapes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 @njit(cache=True, error_model="numpy")
 def hit_sphere(center, radius, i, ray, tmin, tmax):
-    """Nearest ``t`` in ``(tmin, tmax)`` of ``ray`` and sphere ``i`` (``center`` (S, 3), ``radius`` (S,))."""
+    """Nearest ``t`` in ``(tmin, tmax)`` of ``ray`` and sphere ``i`` (``center`` (S, 3), ``radius`` (S,)).
+
+    Returns ``(t, roots)``: ``t`` or ``inf``, and 1 if the test took a square
+    root (the discriminant was not negative), else 0. Which path a test
+    takes matters to its cost on a machine without a square-root
+    instruction (``coherence.cost.SQUARE_ROOT_CYCLES_21164``).
+    """
     cx, cy, cz, r = center[i, 0], center[i, 1], center[i, 2], radius[i]
     ox, oy, oz, dx, dy, dz = ray
     px, py, pz = ox - cx, oy - cy, oz - cz
@@ -257,15 +263,15 @@ def hit_sphere(center, radius, i, ray, tmin, tmax):
     c = px * px + py * py + pz * pz - r * r
     disc = b * b - c
     if disc < 0.0:
-        return INF
+        return INF, 0
     s = math.sqrt(disc)
     t = -b - s
     if t > tmin and t < tmax:
-        return t
+        return t, 1
     t = -b + s
     if t > tmin and t < tmax:
-        return t
-    return INF
+        return t, 1
+    return INF, 1
 
 
 @njit(cache=True, error_model="numpy")
@@ -299,7 +305,10 @@ def hit_triangle(tri, i, ray, tmin, tmax):
 
 @njit(cache=True, error_model="numpy")
 def hit_cone(geo, i, ray, tmin, tmax):
-    """Test ``ray`` and the lateral surface of truncated cone ``i`` of ``geo`` (no caps)."""
+    """Test ``ray`` and the lateral surface of truncated cone ``i`` of ``geo`` (no caps).
+
+    Returns ``(t, roots)`` as :func:`hit_sphere` does.
+    """
     base, axis, height, r0s, r1s = geo.cone_base, geo.cone_axis, geo.cone_height, geo.cone_r0, geo.cone_r1
     ox, oy, oz, dx, dy, dz = ray
     ax, ay, az = axis[i, 0], axis[i, 1], axis[i, 2]
@@ -317,14 +326,16 @@ def hit_cone(geo, i, ray, tmin, tmax):
     c = wox * wox + woy * woy + woz * woz - rr * rr
     t0 = INF
     t1 = INF
+    roots = 0
     if abs(a) < 1e-300:
         if b == 0.0:
-            return INF
+            return INF, 0
         t0 = -c / b
     else:
         disc = b * b - 4.0 * a * c
         if disc < 0.0:
-            return INF
+            return INF, 0
+        roots = 1
         s = math.sqrt(disc)
         # numerically stable roots
         qq = -0.5 * (b + s) if b >= 0.0 else -0.5 * (b - s)
@@ -337,13 +348,16 @@ def hit_cone(geo, i, ray, tmin, tmax):
         if t > tmin and t < tmax:
             z = zo + t * zd
             if z >= 0.0 and z <= h and r0 + k * z >= 0.0:
-                return t
-    return INF
+                return t, roots
+    return INF, roots
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def hit_element(kind, idx, geo, ray, tmin, tmax):
-    """Nearest ``t`` of ``ray`` and element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``.
+    """Nearest ``t`` of ``ray`` and element (``kind``, ``idx``) in ``(tmin, tmax)`` or ``inf``, and its roots.
+
+    Returns ``(t, roots)``: ``roots`` is 1 when the test took a square root
+    (a sphere or cone whose quadratic has real roots), else 0.
 
     Inlined into the traversal (numba IR): called once per test, it would
     otherwise take the ``Geometry`` bundle apart, with reference counting,
@@ -355,12 +369,12 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
     if kind == ElementKind.SPHERE:
         return hit_sphere(geo.sphere_center, geo.sphere_radius, idx, ray, tmin, tmax)
     if kind == ElementKind.TRIANGLE:
-        return hit_triangle(geo.triangle_v0e1e2, idx, ray, tmin, tmax)
+        return hit_triangle(geo.triangle_v0e1e2, idx, ray, tmin, tmax), 0
     if kind == ElementKind.POLYGON:
         return hit_polygon(geo.polygon_offsets, geo.polygon_vertices, geo.polygon_normal, geo.polygon_even_odd_axis,
-                           idx, ray, tmin, tmax)
+                           idx, ray, tmin, tmax), 0
     if kind == ElementKind.PATCH:
-        return hit_convex(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, idx, ray, tmin, tmax)
+        return hit_convex(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, idx, ray, tmin, tmax), 0
     return hit_cone(geo, idx, ray, tmin, tmax)
 
 

@@ -25,7 +25,7 @@ KIND_SHIFT = 28
 WRITE_SHIFT = 27
 WRITE_FLAG = 1 << WRITE_SHIFT
 INDEX_MASK = WRITE_FLAG - 1
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: counter ROOT_TESTS added
 
 # The budget of the 16 record kinds (4 bits), planned once for every workload:
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
@@ -85,6 +85,9 @@ class Counter(enum.IntEnum):
     HIT_RECORD_ACCESSES = 19
     SHADING_TEMP_ACCESSES = 20
     PIXEL_WRITES = 21
+    #: intersection tests that took a square root (a sphere or cone whose
+    #: quadratic has real roots); no record of its own, a subset of the tests
+    ROOT_TESTS = 22
 
 
 # Column names of the counters, in column order (the on-disk format's names).

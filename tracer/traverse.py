@@ -81,7 +81,8 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
     cnt : ndarray, shape (K,) int64
         Counters (:class:`~tracer.records.Counter` columns): every node
         visit, leaf index-entry read and primitive test is counted and
-        advances ``pos``.
+        advances ``pos``; a test that took a square root is counted again
+        in ``ROOT_TESTS`` (no record).
     stack : TraversalStack
 
     Returns
@@ -181,7 +182,8 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
             pos += 2
             cnt[Counter.INDEX_READS] += 1
             cnt[Counter.TESTS_SPHERE + k] += 1
-            t = hit_element(k, i, geo, ray, tmin, best_t)
+            t, roots = hit_element(k, i, geo, ray, tmin, best_t)
+            cnt[Counter.ROOT_TESTS] += roots
             if t < best_t:
                 best_t = t
                 best_e = e
@@ -211,7 +213,7 @@ def brute_force(geo, ray, tmin, tmax):
     best_t = tmax
     best_e = -1
     for e in range(ekind.shape[0]):
-        t = hit_element(np.int64(ekind[e]), eidx[e], geo, ray, tmin, best_t)
+        t, _ = hit_element(np.int64(ekind[e]), eidx[e], geo, ray, tmin, best_t)
         if t < best_t:
             best_t = t
             best_e = e

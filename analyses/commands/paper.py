@@ -20,7 +20,9 @@ cycles, by least squares of relative errors to the study's sequential S times
 (Balls 345.8 s, Tetra 28.8 s, Shell 403.0 s, Room 365.7 s, Fluid 97.5 s at
 512x512; scaled by pixel count at other sizes): cycles per intersection test,
 per ray and per kd-node visit; every other operation is tied to the test cost
-by its routine's floating-point operation count. Each scene is also predicted
+by its routine's floating-point operation count, except that a sphere test
+with real roots pays the 21164's software square root (90 cycles, fixed, not
+fitted) on top. Each scene is also predicted
 from a fit to the other four. Then every
 mapping runs at every process count on 8 simulated CPUs with the calibrated
 model. Real time assumes --background always-runnable processes of other

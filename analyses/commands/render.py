@@ -112,6 +112,7 @@ def report(result, scene_name: str, seconds: float) -> dict:
         "intersection_tests": {k[6:]: t[k] for k in t if k.startswith("tests_")},
         "node_visits": t["node_visits"], "leaf_visits": t["leaf_visits"],
         "index_reads": t["index_reads"], "shading": t["shading"], "light_reads": t["light_reads"],
+        "root_tests": t["root_tests"],
         "per_ray": {"tests": t["intersection_tests"] / rays, "node_visits": t["node_visits"] / rays},
         "records": t.get("records"),
         "bytes_per_record": 4 if result.trace is not None else None,
