@@ -55,6 +55,10 @@ def run_summary(processes: pd.DataFrame, level_names, clock_hz: float, real_cycl
         row[f"{name}_hit_rate"] = hits / accesses if accesses else float("nan")
         row[f"{name}_misses_per_ray"] = misses / rays if rays else float("nan")
     row["memory_accesses"] = int(processes["memory_accesses"].sum())
+    if "tlb_misses" in processes:
+        row["tlb_misses"] = int(processes["tlb_misses"].sum())
+        row["tlb_misses_per_ray"] = row["tlb_misses"] / rays if rays else float("nan")
+        row["tlb_cycles"] = float(processes["tlb_cycles"].sum())
     if "migrations" in processes:
         row["migrations"] = int(processes["migrations"].sum())
     return row

@@ -31,9 +31,13 @@ scheduler. Its rules, in the order it applies them:
   lowest CPU index), so queue hand-overs and dynamic hand-outs happen in
   time order. The run is over when the last of our processes finishes.
 
+- **Data TLB** (optional). Each CPU has one; every access, ours and the
+  background's, is looked up in the TLB of the CPU it runs on, and a miss of
+  ours costs a fixed penalty on top of its memory cycles.
+
 User time of a process = its compute cycles + its memory cycles (on whichever
-CPU's caches it ran) + its dispatch waits; real time = when the last of ours
-finished.
+CPU's caches it ran, TLB misses included) + its dispatch waits; real time =
+when the last of ours finished.
 """
 from __future__ import annotations
 
@@ -43,6 +47,7 @@ import numpy as np
 from numba import njit
 
 from cachesim import kernels as K
+from cachesim import tlb as T
 from coherence.layout import record_lines_and_writes
 
 # Columns of the per-process cycle totals the event loop writes.
@@ -98,9 +103,61 @@ class BackgroundLoad(NamedTuple):
     footprint_lines: int
 
 
+class CpuTlbs(NamedTuple):
+    """One data TLB per CPU, its counters per process (a TLB, like the caches, stays with its CPU).
+
+    Attributes
+    ----------
+    enabled : bool
+        False: no TLB (the arrays are placeholders and never read).
+    geometry : cachesim.tlb.TlbGeometry
+    pages, stamps : ndarray of int64, shape (C, E)
+        Each CPU's entries (:class:`cachesim.tlb.TlbArrays` fields).
+    cursor : ndarray of int64, shape (C, N_CURSOR)
+    counts : ndarray of int64, shape (n + B, N_TLB_COUNTERS)
+        Lookups, hits and misses per process. Updated in place.
+    miss_cycles : float
+        Cycles of one miss (a fixed penalty, added to memory cycles).
+    """
+
+    enabled: bool
+    geometry: T.TlbGeometry
+    pages: np.ndarray
+    stamps: np.ndarray
+    cursor: np.ndarray
+    counts: np.ndarray
+    miss_cycles: float
+
+
+class RunOutputs(NamedTuple):
+    """What the event loop writes, per process and per task.
+
+    Attributes
+    ----------
+    cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
+        Compute, memory, dispatch and finish cycles per process.
+    placement : ndarray of int64, shape (n, N_PLACEMENT_COLUMNS)
+        Each process's first CPU (-1: never ran) and migrations.
+    task_owner : ndarray of int64, shape (T,)
+        The process that rendered each task.
+    """
+
+    cycles: np.ndarray
+    placement: np.ndarray
+    task_owner: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _tlb_misses(tlbs, cpu, process, addresses):
+    # look the addresses up in the CPU's TLB, counting for the process
+    if not tlbs.enabled:
+        return 0
+    return T.tlb_lookup(addresses, tlbs.geometry,
+                        T.TlbArrays(tlbs.pages[cpu], tlbs.stamps[cpu], tlbs.cursor[cpu], tlbs.counts[process]))
+
+
 @njit(cache=True, nogil=True)
-def run_schedule(reads, geometry, caches, cost, schedule, queues, background, out_cycles, out_placement,
-                 task_owner):
+def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, background, out):
     """The event loop (see the module docstring).
 
     Parameters
@@ -110,16 +167,16 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
     caches : cachesim.kernels.CacheArrays
         ``tags``/``stamps`` (C, W): one state per CPU; ``counts``
         (n + B, L, N_COUNTERS): counters per process. Updated in place.
+    tlbs : CpuTlbs
+        Every access (ours and the background's) is looked up in the CPU's
+        TLB when enabled; a miss of ours adds ``miss_cycles`` to its memory
+        cycles.
     cost : coherence.simulation.PixelCost
     schedule : coherence.simulation.Schedule
     queues : RunQueues
     background : BackgroundLoad
-    out_cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
-        Receives compute, memory, dispatch and finish cycles per process.
-    out_placement : ndarray of int64, shape (n, N_PLACEMENT_COLUMNS)
-        Receives each process's first CPU (-1: never ran) and migrations.
-    task_owner : ndarray of int64, shape (T,)
-        Receives the process that rendered each task.
+    out : RunOutputs
+        Receives the cycles, placements and task owners.
     """
     # Bundle fields are read once here: a read inside the per-pixel loop
     # would cost a reference-count update each time.
@@ -141,6 +198,10 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
     switch_cycles = queues.switch_cycles
     first_line = background.first_line
     footprint_lines = background.footprint_lines
+    out_cycles = out.cycles
+    out_placement = out.placement
+    task_owner = out.task_owner
+    tlb_miss_cycles = tlbs.miss_cycles
     n_ours = out_cycles.shape[0]
     n_all = process_queue.shape[0]
     n_cpus = tags.shape[0]
@@ -215,6 +276,7 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
             cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
             cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
                                                served, False, work)
+            _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
             clock += quantum
             slice_used[cpu] = quantum
             cpu_clock[cpu] = clock
@@ -253,6 +315,7 @@ def run_schedule(reads, geometry, caches, cost, schedule, queues, background, ou
                                                       write_flags[:n_addresses] if n_writes else no_writes,
                                                       geometry, cache, cache_clock[cpu], served, False, work)
             memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
+            memory += _tlb_misses(tlbs, cpu, process, buffer[:n_addresses]) * tlb_miss_cycles
             cycles = compute[pixel] + memory
             out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
             out_cycles[process, MEMORY_CYCLES] += memory

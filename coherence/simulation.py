@@ -13,7 +13,8 @@
   frame buffer) are writes to the caches, which allocate them as the
   hierarchy says; a write costs the first level's latency, as a store
   retired into the 21164's write buffer does. A hierarchy with a data TLB
-  is refused: the replay does not model it yet.
+  gives each CPU one: every access is looked up in it, and each miss costs
+  the TLB's fixed ``miss_cycles`` on top of the memory cycles.
 - The machine's operating system (:class:`Machine`, :mod:`coherence.scheduler`)
   decides which process runs on which CPU when: one run queue shared by all
   CPUs (processes move between CPUs at the end of time slices, and find the
@@ -35,12 +36,13 @@ import pandas as pd
 
 from cachesim import CacheState, Hierarchy
 from cachesim import kernels as K
+from cachesim import tlb as T
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
-                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, RunQueues,
-                                 run_schedule)
+                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
+                                 RunOutputs, RunQueues, run_schedule)
 from rtcommon.validate import require_int, require_number
 
 SCHEDULERS = ("shared-queue", "static")
@@ -284,16 +286,13 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         counters summed, ``<level>_accesses``/``_hits``/``_misses`` per level,
         (cpu is the CPU of its first slice, -1 if it never ran; migrations
         counts the slices it ran on another CPU than its previous one),
-        memory_accesses, compute_cycles, memory_cycles, dispatch_cycles,
-        user_cycles, user_seconds, finish_cycles.
+        memory_accesses, with a TLB tlb_accesses, tlb_misses and tlb_cycles
+        (included in memory_cycles), then compute_cycles, memory_cycles,
+        dispatch_cycles, user_cycles, user_seconds, finish_cycles.
     """
     if counter_names is None:
         from tracer.trace import COUNTER_NAMES as counter_names
     n_pixels = trace.width * trace.height
-    if hierarchy.tlb is not None:
-        raise ValueError(f"hierarchy {hierarchy.name!r} has a data TLB, which the schedule replay does not model "
-                         "yet (its misses would be left out silently): use a hierarchy without one, e.g. "
-                         "alpha21164; cachesim.simulate models it")
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")
@@ -331,12 +330,13 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     out_placement = np.zeros((n_processes, N_PLACEMENT_COLUMNS), dtype=np.int64)
     out_placement[:, FIRST_CPU] = -1
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
+    tlbs = _cpu_tlbs(state, n_cpus, n_all)
     run_schedule(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
                             placed.placement, line_shift),
-                 state.geometry, caches, PixelCost(compute, latency),
+                 state.geometry, caches, tlbs, PixelCost(compute, latency),
                  Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
                           distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
-                 queues, machine.background(line_shift), out_cycles, out_placement, task_owner)
+                 queues, machine.background(line_shift), RunOutputs(out_cycles, out_placement, task_owner))
     if not distribution.dynamic:
         task_owner[:] = distribution.task_process  # empty tasks after a process's last pixel included
 
@@ -358,6 +358,10 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         frame[f"{level.name}_hits"] = counts[:, index, K.HITS]
         frame[f"{level.name}_misses"] = counts[:, index, K.MISSES]
     frame["memory_accesses"] = counts[:, -1, K.MISSES]
+    if tlbs.enabled:
+        frame["tlb_accesses"] = tlbs.counts[:n_processes, T.TLB_ACCESSES]
+        frame["tlb_misses"] = tlbs.counts[:n_processes, T.TLB_MISSES]
+        frame["tlb_cycles"] = tlbs.counts[:n_processes, T.TLB_MISSES] * tlbs.miss_cycles
     frame["compute_cycles"] = out_cycles[:, COMPUTE_CYCLES]
     frame["memory_cycles"] = out_cycles[:, MEMORY_CYCLES]
     frame["dispatch_cycles"] = out_cycles[:, DISPATCH_CYCLES]
@@ -367,6 +371,18 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     frame["finish_cycles"] = out_cycles[:, FINISH_CYCLES]
     processes = pd.DataFrame(frame)
     return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()))
+
+
+def _cpu_tlbs(state: CacheState, n_cpus: int, n_all: int) -> CpuTlbs:
+    """An empty data TLB per CPU and zero counters per process; a disabled placeholder without one."""
+    geometry = state.tlb_geometry
+    if geometry is None:
+        none = np.zeros((n_cpus, 1), dtype=np.int64)
+        return CpuTlbs(False, T.TlbGeometry(0, 1, T.NLU), none, none, np.zeros((n_cpus, T.N_CURSOR), np.int64),
+                       np.zeros((n_all, T.N_TLB_COUNTERS), dtype=np.int64), 0.0)
+    tlbs = T.empty_tlbs(n_cpus, geometry.entries)
+    return CpuTlbs(True, geometry, tlbs.pages, tlbs.stamps, tlbs.cursor,
+                   np.zeros((n_all, T.N_TLB_COUNTERS), dtype=np.int64), float(state.hierarchy.tlb.miss_cycles))
 
 
 def _warn_idle_processes(distribution: Distribution) -> None:

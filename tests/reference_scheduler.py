@@ -11,6 +11,7 @@ from collections import deque
 import numpy as np
 
 from reference_cache import ReferenceLevel
+from reference_tlb import ReferenceTlb
 from tracer.records import WRITE_FLAG
 
 BACKGROUND_BASE = 1 << 56
@@ -70,8 +71,13 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     dict
         ``user``, ``compute``, ``memory``, ``dispatch``, ``finish`` (lists of
         float per process), ``hits``/``misses`` (lists of per-level lists),
-        ``cpu`` (first CPU), ``migrations``, ``task_owner`` (list) and
-        ``real`` (float).
+        ``cpu`` (first CPU), ``migrations``, ``task_owner`` (list),
+        ``real`` (float) and, with a TLB, ``tlb_accesses``/``tlb_misses``
+        (lists per process).
+
+    A hierarchy's data TLB is one per CPU, like its caches: every access,
+    ours and the background's, is looked up in the TLB of the CPU it runs
+    on, and a miss of ours adds the TLB's ``miss_cycles`` to its memory.
     """
     n = distribution.n_processes
     n_background = machine.background_load
@@ -111,8 +117,12 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     footprint_lines = -(-machine.background_footprint // line_size)
 
     n_cpus = machine.n_cpus
+    tlb = hierarchy.tlb
     cpus = [{"clock": 0.0, "running": None, "last": None, "used": 0.0, "active": True,
-             "caches": ReferenceCaches(hierarchy)} for _ in range(n_cpus)]
+             "caches": ReferenceCaches(hierarchy),
+             "tlb": ReferenceTlb(tlb.entries, tlb.page_size, tlb.policy) if tlb else None} for _ in range(n_cpus)]
+    tlb_accesses = [0] * n
+    tlb_misses = [0] * n
 
     def queue_index(cpu):
         return cpu if machine.scheduler == "static" else 0
@@ -183,6 +193,8 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
             b = p - n
             for line in range(stream_line[b], stream_line[b] + footprint_lines):
                 state["caches"].access(line * line_size)
+                if tlb:
+                    state["tlb"].lookup(line * line_size)
             stream_line[b] += footprint_lines
             state["clock"] += quantum
             state["used"] = quantum
@@ -214,6 +226,11 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
                     else:
                         result["misses"][p][level] += 1
                 memory += latency[0] if write else latency[served]  # a store goes to the write buffer
+                if tlb:
+                    tlb_accesses[p] += 1
+                    if not state["tlb"].lookup(int(address)):
+                        tlb_misses[p] += 1
+                        memory += tlb.miss_cycles
             result["compute"][p] += compute[pixel]
             result["memory"][p] += memory
             state["clock"] += compute[pixel] + memory
@@ -232,6 +249,8 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
             state["running"] = None
     result["user"] = [result["compute"][p] + result["memory"][p] + result["dispatch"][p] for p in range(n)]
     result["task_owner"] = task_owner
+    if tlb:
+        result["tlb_accesses"], result["tlb_misses"] = tlb_accesses, tlb_misses
     result["real"] = max(result["finish"])
     return result
 

@@ -4,10 +4,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cachesim import CacheLevel, CacheState, Hierarchy, simulate
+from cachesim import CacheLevel, CacheState, Hierarchy, Tlb, simulate
 from coherence.cost import CostModel
 from coherence.layout import RecordLayout, get_layout
 from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip
+from coherence.metrics import run_summary
 from coherence.simulation import Machine, simulate_run
 from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
@@ -48,6 +49,11 @@ def compare(trace, mapping, n, hierarchy, machine):
     for index, level in enumerate(hierarchy.levels):
         assert frame[f"{level.name}_hits"].tolist() == [hits[index] for hits in expected["hits"]]
         assert frame[f"{level.name}_misses"].tolist() == [misses[index] for misses in expected["misses"]]
+    if hierarchy.tlb is not None:
+        assert frame["tlb_accesses"].tolist() == expected["tlb_accesses"]
+        assert frame["tlb_misses"].tolist() == expected["tlb_misses"]
+    else:
+        assert "tlb_misses" not in frame
     return run
 
 
@@ -216,9 +222,37 @@ def test_writes_equal_the_reference(mapping, inclusion):
     assert run.processes["memory_cycles"].tolist() != other.processes["memory_cycles"].tolist()
 
 
-def test_a_hierarchy_with_a_tlb_is_refused_not_ignored():
-    from cachesim import get_hierarchy
+# A TLB small enough that the random traces' pages overflow it: 4 entries of 512-byte pages.
+SMALL_TLB = Tlb(entries=4, page_size=512, miss_cycles=21.0)
 
-    trace = random_trace(width=4, height=4, seed=1)
-    with pytest.raises(ValueError, match="TLB"):
-        simulate_run(trace, Strip().build(4, 4, 2), get_hierarchy("alpha21164-dtb"), placed_for(), COST, Machine())
+
+@pytest.mark.parametrize("policy", ["nlu", "lru", "fifo"])
+@pytest.mark.parametrize("mapping", ["S", "P", "DB"])
+def test_tlb_in_the_schedule_equals_the_reference(mapping, policy):
+    trace = random_trace(width=8, height=6, seed=13)
+    hierarchy = replace(INCLUSIVE, tlb=replace(SMALL_TLB, policy=policy))
+    machine = Machine(n_cpus=2, quantum_cycles=5000.0, background_load=1, background_footprint=768)
+    run = compare(trace, mapping, 3, hierarchy, machine)
+    frame = run.processes
+    assert frame["tlb_misses"].sum() > 0 and (frame["tlb_misses"] < frame["tlb_accesses"]).all()
+    assert frame["tlb_cycles"].tolist() == (frame["tlb_misses"] * 21.0).tolist()
+
+
+def test_tlb_misses_add_to_memory_cycles_only():
+    trace = random_trace(width=6, height=4, seed=14)
+    placed = placed_for()
+    distribution = MAPPINGS["R"].build(6, 4, 2)
+    compute = COST.compute_cycles(trace.counters, COUNTER_NAMES)
+    machine = Machine(n_cpus=2, quantum_cycles=0)
+    with_tlb = simulate_run(trace, distribution, replace(INCLUSIVE, tlb=SMALL_TLB), placed, COST, machine,
+                            compute=compute).processes
+    without = simulate_run(trace, distribution, INCLUSIVE, placed, COST, machine, compute=compute).processes
+    # caches and compute are untouched; every miss costs exactly its penalty
+    assert with_tlb["compute_cycles"].tolist() == without["compute_cycles"].tolist()
+    assert with_tlb["L1_misses"].tolist() == without["L1_misses"].tolist()
+    assert (with_tlb["memory_cycles"] - without["memory_cycles"]).tolist() == \
+        (with_tlb["tlb_misses"] * SMALL_TLB.miss_cycles).tolist()
+    summary = run_summary(with_tlb, [level.name for level in INCLUSIVE.levels], COST.clock_hz, 1.0)
+    assert summary["tlb_misses"] == with_tlb["tlb_misses"].sum() > 0
+    assert summary["tlb_cycles"] == summary["tlb_misses"] * SMALL_TLB.miss_cycles
+    assert "tlb_misses" not in run_summary(without, [level.name for level in INCLUSIVE.levels], COST.clock_hz, 1.0)
