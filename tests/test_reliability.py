@@ -203,7 +203,8 @@ def test_write_files_atomic_writes_all_or_nothing(tmp_path):
 # variables. Paths are relative to a scratch folder that holds: afile (a regular file), adir (a
 # folder), pipe.nff and pipe.txt (FIFOs), trace8 (a tetra 8x8 trace), trace8-flipped (one byte of
 # its records flipped), trace8-outside (no checksums, a record beyond the scene), addresses.txt,
-# empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses).
+# empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses) and huge.nff (a
+# triangle at 1e300, which the renderer refuses).
 CLI_CASES = [
     (["render", "balls", "--size", "20000"], 2, "needs about"),
     (["render", "tetra", "--size", "0"], 2, "--size must be >= 1"),
@@ -215,6 +216,7 @@ CLI_CASES = [
     (["render", "empty.nff", "--size", "8"], 2, "empty.nff:2:1: expected at least one object"),
     (["scene", "noview.nff"], 2, "noview.nff:1:1: expected a view"),
     (["scene", "digits.nff"], 2, "digits.nff:8:3: expected a number"),
+    (["render", "huge.nff", "--size", "8"], 2, "row 0 holds 1e+300; coordinates and sizes must be finite"),
     (["render", "tetra", "--size", "8", "--max-depth", "0"], 2, "--max-depth must be in [1, 64]"),
     (["render", "tetra", "--size", "8", "--memory-budget", "0"], 2, "--memory-budget must be > 0"),
     (["render", "tetra", "--size", "8", "--memory-budget", "nan"], 2, "--memory-budget must be > 0"),
@@ -315,6 +317,7 @@ def scratch(tmp_path_factory):
     (folder / "noview.nff").write_text("s 0 0 0 1\n")
     view = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\n"
     (folder / "digits.nff").write_text(view + "s 1_0 0 0 1\n")
+    (folder / "huge.nff").write_text(view + "p 3 0 0 0 1e300 0 0 0 1e300 0\n")
     render(load("tetra"), size=8, trace_path=folder / "trace8")
     for name in ("trace8-flipped", "trace8-outside"):
         render(load("tetra"), size=8, trace_path=folder / name)

@@ -229,3 +229,23 @@ def test_save_png(tmp_path):
     assert path.stat().st_size > 0
     with pytest.raises(ValueError, match="shape"):
         save_png(np.zeros((4, 4)), tmp_path / "bad.png")
+
+
+@pytest.mark.parametrize("field, value", [("triangle", 1e300), ("sphere", -1e120), ("triangle", -2e100)])
+def test_huge_coordinates_are_refused_before_any_overflow(field, value):
+    import warnings
+
+    from tracer.scene import Material, SceneBuilder
+    from scene_factory import one_sphere
+
+    b = SceneBuilder("huge")
+    b.camera = one_sphere().camera
+    b.material(Material((1.0, 1.0, 1.0), 1.0, 0.0, 1.0, 0.0, 1.0))
+    if field == "triangle":
+        b.triangle([[0.0, 0.0, 0.0], [value, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    else:
+        b.sphere((value, 0.0, 0.0), 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a numpy overflow warning fails the test
+        with pytest.raises(ValueError, match=rf"Scene\.{field}_\w+: row 0 holds .*within \+-1e\+100"):
+            render(b.build(), size=4)

@@ -73,6 +73,24 @@ class Ray(NamedTuple):
     dz: float
 
 
+#: Largest coordinate (and radius) magnitude the tracer accepts: its
+#: routines multiply up to two coordinates (dot and cross products, squared
+#: distances) and a few more factors of order one, which must stay finite.
+COORDINATE_LIMIT = 1e100
+
+
+def _check_magnitude(values: np.ndarray, what: str) -> None:
+    """Refuse non-finite or too large numbers before any arithmetic overflows on them."""
+    if values.size == 0:
+        return
+    rows = values.reshape(len(values), -1)
+    bad = ~np.isfinite(rows) | (np.abs(rows) > COORDINATE_LIMIT)
+    if bad.any():
+        row, column = (int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"Scene.{what}: row {row} holds {float(rows[row, column]):g}; coordinates and sizes must be "
+                         f"finite and within +-{COORDINATE_LIMIT:.0e} (the tracer multiplies them)")
+
+
 def _unit_rows(v: np.ndarray, what: str) -> np.ndarray:
     norm = np.linalg.norm(v, axis=1)
     if np.any(norm == 0.0) or not np.all(np.isfinite(norm)):
@@ -116,8 +134,9 @@ def prepare_geometry(scene: Scene) -> Geometry:
     Raises
     ------
     ValueError
-        If the element table is inconsistent or a triangle, polygon or cone
-        is degenerate (naming the field).
+        If the element table is inconsistent, a coordinate or size is not
+        finite or beyond :data:`COORDINATE_LIMIT`, or a triangle, polygon or
+        cone is degenerate (naming the field and row).
     """
     n = scene.n_elements
     if scene.element_index.shape != (n,):
@@ -130,6 +149,9 @@ def prepare_geometry(scene: Scene) -> Geometry:
     sc = f(scene.sphere_center, (-1, 3))
     sr = np.abs(f(scene.sphere_radius, (-1,)))
     tv = f(scene.triangle_vertices, (-1, 3, 3))
+    for what in ("sphere_center", "sphere_radius", "triangle_vertices", "polygon_vertices", "patch_vertices",
+                 "cone_base", "cone_apex", "cone_base_radius", "cone_apex_radius"):
+        _check_magnitude(np.asarray(getattr(scene, what), dtype=np.float64), what)
     tri = np.empty_like(tv)
     tri[:, 0] = tv[:, 0]
     tri[:, 1] = tv[:, 1] - tv[:, 0]
