@@ -173,6 +173,30 @@ def test_concave_outlines_match_an_independent_even_odd_test(outline):
     assert agreement >= 0.999 and reference_hits == our_hits
 
 
+@pytest.mark.parametrize("outline", [L_SHAPE, STAR], ids=["L", "star"])
+def test_concave_patches_match_an_independent_even_odd_test(outline):
+    # the same outline as a patch (vertex normals): element 0 is the patch, element 1 the floor, as
+    # polygons 0 and 1 are in the all-polygon twin the reference reads
+    from tracer.camera import camera_rays
+    from tracer.closest import closest_hit
+    from tracer.scene import Camera, SceneBuilder
+
+    twin = _flat_scene(outline)
+    builder = SceneBuilder("outline-patch")
+    builder.camera = twin.camera
+    builder.light((0, 0, 10))
+    corners = np.column_stack([np.asarray(outline, dtype=float) * 2.0, np.zeros(len(outline))])
+    builder.patch(corners, np.tile([0.0, 0.2, 1.0], (len(outline), 1)) / np.hypot(0.2, 1.0))
+    builder.polygon([(-3, -3, -1), (3, -3, -1), (3, 3, -1), (-3, 3, -1)])
+    scene = builder.build()
+    origin, directions = camera_rays(scene, 64)
+    ours = closest_hit(scene, None, np.broadcast_to(origin, directions.reshape(-1, 3).shape),
+                       directions.reshape(-1, 3)).element
+    reference = _even_odd_reference(twin, origin, directions)
+    assert (reference == 0).sum() > 500
+    assert np.mean(ours == reference) >= 0.999
+
+
 def test_convexity_is_decided_per_polygon():
     from tracer.geometry import CONVEX, prepare_geometry
 

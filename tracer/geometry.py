@@ -50,6 +50,7 @@ class Geometry(NamedTuple):
     patch_vertices: np.ndarray    #: (W, 3)
     patch_vnormals: np.ndarray    #: (W, 3) unit vertex normals
     patch_normal: np.ndarray      #: (Q, 3) unit Newell plane normal
+    patch_even_odd_axis: np.ndarray  #: (Q,) int64 :data:`CONVEX`, or the axis a concave one drops
     cone_base: np.ndarray         #: (C, 3)
     cone_axis: np.ndarray         #: (C, 3) unit, base -> apex
     cone_height: np.ndarray       #: (C,)
@@ -167,6 +168,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     qvn = f(scene.patch_normals, (-1, 3))
     qvn = _unit_rows(qvn, "patch_normals") if len(qvn) else qvn
     qn = _newell(qo, qv, "patch_vertices")
+    q_axes = polygon_even_odd_axes(qo, qv, qn)
     cb = f(scene.cone_base, (-1, 3))
     ca = f(scene.cone_apex, (-1, 3))
     axis = ca - cb
@@ -177,7 +179,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     r0 = f(scene.cone_base_radius, (-1,))
     r1 = f(scene.cone_apex_radius, (-1,))
     sign = np.where((r0 < 0) | ((r0 == 0) & (r1 < 0)), -1.0, 1.0)
-    return Geometry(ekind, eidx, sc, sr, tri, tn, po, pv, pn, p_axes, qo, qv, qvn, qn,
+    return Geometry(ekind, eidx, sc, sr, tri, tn, po, pv, pn, p_axes, qo, qv, qvn, qn, q_axes,
                     np.ascontiguousarray(cb), np.ascontiguousarray(axis), np.ascontiguousarray(height),
                     np.abs(r0), np.abs(r1), sign)
 
@@ -396,7 +398,8 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
         return hit_polygon(geo.polygon_offsets, geo.polygon_vertices, geo.polygon_normal, geo.polygon_even_odd_axis,
                            idx, ray, tmin, tmax), 0
     if kind == ElementKind.PATCH:
-        return hit_convex(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, idx, ray, tmin, tmax), 0
+        return hit_polygon(geo.patch_offsets, geo.patch_vertices, geo.patch_normal, geo.patch_even_odd_axis,
+                           idx, ray, tmin, tmax), 0
     return hit_cone(geo, idx, ray, tmin, tmax)
 
 
