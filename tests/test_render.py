@@ -141,7 +141,7 @@ def test_trace_save_load_round_trip(tmp_path, mixed):
     assert (back.width, back.height) == (12, 12)
     meta = back.metadata
     assert meta["scene"] == scene.name and meta["note"] == "round trip"
-    assert meta["kd_config"]["builder"] == "sah" and "numba" in meta["packages"]
+    assert meta["kd_config"]["builder"] == "sah" and "numba" in meta["versions"]
     assert json.loads((path / "meta.json").read_text())["format_version"] == FORMAT_VERSION
     # saving again over the same path replaces it and leaves no temporaries
     res.trace.save(path)

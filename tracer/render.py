@@ -48,7 +48,8 @@ from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_
 from tracer.render_types import (N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, N_RAY_COLUMNS, LightColumn, MaterialColumn,
                                  RayColumn, RayType, RenderParams, SampleOutputs, SampleScratch, Shading, WorkItems)
 from tracer.scene import Scene
-from tracer.trace import AccessTrace, TraceWriter, package_versions
+from rtcommon.versions import package_versions
+from tracer.trace import AccessTrace, TraceWriter
 from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
 from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
@@ -543,7 +544,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
             "corner_rays": bool(corner_rays), "max_depth": depth, "hither": hither, "epsilon": eps,
             "kd_config": tree.config.to_dict(), "kd_stats": tree.stats, "workload": workload.to_dict(),
             "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
-            "packages": package_versions(),
+            "versions": package_versions(),
             "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
             # How many records of each kind exist, read or not, so that a
             # memory layout can place them all (coherence.layout).

@@ -48,19 +48,6 @@ class TraceIntegrityError(ValueError):
     """A trace's files are damaged: a checksum differs, or the arrays break the format's rules."""
 
 
-def package_versions() -> dict:
-    """Versions of the packages that decide a trace's content."""
-    import numba
-    import sys
-    versions = {"python": sys.version.split()[0], "numpy": np.__version__, "numba": numba.__version__}
-    try:
-        from importlib.metadata import version
-        versions["raytrace-coherence"] = version("raytrace-coherence")
-    except Exception:  # pragma: no cover - not installed as a distribution
-        versions["raytrace-coherence"] = "unknown"
-    return versions
-
-
 @dataclass(eq=False)
 class AccessTrace:
     """Ordered per-pixel access logs of one render, CSR style.
