@@ -7,10 +7,8 @@ numbers come from :func:`analyses.paper.reproduce`. Outputs are deterministic
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from analyses.html import figure_png, render_page
@@ -19,6 +17,7 @@ from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
 from rtcommon.files import write_files_atomic
+from rtcommon.jsonio import plain
 
 __all__ = ["speedup_figure", "crossover_figure", "paper_summary", "paper_html", "write_paper"]
 
@@ -44,22 +43,7 @@ def speedup_figure(runs: pd.DataFrame, column: str = "speedup_real", *, n_cpus: 
 
 def _clean(value):
     """Plain JSON types; NaN and infinities become None; floats to 10 significant digits."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, pd.DataFrame):
-        return [_clean(row) for row in value.to_dict(orient="records")]
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        if not math.isfinite(value):
-            return None
-        return float(f"{value:.10g}")
-    return value
+    return plain(value, 10)
 
 
 def paper_summary(result: PaperResult) -> dict:

@@ -42,6 +42,7 @@ from analyses.paper_study import check_process_counts
 from analyses.report_html import report_html
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
+from rtcommon.jsonio import plain, round_number
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
@@ -340,17 +341,8 @@ def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> p
 
 
 def _round(value):
-    """Ints stay ints; floats get six significant digits; NaN/inf become None."""
-    if isinstance(value, (bool, np.bool_)):
-        return int(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    value = float(value)
-    if not math.isfinite(value):
-        return None
-    if value == int(value) and abs(value) < 2**53:
-        return int(value)
-    return float(f"{value:.{_SIGNIFICANT}g}")
+    """Ints stay ints; floats get six significant digits (integral ones become ints); NaN/inf become None."""
+    return round_number(value, _SIGNIFICANT, integral_as_int=True)
 
 
 def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes, curves,
@@ -410,17 +402,7 @@ _HEADLINE_COLUMNS = ("speedup_user", "speedup_real", "speedup_real_idle", "effic
 
 
 def _clean(value):
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (str, type(None))):
-        return value
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, float, np.number)):
-        return _round(value)
-    return str(value)
+    return plain(value, _SIGNIFICANT, integral_as_int=True)
 
 
 def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, names, scene_bytes) -> dict:

@@ -65,3 +65,23 @@ def test_json_default():
     assert json.loads(text) == {"a": 3, "b": [0.0, 1.0], "c": True}
     with pytest.raises(TypeError, match="not JSON serialisable: object"):
         json.dumps(object(), default=json_default)
+
+
+def test_round_number_and_plain_by_hand():
+    import math
+
+    import numpy as np
+    import pandas as pd
+
+    from rtcommon.jsonio import plain, round_number
+
+    assert round_number(np.float64(1.23456789), 3) == 1.23
+    assert round_number(2.0, 6) == 2.0 and isinstance(round_number(2.0, 6), float)
+    assert round_number(2.0, 6, integral_as_int=True) == 2 and isinstance(round_number(2.0, 6, integral_as_int=True), int)
+    assert round_number(2.0 ** 60, 6, integral_as_int=True) == float(f"{2.0 ** 60:.6g}")  # beyond 2**53 stays a float
+    assert round_number(math.nan, 6) is None and round_number(-math.inf, 6) is None
+    assert round_number(np.True_, 6) == 1 and round_number(np.int32(7), 2) == 7
+    frame = pd.DataFrame({"a": [1, 2], "b": [0.123456, math.nan]})
+    assert plain({1: (np.bool_(True), frame, None, "x", np.float32(0.5))}, 2) == \
+        {"1": [True, [{"a": 1, "b": 0.12}, {"a": 2, "b": None}], None, "x", 0.5]}
+    assert plain(object.__new__(type("Odd", (), {"__str__": lambda self: "odd"})), 3) == "odd"
