@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from tracer import spd
-from tracer.kd_build import _build_sah
+from tracer.kd_sah import _build_sah
 from tracer.kdtree import KdTreeConfig, build_params, builder_inputs, default_max_depth
 from tracer.scenes import PAPER_SCENES, load
 

@@ -1,4 +1,4 @@
-"""The per-node SAH kd-tree builder: the slow peer of ``tracer.kd_build._build_sah``.
+"""The per-node SAH kd-tree builder: the slow peer of ``tracer.kd_sah._build_sah``.
 
 Every node clips its primitives to its box and sorts their events there
 (O(m log m) per node, O(N log^2 N) in all), which is how the SAH builder

@@ -1,7 +1,8 @@
 """kd-tree split kernels: primitives clipped to a node, SAH event sweeps and costs.
 
-Used by the builders of :mod:`tracer.kd_build` (and the per-node SAH peer in
-``tests/naive_kdtree.py``); see :mod:`tracer.kdtree` for the rules. The
+Used by the builders of :mod:`tracer.kd_build` and :mod:`tracer.kd_sah` (and
+the per-node SAH peer in ``tests/naive_kdtree.py``); see :mod:`tracer.kdtree`
+for the rules. The
 kernels take the scene as :class:`BuildInputs`, the configuration as
 :class:`BuildParams` and (3,) boxes to clip into as :class:`ClipScratch`.
 """

@@ -56,7 +56,8 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from tracer.geometry import element_bounds, element_clip_shapes
-from tracer.kd_build import _build_median, _build_sah
+from tracer.kd_build import _build_median
+from tracer.kd_sah import _build_sah
 from tracer.kd_split import BuildInputs, BuildParams
 from tracer.scene import Scene
 
