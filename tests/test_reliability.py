@@ -234,6 +234,7 @@ CLI_CASES = [
     (["simulate", "trace8", "--cpus", "0"], 2, "--cpus must be >= 1"),
     (["simulate", "trace8", "--background", "-1"], 2, "--background must be >= 0"),
     (["simulate", "trace8", "--quantum", "-1"], 2, "--quantum must be"),
+    (["simulate", "trace8", "--background-footprint", "-1"], 2, "--background-footprint must be >= 0"),
     (["simulate", "trace8-flipped"], 2, "damaged"),
     (["simulate", "trace8-outside"], 2, "beyond the"),
     (["simulate", "trace8", "--mapping", "S", "--processes", "2", "--csv", "runs.csv"], 0, ""),

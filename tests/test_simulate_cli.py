@@ -50,6 +50,23 @@ def test_errors_are_clear(saved, tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
 
 
+def test_scheduler_footprint_and_tlb_options_reach_the_machine(saved, capsys):
+    trace, folder = saved
+    assert main(["simulate", str(folder), "--mapping", "R", "--processes", "3", "--cpus", "2", "--background", "1",
+                 "--scheduler", "static", "--placement", "neighbours", "--background-footprint", "4096",
+                 "--hierarchy", "alpha21164-dtb", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    machine = Machine(n_cpus=2, scheduler="static", placement="neighbours", background_load=1,
+                      background_footprint=4096)
+    expected = study(trace, ["R"], [3], hierarchy="alpha21164-dtb", machine=machine, progress=False).runs
+    assert report["parameters"]["machine"]["scheduler"] == "static"
+    assert report["parameters"]["machine"]["background_footprint"] == 4096
+    assert [run["user_cycles_max"] for run in report["runs"]] == expected["user_cycles_max"].tolist()
+    assert [run["tlb_misses"] for run in report["runs"]] == expected["tlb_misses"].tolist()
+    assert main(["simulate", str(folder), "--placement", "neighbours"]) == 2
+    assert "--placement neighbours needs --scheduler static" in capsys.readouterr().err
+
+
 def run_cli(*arguments, cwd):
     """``coherence ...`` in a subprocess: a segfault fails the test instead of killing pytest."""
     done = subprocess.run([sys.executable, "-m", "analyses", *arguments], capture_output=True, text=True,

@@ -22,7 +22,7 @@ from importlib import import_module
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
-           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS",
+           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS",
            "WORKLOADS", "workload_options"]
 
 
@@ -77,6 +77,7 @@ COST_MODELS = RegistryNames("coherence.cost", "COST_MODELS")
 KD_BUILDERS = RegistryNames("tracer.kdtree", "BUILDERS")
 WORKLOADS = RegistryNames("tracer.workload", "WORKLOADS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
+SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import PLACEMENTS, HelpFormatter, machine_options, model_options
+from analyses.commands.options import PLACEMENTS, SCHEDULERS, HelpFormatter, machine_options, model_options
 
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
 
@@ -24,6 +24,8 @@ examples:
   coherence simulate balls128 --mapping S --mapping R --processes 8
   coherence simulate balls128 --mapping DB --processes 2 4 8 16 --cpus 8 --background 4
   coherence simulate balls128 --hierarchy modern --layout alpha1997 --json
+  coherence simulate balls128 --processes 16 --scheduler static --placement neighbours
+  coherence simulate balls128 --background 4 --background-footprint 262144 --hierarchy alpha21164-dtb
 """
 
 COLUMNS = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", "load_balance",
@@ -42,9 +44,17 @@ def register(subparsers) -> None:
     parser.add_argument("--quantum", type=float, default=3e6, metavar="CYCLES",
                         help="time slice of processes sharing a CPU; 0 runs them one after another "
                              "(default: 3e6, 10 ms at 300 MHz)")
-    parser.add_argument("--placement", default="round-robin", choices=PLACEMENTS, metavar="NAME",
-                        help="how processes are placed on CPUs when there are more of them: %(choices)s "
+    parser.add_argument("--scheduler", default="shared-queue", choices=SCHEDULERS, metavar="NAME",
+                        help="the operating system: %(choices)s; shared-queue = one run queue for all CPUs, a "
+                             "process moves to whichever CPU is free at the end of a time slice and finds the "
+                             "caches other processes left there; static = every process pinned to one CPU "
                              "(default %(default)s)")
+    parser.add_argument("--placement", default="round-robin", choices=PLACEMENTS, metavar="NAME",
+                        help="static scheduler: how processes are pinned to CPUs when there are more of them: "
+                             "%(choices)s (default %(default)s)")
+    parser.add_argument("--background-footprint", type=int, default=None, metavar="BYTES",
+                        help="bytes one slice of another user's process streams through its CPU's caches "
+                             "(default 1 MiB: about 100 MB/s for a 10 ms slice; see coherence.simulation.Machine)")
     parser.add_argument("--json", action="store_true", help="print JSON (runs and parameters) instead of a table")
     parser.add_argument("--csv", metavar="PATH", help="write the full per-run table to CSV (+ .meta.json)")
     parser.add_argument("--processes-csv", metavar="PATH", help="write the per-process table to CSV")
@@ -69,12 +79,17 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--cpus", args.cpus, 1)
     checks.check_range("--background", args.background, 0)
     checks.check_range("--quantum", args.quantum, 0, float("inf"))
+    checks.check_range("--background-footprint", args.background_footprint, 0)
+    if args.placement != "round-robin" and args.scheduler != "static":
+        raise ValueError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
+                         "scheduler moves processes between CPUs)")
     if Path(args.hierarchy).suffix.lower() in (".toml", ".json"):
         checks.check_input_file("--hierarchy", args.hierarchy)
     hierarchy = get_hierarchy(args.hierarchy)
     mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
-    machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, placement=args.placement,
-                      background_load=args.background)
+    footprint = {} if args.background_footprint is None else {"background_footprint": args.background_footprint}
+    machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, scheduler=args.scheduler,
+                      placement=args.placement, background_load=args.background, **footprint)
     for option, path in (("--csv", args.csv), ("--processes-csv", args.processes_csv)):
         if path:
             checks.check_output_file(option, path)
