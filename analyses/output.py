@@ -4,6 +4,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from rtcommon.files import check_writable_ancestor
+
 
 def check_free_space(what: str, folder, needed: int) -> None:
     """Refuse when ``needed`` bytes will not fit on the file system holding ``folder`` (or its nearest parent).
@@ -33,22 +35,16 @@ def check_output_folder(out) -> Path:
     Raises
     ------
     ValueError
-        ``out`` is an existing file, or a parent on its path is a file.
+        ``out`` is an existing file.
+    NotADirectoryError
+        A parent on its path is a file.
     PermissionError
         ``out`` (or its nearest existing parent) is not writable.
     """
     path = Path(out).expanduser()
     if path.exists() and not path.is_dir():
         raise ValueError(f"output folder {str(out)!r} exists and is not a folder")
-    probe = path
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ValueError(f"output folder {str(out)!r}: {str(probe)!r} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise PermissionError(f"output folder {str(out)!r}: {str(probe)!r} is not writable")
+    check_writable_ancestor(path, f"output folder {str(out)!r}")
     return path
 
 

@@ -83,6 +83,29 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
     return removed
 
 
+def check_writable_ancestor(path: str | os.PathLike, label: str) -> Path:
+    """The nearest existing folder at or above ``path``, which must be a writable folder.
+
+    What a file or folder to be created at ``path`` needs; ``label`` starts
+    each message (the option and the path the user gave).
+
+    Raises
+    ------
+    NotADirectoryError
+        The nearest existing entry is a file.
+    PermissionError
+        It is a folder this process may not write to.
+    """
+    probe = Path(path)
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise NotADirectoryError(f"{label}: {str(probe)!r} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise PermissionError(f"{label}: folder {str(probe)!r} is not writable")
+    return probe
+
+
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to a temporary file beside ``path``, then rename it.
 

@@ -16,8 +16,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_build import (_clip_members, _emit_leaf, _partition, new_node_stack, open_node, push_node)
-from tracer.kd_nodes import NODE_WORDS, set_interior
+from tracer.kd_build import (_clip_members, _emit_leaf, _partition, new_per_node_build, open_node, push_node)
+from tracer.kd_nodes import set_interior
 from tracer.kd_split import _area, _axis_events, _sah_sweep, _settle_split, new_clip_scratch
 from tracer.kdtree import build_params, builder_inputs, resolve_config
 
@@ -62,15 +62,9 @@ def build_per_node_sah_kernel(inputs, params):
     """
     n = inputs.prim_lo.shape[0]
     nn = max(n, 1)
-    nodes = np.zeros((max(16, 2 * n + 1), NODE_WORDS), np.uint32)
+    nodes, pidx, work, stack, sp = new_per_node_build(n, params.max_depth, inputs.root_lo, inputs.root_hi)
     n_nodes = 0
-    pidx = np.empty(max(16, 2 * n), np.int32)
     n_pidx = 0
-    work = np.empty(max(16, 4 * n), np.int32)
-    for j in range(n):
-        work[j] = j
-    stack = new_node_stack(params.max_depth)
-    sp = push_node(stack, 0, inputs.root_lo, inputs.root_hi, 0, -1, 0, n)
     size = inputs.root_hi - inputs.root_lo
     root_area = _area(size[0], size[1], size[2])
     if root_area <= 0.0:

@@ -16,7 +16,8 @@ import numpy as np
 from numba import njit
 
 from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior, set_leaf
-from tracer.kd_split import _area, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, new_clip_scratch
+from tracer.kd_split import (_area, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
+                             new_clip_scratch)
 
 
 class NodeStack(NamedTuple):
@@ -78,6 +79,39 @@ def _emit_leaf(nodes, node, pidx, n_pidx, members):
     for j in range(m):
         pidx[n_pidx + j] = members[j]
     return pidx, n_pidx + m
+
+
+@njit(cache=True)
+def new_per_node_build(n, max_depth, root_lo, root_hi):
+    """What a per-node builder of ``n`` elements starts from.
+
+    Returns ``(nodes, pidx, work, stack, sp)``: node and leaf-index arrays
+    (grown as needed), the member work array holding ``0 .. n-1``, and the
+    :class:`NodeStack` holding the root (``sp`` = 1).
+    """
+    nodes = np.zeros((max(16, 2 * n + 1), NODE_WORDS), np.uint32)
+    pidx = np.empty(max(16, 2 * n), np.int32)
+    work = np.empty(max(16, 4 * n), np.int32)
+    for j in range(n):
+        work[j] = j
+    stack = new_node_stack(max_depth)
+    sp = push_node(stack, 0, root_lo, root_hi, 0, -1, 0, n)
+    return nodes, pidx, work, stack, sp
+
+
+# Columns of a builder's leaf statistics (:func:`_close_leaf`).
+LEAVES, EMPTY_LEAVES, DEEPEST = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def _close_leaf(nodes, node, pidx, n_pidx, members, depth, stats):
+    # make ``node`` a leaf of ``members`` and count it in stats (int64 (3,): LEAVES, EMPTY_LEAVES, DEEPEST)
+    pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, members)
+    stats[LEAVES] += 1
+    if members.shape[0] == 0:
+        stats[EMPTY_LEAVES] += 1
+    stats[DEEPEST] = max(stats[DEEPEST], depth)
+    return pidx, n_pidx
 
 
 @njit(cache=True)
@@ -150,22 +184,12 @@ def _build_median(inputs, params):
     n = inputs.prim_lo.shape[0]
     nn = max(n, 1)
     ci = params.intersection_cost
-    nodes = np.zeros((max(16, 2 * n + 1), NODE_WORDS), np.uint32)
-    n_nodes = 0
-    pidx = np.empty(max(16, 2 * n), np.int32)
-    n_pidx = 0
-    work = np.empty(max(16, 4 * n), np.int32)
-    for j in range(n):
-        work[j] = j
-    stack = new_node_stack(params.max_depth)
-    sp = push_node(stack, 0, inputs.root_lo, inputs.root_hi, 0, -1, 0, n)
     root_lo, root_hi = inputs.root_lo, inputs.root_hi
-    root_area = _area(root_hi[0] - root_lo[0], root_hi[1] - root_lo[1], root_hi[2] - root_lo[2])
-    if root_area <= 0.0:
-        root_area = 1.0
-    leaves = 0
-    empty_leaves = 0
-    deepest = 0
+    nodes, pidx, work, stack, sp = new_per_node_build(n, params.max_depth, root_lo, root_hi)
+    n_nodes = 0
+    n_pidx = 0
+    root_area = _root_area(root_lo, root_hi)
+    stats = np.zeros(3, dtype=np.int64)
     sah_cost = 0.0
     lo = np.empty(3)
     hi = np.empty(3)
@@ -198,11 +222,7 @@ def _build_median(inputs, params):
             split = np.float64(split32[0])
             work, nl, nr = _partition(work, seg0, m, boxes, axis, split, True)
         if axis < 0 or (nl == m and nr == m and not params.split_to_depth):
-            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, work[seg0:seg0 + m])
-            leaves += 1
-            if m == 0:
-                empty_leaves += 1
-            deepest = max(deepest, depth)
+            pidx, n_pidx = _close_leaf(nodes, node, pidx, n_pidx, work[seg0:seg0 + m], depth, stats)
             sah_cost += ci * m * area_frac
             continue
         sah_cost += params.traversal_cost * area_frac
@@ -212,4 +232,5 @@ def _build_median(inputs, params):
         stack.lo[sp - 1, axis] = split
         sp = push_node(stack, sp, lo, hi, depth + 1, -1, seg0 + nr, seg0 + nr + nl)
         stack.hi[sp - 1, axis] = split
-    return nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), leaves, empty_leaves, deepest, sah_cost
+    return (nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), stats[LEAVES], stats[EMPTY_LEAVES], stats[DEEPEST],
+            sah_cost)

@@ -12,10 +12,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_build import _emit_leaf
+from tracer.kd_build import DEEPEST, EMPTY_LEAVES, LEAVES, _close_leaf
 from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior
-from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _sah_sweep,
-                             _settle_split, new_clip_scratch)
+from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
+                             _sah_sweep, _settle_split, new_clip_scratch)
 
 
 class Events(NamedTuple):
@@ -199,12 +199,8 @@ def _build_sah(inputs, params):
     s_e0[0] = 0
     s_cnt[0, :] = cnt
     sp = 1
-    root_area = _area(root_hi[0] - root_lo[0], root_hi[1] - root_lo[1], root_hi[2] - root_lo[2])
-    if root_area <= 0.0:
-        root_area = 1.0
-    leaves = 0
-    empty_leaves = 0
-    deepest = 0
+    root_area = _root_area(root_lo, root_hi)
+    stats = np.zeros(3, dtype=np.int64)
     sah_cost = 0.0
     while sp > 0:
         sp -= 1
@@ -235,11 +231,7 @@ def _build_sah(inputs, params):
             if not (split > lo[axis] and split < hi[axis]):
                 axis = -1
         if axis < 0:
-            pidx, n_pidx = _emit_leaf(nodes, node, pidx, n_pidx, ids[i0:i0 + m])
-            leaves += 1
-            if m == 0:
-                empty_leaves += 1
-            deepest = max(deepest, depth)
+            pidx, n_pidx = _close_leaf(nodes, node, pidx, n_pidx, ids[i0:i0 + m], depth, stats)
             sah_cost += ci * m * area_frac
             continue
         sah_cost += ct * area_frac
@@ -419,4 +411,5 @@ def _build_sah(inputs, params):
         s_e0[sp] = e0 + cnt_r[0] + cnt_r[1] + cnt_r[2]
         s_cnt[sp, :] = cnt_l
         sp += 1
-    return nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), leaves, empty_leaves, deepest, sah_cost
+    return (nodes[:n_nodes].copy(), pidx[:n_pidx].copy(), stats[LEAVES], stats[EMPTY_LEAVES], stats[DEEPEST],
+            sah_cost)

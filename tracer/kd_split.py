@@ -174,6 +174,13 @@ def _area(dx, dy, dz):
     return 2.0 * (dx * dy + dy * dz + dz * dx)
 
 
+@njit(cache=True, inline="always")
+def _root_area(root_lo, root_hi):
+    # the root box's surface area, the SAH's denominator (1 for a flat or empty scene)
+    area = _area(root_hi[0] - root_lo[0], root_hi[1] - root_lo[1], root_hi[2] - root_lo[2])
+    return 1.0 if area <= 0.0 else area
+
+
 @njit(cache=True)
 def _grow_nodes(a, need):
     if need <= a.shape[0]:

@@ -12,6 +12,8 @@ import os
 import stat
 from pathlib import Path
 
+from rtcommon.files import check_writable_ancestor
+
 #: Bytes a render holds in memory per pixel: the image (3 float64), 18 int64
 #: counters, offsets and record counts, with room for temporaries. Measured:
 #: balls without logging peaks at 204 MB at 256x256 and 374 MB at 1024x1024,
@@ -148,13 +150,7 @@ def check_trace_folder(option: str, path) -> Path:
             raise NotADirectoryError(f"{option} {str(path)!r} exists and is a file, not a trace folder")
         if not (path / "meta.json").is_file() and any(path.iterdir()):
             raise ValueError(f"{option} {str(path)!r} exists and is not a trace folder; not overwriting")
-    probe = path.parent
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
-    if not probe.is_dir():
-        raise NotADirectoryError(f"{option} {str(path)!r}: {str(probe)!r} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise PermissionError(f"{option} {str(path)!r}: folder {str(probe)!r} is not writable")
+    check_writable_ancestor(path.parent, f"{option} {str(path)!r}")
     return path
 
 
