@@ -26,7 +26,7 @@ import numpy as np
 
 from tracer import spd
 from tracer.kd_sah import _build_sah
-from tracer.kdtree import KdTreeConfig, build_params, builder_inputs, default_max_depth
+from tracer.kdtree import KdTreeConfig, build_params, builder_inputs, default_tree_depth
 from tracer.scenes import PAPER_SCENES, load
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
@@ -66,7 +66,7 @@ def main(argv=None):
     # compile (or load the numba cache) outside the timings
     warm = builder_inputs(spd.balls(1))
     for cfg in CONFIGS.values():
-        params = build_params(KdTreeConfig(**{**cfg.to_dict(), "max_depth": 8}))
+        params = build_params(KdTreeConfig(**{**cfg.to_dict(), "tree_depth": 8}))
         _build_sah(warm, params)
         build_per_node_sah_kernel(warm, params)
 
@@ -80,7 +80,7 @@ def main(argv=None):
         prep = time.perf_counter() - t0
         nlogn = n * math.log2(n)
         for cname, cfg in CONFIGS.items():
-            params = build_params(KdTreeConfig(**{**cfg.to_dict(), "max_depth": default_max_depth(n)}))
+            params = build_params(KdTreeConfig(**{**cfg.to_dict(), "tree_depth": default_tree_depth(n)}))
             new_s, new = _best_of(args.repeats, lambda: _build_sah(inputs, params))
             old_s, old = _best_of(args.repeats, lambda: build_per_node_sah_kernel(inputs, params))
             same = bool(np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1]))

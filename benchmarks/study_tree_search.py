@@ -61,7 +61,7 @@ def candidates():
                                                                         SPLIT_TO_DEPTH, SHADOW_NEAREST):
         name = (f"d{depth}-l{leaf}-{'clip' if clip else 'box'}-{axis}-{'todepth' if to_depth else 'separate'}"
                 f"-{'nearest' if nearest else 'anyhit'}")
-        config = KdTreeConfig(builder="median", max_depth=depth, leaf_size=leaf, clip=clip, axis_rule=axis,
+        config = KdTreeConfig(builder="median", tree_depth=depth, leaf_size=leaf, clip=clip, axis_rule=axis,
                               split_to_depth=to_depth)
         yield name, Workload(name, config, shadow_nearest=nearest)
 
@@ -78,7 +78,7 @@ def rows_of(name, workload, scene_names, loaded, size):
         tests = tests_at_study_size(loaded[scene_name], workload, size)
         study = STUDY_SCENES[scene_name].tests_1e6
         config = workload.kd_config
-        rows.append({"rule": name, "builder": config.builder, "max_depth": config.max_depth,
+        rows.append({"rule": name, "builder": config.builder, "tree_depth": config.tree_depth,
                      "leaf_size": config.leaf_size, "clip": config.clip, "axis_rule": config.axis_rule,
                      "split_to_depth": config.split_to_depth,
                      "shadow_nearest": workload.shadow_nearest, "scene": scene_name, "size": size,

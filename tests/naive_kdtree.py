@@ -62,7 +62,7 @@ def build_per_node_sah_kernel(inputs, params):
     """
     n = inputs.prim_lo.shape[0]
     nn = max(n, 1)
-    nodes, pidx, work, stack, sp = new_per_node_build(n, params.max_depth, inputs.root_lo, inputs.root_hi)
+    nodes, pidx, work, stack, sp = new_per_node_build(n, params.tree_depth, inputs.root_lo, inputs.root_hi)
     n_nodes = 0
     n_pidx = 0
     size = inputs.root_hi - inputs.root_lo
@@ -87,7 +87,7 @@ def build_per_node_sah_kernel(inputs, params):
         m = _clip_members(work, seg0, seg1, inputs, lo, hi, params.clip, boxes, scratch)
         axis = -1
         planar_left = True
-        if m > params.leaf_size and depth < params.max_depth:
+        if m > params.leaf_size and depth < params.tree_depth:
             best = _sah_split(boxes, m, lo, hi, params, events)
             axis, pos, planar_left = _settle_split(best, work[seg0:seg0 + m], inputs, lo, hi, params, scratch)
             if axis >= 0:

@@ -7,7 +7,7 @@ import pytest
 from jit_mode import shrink
 from scene_factory import KINDS, one_sphere, random_rays, random_scene
 from naive_kdtree import build_per_node_sah
-from tracer.kdtree import KdTreeConfig, build_kdtree, default_max_depth
+from tracer.kdtree import KdTreeConfig, build_kdtree, default_tree_depth
 from tracer.closest import closest_hit, closest_hit_bruteforce
 from tracer.scene import ElementKind, Material, Scene, SceneBuilder
 
@@ -15,8 +15,8 @@ CONFIGS = {
     "sah": KdTreeConfig(),
     "sah-noclip": KdTreeConfig(clip=False),
     "median": KdTreeConfig(builder="median"),
-    "median-leaf4": KdTreeConfig(builder="median", leaf_size=4, max_depth=6),
-    "median-cycle": KdTreeConfig(builder="median", axis_rule="cycle", max_depth=12),
+    "median-leaf4": KdTreeConfig(builder="median", leaf_size=4, tree_depth=6),
+    "median-cycle": KdTreeConfig(builder="median", axis_rule="cycle", tree_depth=12),
 }
 
 
@@ -72,7 +72,7 @@ def _interior_axes_by_depth(tree):
 def test_cycling_median_tree_splits_axis_depth_mod_3():
     scene = random_scene(KINDS, n=300, seed=11, size=0.8)
     cycled = _interior_axes_by_depth(build_kdtree(scene, KdTreeConfig(builder="median", axis_rule="cycle",
-                                                                      max_depth=9)))
+                                                                      tree_depth=9)))
     assert len(cycled) > 20 and max(depth for depth, _ in cycled) >= 5
     assert all(axis == depth % 3 for depth, axis in cycled)
     # on a scene 8 times wider in x than in y and z (16 x 2 x 2), the
@@ -84,10 +84,10 @@ def test_cycling_median_tree_splits_axis_depth_mod_3():
     for x, y, z in rng.uniform(-1, 1, (200, 3)):
         b.sphere((8 * x, y, z), 0.02)
     wide = b.build()
-    longest = _interior_axes_by_depth(build_kdtree(wide, KdTreeConfig(builder="median", max_depth=9)))
+    longest = _interior_axes_by_depth(build_kdtree(wide, KdTreeConfig(builder="median", tree_depth=9)))
     assert all(axis == 0 for depth, axis in longest if depth < 3)
     cycled = _interior_axes_by_depth(build_kdtree(wide, KdTreeConfig(builder="median", axis_rule="cycle",
-                                                                    max_depth=9)))
+                                                                    tree_depth=9)))
     assert all(axis == depth % 3 for depth, axis in cycled)
 
 
@@ -127,9 +127,9 @@ def test_node_layout_and_stats():
     assert np.all(covered == 1)
     assert set(np.unique(tree.primitive_indices)) == set(range(scene.n_elements))
     assert tree.stats["references"] == cnt.sum()
-    assert tree.stats["depth"] <= tree.config.max_depth
+    assert tree.stats["depth"] <= tree.config.tree_depth
     assert tree.stats["sah_cost"] > 0
-    assert tree.config.max_depth == default_max_depth(scene.n_elements)
+    assert tree.config.tree_depth == default_tree_depth(scene.n_elements)
 
 
 def test_one_sphere_known_distance_and_missing_ray_visits_root():
@@ -159,7 +159,7 @@ def test_sah_tree_is_cheaper_than_median_by_its_own_measure():
 
 
 @pytest.mark.parametrize("field,value", [
-    ("builder", "bvh"), ("max_depth", 0), ("max_depth", 61), ("leaf_size", 0),
+    ("builder", "bvh"), ("tree_depth", 0), ("tree_depth", 61), ("leaf_size", 0),
     ("traversal_cost", 0.0), ("intersection_cost", float("nan")), ("empty_bonus", 1.0),
     ("force_split", -1), ("axis_rule", "random"),
 ])
@@ -287,7 +287,7 @@ def _check_splits_by_brute_force(scene, config):
         blo, bhi = np.array(blo).reshape(m, 3), np.array(bhi).reshape(m, 3)
         best = np.inf
         node_best = {}
-        if m > cfg.leaf_size and depth < cfg.max_depth:
+        if m > cfg.leaf_size and depth < cfg.tree_depth:
             for axis in range(3):
                 costs, planes = _sah_costs(blo, bhi, lo, hi, axis, np.unique(np.r_[blo[:, axis], bhi[:, axis]]), cfg)
                 inside = (planes > lo[axis]) & (planes < hi[axis])
@@ -357,7 +357,7 @@ def _lattice_scene(seed, n, step):
 
 @pytest.mark.parametrize("config", [KdTreeConfig(), KdTreeConfig(clip=False),
                                     KdTreeConfig(leaf_size=2, force_split=6),
-                                    KdTreeConfig(max_depth=6, empty_bonus=0.9)],
+                                    KdTreeConfig(tree_depth=6, empty_bonus=0.9)],
                          ids=["sah", "sah-noclip", "sah-force", "sah-shallow"])
 def test_presorted_events_build_the_per_node_sort_tree(config):
     # the O(N log N) builder keeps events of primitives on one side of a

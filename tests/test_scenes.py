@@ -83,7 +83,7 @@ def test_shells_counts(size):
 @pytest.mark.parametrize("call", [lambda: spd.balls(-1), lambda: spd.tetra(0),
                                   lambda: spd.shells(2.5), lambda: spd.balls(True)])
 def test_generator_sizes_are_validated(call):
-    with pytest.raises(ValueError, match="size must be"):
+    with pytest.raises(ValueError, match="size_factor must be"):
         call()
 
 

@@ -82,7 +82,7 @@ def test_shadow_nearest_changes_test_counts_not_the_picture(mixed):
 
 
 @pytest.mark.parametrize("config", [WORKLOADS["study1997"].kd_config,
-                                    KdTreeConfig(builder="median", axis_rule="cycle", max_depth=10, leaf_size=4)])
+                                    KdTreeConfig(builder="median", axis_rule="cycle", tree_depth=10, leaf_size=4)])
 def test_study_tree_finds_the_brute_force_nearest_hit_on_segments(config):
     # a shadow ray looking for the nearest hit is a closest-hit query on the
     # segment (epsilon, distance to the light)
@@ -104,7 +104,7 @@ def test_study_tree_tests_repeat_objects_in_several_leaves():
     # no mailboxing: a ray through a sphere spanning many leaves tests it in
     # each leaf it visits that lists it, counted against the tree's own leaves
     scene = random_scene(("sphere",), n=40, seed=2, size=1.2)
-    config = KdTreeConfig(builder="median", max_depth=8, leaf_size=1)
+    config = KdTreeConfig(builder="median", tree_depth=8, leaf_size=1)
     result = render(scene, size=16, workload=Workload("w", config))
     trace = result.trace
     kinds, index = unpack(trace.records)
@@ -212,7 +212,7 @@ def _slab_overlaps(origin, direction, lo, hi, tmin):
 
 
 @pytest.mark.parametrize("config", [WORKLOADS["study1997"].kd_config,
-                                    KdTreeConfig(builder="median", max_depth=10, leaf_size=2)])
+                                    KdTreeConfig(builder="median", tree_depth=10, leaf_size=2)])
 def test_missing_rays_test_every_object_of_every_leaf_they_cross(config):
     # without mailboxes a ray that hits nothing tests every entry of every
     # leaf its line crosses, however often an object is listed: the slow

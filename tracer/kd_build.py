@@ -36,9 +36,9 @@ class NodeStack(NamedTuple):
 
 
 @njit(cache=True)
-def new_node_stack(max_depth):
-    """A :class:`NodeStack` deep enough for trees of ``max_depth`` levels."""
-    size = max_depth + 4
+def new_node_stack(tree_depth):
+    """A :class:`NodeStack` deep enough for trees of ``tree_depth`` levels."""
+    size = tree_depth + 4
     return NodeStack(np.empty((size, 3)), np.empty((size, 3)), np.empty(size, np.int64),
                      np.empty(size, np.int64), np.empty(size, np.int64), np.empty(size, np.int64))
 
@@ -82,7 +82,7 @@ def _emit_leaf(nodes, node, pidx, n_pidx, members):
 
 
 @njit(cache=True)
-def new_per_node_build(n, max_depth, root_lo, root_hi):
+def new_per_node_build(n, tree_depth, root_lo, root_hi):
     """What a per-node builder of ``n`` elements starts from.
 
     Returns ``(nodes, pidx, work, stack, sp)``: node and leaf-index arrays
@@ -94,7 +94,7 @@ def new_per_node_build(n, max_depth, root_lo, root_hi):
     work = np.empty(max(16, 4 * n), np.int32)
     for j in range(n):
         work[j] = j
-    stack = new_node_stack(max_depth)
+    stack = new_node_stack(tree_depth)
     sp = push_node(stack, 0, root_lo, root_hi, 0, -1, 0, n)
     return nodes, pidx, work, stack, sp
 
@@ -179,13 +179,13 @@ def _build_median(inputs, params):
     # Per-node build: each node's primitives are clipped to it, and its
     # longest axis (the first of equal ones), or with cycle_axes the axis
     # depth % 3, halved; a node becomes a leaf at
-    # leaf_size primitives, at max_depth, or (unless split_to_depth) where a
+    # leaf_size primitives, at tree_depth, or (unless split_to_depth) where a
     # split separates nothing.
     n = inputs.prim_lo.shape[0]
     nn = max(n, 1)
     ci = params.intersection_cost
     root_lo, root_hi = inputs.root_lo, inputs.root_hi
-    nodes, pidx, work, stack, sp = new_per_node_build(n, params.max_depth, root_lo, root_hi)
+    nodes, pidx, work, stack, sp = new_per_node_build(n, params.tree_depth, root_lo, root_hi)
     n_nodes = 0
     n_pidx = 0
     root_area = _root_area(root_lo, root_hi)
@@ -203,7 +203,7 @@ def _build_median(inputs, params):
         m = _clip_members(work, seg0, seg1, inputs, lo, hi, params.clip, boxes, scratch)
         area_frac = _area(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / root_area
         axis = -1
-        if m > params.leaf_size and depth < params.max_depth:
+        if m > params.leaf_size and depth < params.tree_depth:
             d0 = hi[0] - lo[0]
             d1 = hi[1] - lo[1]
             d2 = hi[2] - lo[2]

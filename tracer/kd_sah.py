@@ -112,7 +112,7 @@ def _build_sah(inputs, params):
     spheres = inputs.spheres
     root_lo = inputs.root_lo.copy()
     root_hi = inputs.root_hi.copy()
-    max_depth = params.max_depth
+    tree_depth = params.tree_depth
     ct = params.traversal_cost
     ci = params.intersection_cost
     clip = params.clip
@@ -181,7 +181,7 @@ def _build_sah(inputs, params):
             w += 1
         cnt[axis] = ne
 
-    S = max_depth + 4
+    S = tree_depth + 4
     s_lo = np.empty((S, 3))
     s_hi = np.empty((S, 3))
     s_depth = np.empty(S, np.int64)
@@ -221,7 +221,7 @@ def _build_sah(inputs, params):
         axis = -1
         pos = 0.0
         planar_left = True
-        if m > params.leaf_size and depth < max_depth:
+        if m > params.leaf_size and depth < tree_depth:
             best = _sah_sweep(ev_pos, ev_typ, e0, cnt, m, lo, hi, params)
             axis, pos, planar_left = _settle_split(best, ids[i0:i0 + m], inputs, lo, hi, params, scratch)
         split = 0.0

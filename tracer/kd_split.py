@@ -37,9 +37,9 @@ class BuildInputs(NamedTuple):
 
 
 class BuildParams(NamedTuple):
-    """A :class:`~tracer.kdtree.KdTreeConfig` as the builders read it (``max_depth`` resolved)."""
+    """A :class:`~tracer.kdtree.KdTreeConfig` as the builders read it (``tree_depth`` resolved)."""
 
-    max_depth: int
+    tree_depth: int
     leaf_size: int
     traversal_cost: float
     intersection_cost: float

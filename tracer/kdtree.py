@@ -41,11 +41,11 @@ Builders (``KdTreeConfig.builder``):
   changed box (rare) gets new events like a straddler.
 * ``"median"``: the node's longest axis (or, with ``axis_rule="cycle"``,
   axis ``depth % 3``: x, y, z, x, ...) is halved, as a 1990s BSP did; a
-  node stops at ``leaf_size`` primitives, at ``max_depth``, when the node is
+  node stops at ``leaf_size`` primitives, at ``tree_depth``, when the node is
   flat along its split axis, or when a split would not separate any
   primitive (with ``split_to_depth``, not then: a plain BSP of the time
   split every node holding more than ``leaf_size`` primitives down to
-  ``max_depth``, overlapping ones included).
+  ``tree_depth``, overlapping ones included).
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ AXIS_RULES = ("longest", "cycle")
 MAX_TREE_DEPTH = 60  # the traversal stack holds 64 entries
 
 
-def default_max_depth(n_primitives: int) -> int:
+def default_tree_depth(n_primitives: int) -> int:
     """pbrt's depth rule ``round(8 + 1.3 log2 N)``, capped at 60."""
     return int(min(MAX_TREE_DEPTH, round(8 + 1.3 * math.log2(max(n_primitives, 1)))))
 
@@ -79,9 +79,10 @@ class KdTreeConfig:
     ----------
     builder : {"sah", "median"}
         Surface area heuristic or spatial median (see module docstring).
-    max_depth : int or None
+    tree_depth : int or None
         Deepest node level (root 0), 1..60; ``None`` means
-        :func:`default_max_depth` of the scene's element count.
+        :func:`default_tree_depth` of the scene's element count. (The depth
+        of the ray tree is another thing: ``Scene.max_depth``.)
     leaf_size : int
         A node with at most this many primitives becomes a leaf (>= 1).
     traversal_cost, intersection_cost : float
@@ -94,7 +95,7 @@ class KdTreeConfig:
     force_split : int
         SAH only: a node holding more than this many primitives is split at
         its best plane even when the one-level cost estimate says a leaf is
-        cheaper (like pbrt's "bad refines"), down to ``max_depth``. Heavily
+        cheaper (like pbrt's "bad refines"), down to ``tree_depth``. Heavily
         overlapping primitives (SPD shells: about 90 spheres cover every
         point) only separate after several levels, which a greedy estimate
         cannot see. ``0`` disables it.
@@ -104,11 +105,11 @@ class KdTreeConfig:
     split_to_depth : bool
         Median builder only: split a node of more than ``leaf_size``
         primitives even where the plane separates none of them, down to
-        ``max_depth``.
+        ``tree_depth``.
     """
 
     builder: str = "sah"
-    max_depth: int | None = None
+    tree_depth: int | None = None
     leaf_size: int = 1
     traversal_cost: float = 1.0
     intersection_cost: float = 1.5
@@ -121,10 +122,10 @@ class KdTreeConfig:
     def __post_init__(self):
         if self.builder not in BUILDERS:
             raise ValueError(f"KdTreeConfig.builder must be one of {BUILDERS}, got {self.builder!r}")
-        if self.max_depth is not None:
-            if int(self.max_depth) != self.max_depth or not 1 <= self.max_depth <= MAX_TREE_DEPTH:
-                raise ValueError(f"KdTreeConfig.max_depth must be an int in 1..{MAX_TREE_DEPTH} or None, got {self.max_depth!r}")
-            object.__setattr__(self, "max_depth", int(self.max_depth))
+        if self.tree_depth is not None:
+            if int(self.tree_depth) != self.tree_depth or not 1 <= self.tree_depth <= MAX_TREE_DEPTH:
+                raise ValueError(f"KdTreeConfig.tree_depth must be an int in 1..{MAX_TREE_DEPTH} or None, got {self.tree_depth!r}")
+            object.__setattr__(self, "tree_depth", int(self.tree_depth))
         if int(self.leaf_size) != self.leaf_size or self.leaf_size < 1:
             raise ValueError(f"KdTreeConfig.leaf_size must be an int >= 1, got {self.leaf_size!r}")
         object.__setattr__(self, "leaf_size", int(self.leaf_size))
@@ -162,7 +163,7 @@ class KdTree:
     bounds : ndarray, shape (2, 3) float64
         Root box (lo, hi).
     config : KdTreeConfig
-        The configuration used, with ``max_depth`` resolved.
+        The configuration used, with ``tree_depth`` resolved.
     stats : dict
         ``nodes``, ``leaves``, ``empty_leaves``, ``depth`` (deepest leaf),
         ``mean_primitives_per_leaf`` (over non-empty leaves), ``references``
@@ -218,7 +219,7 @@ def build_kdtree(scene: Scene, config: KdTreeConfig | None = None) -> KdTree:
 
 
 def resolve_config(config: KdTreeConfig | None, n_elements: int) -> KdTreeConfig:
-    """``config`` (default ``KdTreeConfig()``) with ``max_depth`` resolved for ``n_elements``.
+    """``config`` (default ``KdTreeConfig()``) with ``tree_depth`` resolved for ``n_elements``.
 
     Raises
     ------
@@ -232,14 +233,14 @@ def resolve_config(config: KdTreeConfig | None, n_elements: int) -> KdTreeConfig
         raise ValueError(f"config must be a KdTreeConfig, got {type(config).__name__}")
     if n_elements >= 2**30:
         raise ValueError(f"Scene.element_kind: too many elements for the kd-tree ({n_elements})")
-    if config.max_depth is None:
-        config = replace(config, max_depth=default_max_depth(n_elements))
+    if config.tree_depth is None:
+        config = replace(config, tree_depth=default_tree_depth(n_elements))
     return config
 
 
 def build_params(config: KdTreeConfig) -> BuildParams:
     """The builder kernels' parameters of a resolved ``config`` (see :func:`resolve_config`)."""
-    return BuildParams(config.max_depth, config.leaf_size, config.traversal_cost, config.intersection_cost,
+    return BuildParams(config.tree_depth, config.leaf_size, config.traversal_cost, config.intersection_cost,
                        config.empty_bonus, config.clip, config.force_split, config.axis_rule == "cycle",
                        config.split_to_depth)
 

@@ -28,9 +28,9 @@ _SPD_DEPTH = 5
 
 
 # ---------------------------------------------------------------- balls
-def balls_count(size: int = 4) -> int:
-    """Elements of :func:`balls`: ``sum(9**k, k=0..size)`` spheres + 1 quad."""
-    return sum(9 ** k for k in range(size + 1)) + 1
+def balls_count(size_factor: int = 4) -> int:
+    """Elements of :func:`balls`: ``sum(9**k, k=0..size_factor)`` spheres + 1 quad."""
+    return sum(9 ** k for k in range(size_factor + 1)) + 1
 
 
 def _child_directions() -> np.ndarray:
@@ -67,25 +67,25 @@ def _rotations_from_z(axes: np.ndarray) -> np.ndarray:
     return rotation
 
 
-def balls(size: int = 4) -> Scene:
+def balls(size_factor: int = 4) -> Scene:
     """SPD ``balls``: a sphereflake over a square floor.
 
     The root sphere (centre 0, radius 0.5, axis +z) and, recursively for
-    ``size`` levels, nine children of radius r/3 touching each sphere at
+    ``size_factor`` levels, nine children of radius r/3 touching each sphere at
     distance 4r/3 along directions turned to the parent's axis. Output order
     is the floor quad, then the spheres in depth-first pre-order.
 
     Parameters
     ----------
-    size : int, 0..6
+    size_factor : int, 0..6
         Size factor (levels of children); the study used 4.
 
     Returns
     -------
     Scene
-        ``balls_count(size)`` elements (7382 at size 4), 3 lights, depth 5.
+        ``balls_count(size_factor)`` elements (7382 at size_factor 4), 3 lights, depth 5.
     """
-    size = require_int("balls size", size, 0, 6)
+    size_factor = require_int("balls size_factor", size_factor, 0, 6)
     builder = SceneBuilder("balls")
     builder.background = _BACKGROUND
     builder.camera = Camera((2.1, 1.3, 1.7), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 45.0, 0.01,
@@ -101,11 +101,11 @@ def balls(size: int = 4) -> Scene:
     # depth j with path digits p_1..p_j has pre-order position
     # sum_i (1 + p_i * subtree_size(i)), subtree_size(i) = sum_{k<=size-i} 9^k.
     directions = _child_directions()
-    subtree = [sum(9 ** k for k in range(size - depth + 1)) for depth in range(size + 1)]
+    subtree = [sum(9 ** k for k in range(size_factor - depth + 1)) for depth in range(size_factor + 1)]
     centers, axes, order = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros(1, np.int64)
     radius = 0.5
     all_centers, all_radii, all_order = [centers], [np.full(1, radius)], [order]
-    for depth in range(1, size + 1):
+    for depth in range(1, size_factor + 1):
         world = np.einsum("nij,kj->nki", _rotations_from_z(axes), directions)  # (N, 9, 3)
         centers = (centers[:, None, :] + (4.0 * radius / 3.0) * world).reshape(-1, 3)
         axes = world.reshape(-1, 3)
@@ -123,16 +123,16 @@ def balls(size: int = 4) -> Scene:
 
 
 # ---------------------------------------------------------------- tetra
-def tetra_count(size: int = 6) -> int:
-    """Elements of :func:`tetra`: ``4**size`` triangles."""
-    return 4 ** size
+def tetra_count(size_factor: int = 6) -> int:
+    """Elements of :func:`tetra`: ``4**size_factor`` triangles."""
+    return 4 ** size_factor
 
 
 _CORNERS = np.array([(-1, -1, 1), (-1, 1, -1), (1, -1, -1), (1, 1, 1)], dtype=np.float64)
 _FACES = ((0, 1, 2), (3, 2, 1), (2, 3, 0), (1, 0, 3))
 
 
-def tetra(size: int = 6) -> Scene:
+def tetra(size_factor: int = 6) -> Scene:
     """SPD ``tetra``: a Sierpinski tetrahedron of triangles.
 
     A node is a cube (centre c, half-size h; root c = 0, h = 1). With more
@@ -144,15 +144,15 @@ def tetra(size: int = 6) -> Scene:
 
     Parameters
     ----------
-    size : int, 1..8
+    size_factor : int, 1..8
         Size factor (levels); the study used 6.
 
     Returns
     -------
     Scene
-        ``4**size`` triangles (4096 at size 6), 1 light, diffuse only, depth 5.
+        ``4**size_factor`` triangles (4096 at size_factor 6), 1 light, diffuse only, depth 5.
     """
-    size = require_int("tetra size", size, 1, 8)
+    size_factor = require_int("tetra size_factor", size_factor, 1, 8)
     builder = SceneBuilder("tetra")
     builder.background = _BACKGROUND
     builder.camera = Camera((1.02285, -3.17715, -2.17451), (-0.004103, -0.004103, 0.216539),
@@ -162,12 +162,12 @@ def tetra(size: int = 6) -> Scene:
     builder.material(Material((1.0, 0.2, 0.2), 1.0, 0.0, 100000.0, 0.0, 0.0))
 
     # Leaf centres in pre-order: digits of the path, most significant first.
-    leaves = 4 ** (size - 1)
+    leaves = 4 ** (size_factor - 1)
     centers = np.zeros((leaves, 3))
     path = np.arange(leaves)
     half = 1.0
-    for level in range(size - 1):
-        digit = (path // 4 ** (size - 2 - level)) % 4
+    for level in range(size_factor - 1):
+        digit = (path // 4 ** (size_factor - 2 - level)) % 4
         half /= 2.0
         centers += half * _CORNERS[digit]
     for center in centers:
@@ -178,30 +178,30 @@ def tetra(size: int = 6) -> Scene:
 
 
 # ---------------------------------------------------------------- shells
-def shells_count(size: int = 5) -> int:
-    """Elements of :func:`shells`: ``180 * 2**size + 1`` spheres."""
-    return 180 * 2 ** size + 1
+def shells_count(size_factor: int = 5) -> int:
+    """Elements of :func:`shells`: ``180 * 2**size_factor + 1`` spheres."""
+    return 180 * 2 ** size_factor + 1
 
 
-def shells(size: int = 5) -> Scene:
+def shells(size_factor: int = 5) -> Scene:
     """SPD ``shells``: Pickover's seashell of spheres on a logarithmic spiral.
 
-    With ``N = 180 * 2**size``, for each integer i from trunc(-2N/3) to
+    With ``N = 180 * 2**size_factor``, for each integer i from trunc(-2N/3) to
     trunc(N/3): ``theta = 18 pi i / N``, ``r = exp(0.15 theta)``, a sphere
     of radius r at ``(r sin theta, r cos theta, -2 r)``. No floor.
 
     Parameters
     ----------
-    size : int, 0..10
+    size_factor : int, 0..10
         Size factor; the study used 5.
 
     Returns
     -------
     Scene
-        ``180 * 2**size + 1`` spheres (5761 at size 5), 1 light, Ks 0.2,
+        ``180 * 2**size_factor + 1`` spheres (5761 at size_factor 5), 1 light, Ks 0.2,
         depth 5.
     """
-    size = require_int("shells size", size, 0, 10)
+    size_factor = require_int("shells size_factor", size_factor, 0, 10)
     builder = SceneBuilder("shells")
     builder.background = _BACKGROUND
     builder.camera = Camera((-6.0, -60.0, 35.0), (0.0, 8.0, -15.0), (0.0, 0.0, 1.0), 45.0, 0.5,
@@ -209,7 +209,7 @@ def shells(size: int = 5) -> Scene:
     builder.max_depth = _SPD_DEPTH
     builder.light((-100, -100, 100))
     builder.material(Material((1.0, 0.8, 0.4), 0.8, 0.2, 45.2776, 0.0, 1.0))
-    n = 180 * 2 ** size
+    n = 180 * 2 ** size_factor
     for i in range(math.trunc(-2 * n / 3), math.trunc(n / 3) + 1):
         theta = 18.0 * math.pi * i / n
         r = math.exp(0.15 * theta)

@@ -92,7 +92,7 @@ class Workload:
 #: The study-era tree: one parameter set for all five scenes, the least mean
 #: squared log error of tests against the study's over balls, tetra and shell
 #: in ``benchmarks/study_tree_search.py`` (table: ``docs/study_tree_search.csv``).
-STUDY_TREE = KdTreeConfig(builder="median", max_depth=16, leaf_size=32, clip=False, axis_rule="cycle",
+STUDY_TREE = KdTreeConfig(builder="median", tree_depth=16, leaf_size=32, clip=False, axis_rule="cycle",
                           split_to_depth=True)
 
 WORKLOADS = {
