@@ -80,16 +80,24 @@ class Ray(NamedTuple):
 COORDINATE_LIMIT = 1e100
 
 
-def _check_magnitude(values: np.ndarray, what: str) -> None:
-    """Refuse non-finite or too large numbers before any arithmetic overflows on them."""
-    if values.size == 0:
-        return
-    rows = values.reshape(len(values), -1)
-    bad = ~np.isfinite(rows) | (np.abs(rows) > COORDINATE_LIMIT)
-    if bad.any():
-        row, column = (int(i) for i in np.argwhere(bad)[0])
-        raise ValueError(f"Scene.{what}: row {row} holds {float(rows[row, column]):g}; coordinates and sizes must be "
-                         f"finite and within +-{COORDINATE_LIMIT:.0e} (the tracer multiplies them)")
+#: The scene arrays of coordinates and sizes (:func:`check_coordinates`).
+COORDINATE_FIELDS = ("sphere_center", "sphere_radius", "triangle_vertices", "polygon_vertices", "patch_vertices",
+                     "cone_base", "cone_apex", "cone_base_radius", "cone_apex_radius")
+
+
+def check_coordinates(scene: Scene) -> None:
+    """Refuse non-finite or too large coordinates and sizes, naming the field and row, before any
+    arithmetic overflows on them (the tree builder and :func:`prepare_geometry` both call it)."""
+    for what in COORDINATE_FIELDS:
+        values = np.asarray(getattr(scene, what), dtype=np.float64)
+        if values.size == 0:
+            continue
+        rows = values.reshape(len(values), -1)
+        bad = ~np.isfinite(rows) | (np.abs(rows) > COORDINATE_LIMIT)
+        if bad.any():
+            row, column = (int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(f"Scene.{what}: row {row} holds {float(rows[row, column]):g}; coordinates and sizes "
+                             f"must be finite and within +-{COORDINATE_LIMIT:.0e} (the tracer multiplies them)")
 
 
 def _unit_rows(v: np.ndarray, what: str) -> np.ndarray:
@@ -150,9 +158,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     sc = f(scene.sphere_center, (-1, 3))
     sr = np.abs(f(scene.sphere_radius, (-1,)))
     tv = f(scene.triangle_vertices, (-1, 3, 3))
-    for what in ("sphere_center", "sphere_radius", "triangle_vertices", "polygon_vertices", "patch_vertices",
-                 "cone_base", "cone_apex", "cone_base_radius", "cone_apex_radius"):
-        _check_magnitude(np.asarray(getattr(scene, what), dtype=np.float64), what)
+    check_coordinates(scene)
     tri = np.empty_like(tv)
     tri[:, 0] = tv[:, 0]
     tri[:, 1] = tv[:, 1] - tv[:, 0]

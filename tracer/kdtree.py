@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from tracer.geometry import element_bounds, element_clip_shapes
+from tracer.geometry import check_coordinates, element_bounds, element_clip_shapes
 from tracer.kd_build import _build_median
 from tracer.kd_sah import _build_sah
 from tracer.kd_split import BuildInputs, BuildParams
@@ -251,14 +251,14 @@ def builder_inputs(scene: Scene) -> BuildInputs:
     Raises
     ------
     ValueError
-        If the scene's coordinates are not finite.
+        If a coordinate or size is not finite or too large
+        (:func:`tracer.geometry.check_coordinates`).
     """
+    check_coordinates(scene)
     lo, hi = element_bounds(scene)
     if scene.n_elements:
         root_lo, root_hi = lo.min(axis=0), hi.max(axis=0)
     else:
         root_lo, root_hi = np.zeros(3), np.zeros(3)
-    if not (np.all(np.isfinite(root_lo)) and np.all(np.isfinite(root_hi))):
-        raise ValueError("Scene geometry has non-finite coordinates")
     clip_off, clip_v, spheres = element_clip_shapes(scene)
     return BuildInputs(lo, hi, clip_off, clip_v, spheres, root_lo, root_hi)
