@@ -8,9 +8,12 @@ capacity at once.
 
 The kernel keeps, for every line, the time of its last access in a hash table
 and marks that time in a Fenwick tree; the distance is the number of marks
-after the previous access. O(N log N) time, O(N) memory. Consecutive accesses
-to one line (distance 0) do not advance time, which keeps the tree small on
-streams with spatial locality.
+after the previous access. Consecutive accesses to one line (distance 0) do
+not advance time. When time reaches the tree's capacity, the live times
+(one per distinct line) are renumbered 1..D in order and the tree is rebuilt,
+with room for at least 2·D times: so the tree holds O(D) entries, not O(N),
+and stays in cache for scenes of any trace length. O(N log D) time
+(amortised), O(D) memory besides the optional per-access output.
 """
 from __future__ import annotations
 
@@ -21,6 +24,9 @@ import pandas as pd
 from numba import njit
 
 from cachesim.simulate import as_addresses
+
+#: First size of the reuse kernel's Fenwick tree (it grows with the distinct lines).
+TREE_CAPACITY = 1 << 12
 
 
 @njit(cache=True)
@@ -46,49 +52,119 @@ def _grow(keys, values):
     return new_keys, new_values
 
 
+@njit(cache=True)
+def _renumber(keys, values, distinct, tree):
+    """Give the live times (``values`` of used slots) the ranks 1..distinct, in
+    order, and make ``tree`` the Fenwick tree with exactly those marked."""
+    slots = np.flatnonzero(keys != -1)
+    order = np.argsort(values[slots])
+    for rank in range(distinct):
+        values[slots[order[rank]]] = rank + 1
+    tree[:] = 0
+    size = tree.shape[0] - 1
+    for position in range(1, distinct + 1):
+        tree[position] += 1
+        parent = position + (position & -position)
+        if parent <= size:
+            tree[parent] += tree[position]
+    for position in range(distinct + 1, size + 1):
+        parent = position + (position & -position)
+        if parent <= size:
+            tree[parent] += tree[position]
+
+
 @njit(cache=True, nogil=True)
-def _reuse_distances(addresses, shift, distances):
+def _reuse_pass(addresses, shift, distances, histogram, tree_capacity):
+    """One pass over ``addresses`` (uint64, (N,)) at lines of ``1 << shift`` bytes.
+
+    Writes each access's distance into ``distances`` (int64, (N,)) unless
+    that is empty (0,), and counts the finite distances into ``histogram``
+    (int64, grown as needed). Returns ``(histogram, cold)``: the histogram,
+    trimmed after its last non-zero bin, and the number of first touches.
+    ``tree_capacity`` is the Fenwick tree's first size (>= 1): small values
+    only make the renumbering run more often.
+    """
     n = addresses.shape[0]
-    tree = np.zeros(n + 1, dtype=np.int64)  # Fenwick tree over 1-based times
+    record = distances.shape[0] > 0
+    tree = np.zeros(tree_capacity + 1, dtype=np.int64)  # Fenwick tree over 1-based times
     keys = np.full(1 << 12, -1, dtype=np.int64)
     values = np.empty(1 << 12, dtype=np.int64)
-    used = 0
     distinct = 0
+    cold = 0
+    largest = -1
     time = 0
     previous = np.int64(-1)
     for i in range(n):
         line = np.int64(addresses[i] >> np.uint64(shift))
         if line == previous:
-            distances[i] = 0
-            continue
-        previous = line
-        time += 1
-        if 2 * (used + 1) > keys.shape[0]:
-            keys, values = _grow(keys, values)
-        mask = keys.shape[0] - 1
-        slot = _slot_of(keys, line, mask)
-        if keys[slot] == -1:
-            keys[slot] = line
-            used += 1
-            distinct += 1
-            distances[i] = -1
+            distance = 0
         else:
-            last = values[slot]
-            marked_up_to_last = 0
-            position = last
-            while position > 0:
-                marked_up_to_last += tree[position]
-                position -= position & -position
-            distances[i] = distinct - marked_up_to_last
-            position = last
-            while position <= n:
-                tree[position] -= 1
+            previous = line
+            size = tree.shape[0] - 1
+            if time == size:
+                # out of times: renumber the live ones, with room for as many again
+                if 2 * distinct + 2 > size:
+                    tree = np.zeros(2 * distinct + 3, dtype=np.int64)
+                _renumber(keys, values, distinct, tree)
+                time = distinct
+                size = tree.shape[0] - 1
+            time += 1
+            if 2 * (distinct + 1) > keys.shape[0]:
+                keys, values = _grow(keys, values)
+            mask = keys.shape[0] - 1
+            slot = _slot_of(keys, line, mask)
+            if keys[slot] == -1:
+                keys[slot] = line
+                distinct += 1
+                distance = -1
+            else:
+                last = values[slot]
+                marked_up_to_last = 0
+                position = last
+                while position > 0:
+                    marked_up_to_last += tree[position]
+                    position -= position & -position
+                distance = distinct - marked_up_to_last
+                position = last
+                while position <= size:
+                    tree[position] -= 1
+                    position += position & -position
+            values[slot] = time
+            position = time
+            while position <= size:
+                tree[position] += 1
                 position += position & -position
-        values[slot] = time
-        position = time
-        while position <= n:
-            tree[position] += 1
-            position += position & -position
+        if record:
+            distances[i] = distance
+        if distance < 0:
+            cold += 1
+        else:
+            if distance >= histogram.shape[0]:
+                grown = np.zeros(max(2 * histogram.shape[0], distance + 1), dtype=np.int64)
+                grown[:histogram.shape[0]] = histogram
+                histogram = grown
+            histogram[distance] += 1
+            if distance > largest:
+                largest = distance
+    return histogram[:largest + 1], cold
+
+
+def _check_line_size(line_size) -> int:
+    if isinstance(line_size, bool) or not isinstance(line_size, (int, np.integer)) or line_size < 1 \
+            or line_size & (line_size - 1):
+        raise ValueError(f"line_size must be a power of two >= 1, got {line_size!r}")
+    return int(line_size).bit_length() - 1
+
+
+def _pass(addresses, line_size, record):
+    """Validate, then run :func:`_reuse_pass`: ``(distances or None, histogram, cold)``."""
+    shift = _check_line_size(line_size)
+    addresses = as_addresses(addresses)
+    if shift == 0 and addresses.size and addresses.max() >= 2**63:
+        raise ValueError("with 1-byte lines, addresses must be below 2**63")
+    distances = np.empty(addresses.size if record else 0, dtype=np.int64)
+    histogram, cold = _reuse_pass(addresses, shift, distances, np.zeros(1024, dtype=np.int64), TREE_CAPACITY)
+    return (distances if record else None), histogram, int(cold)
 
 
 def reuse_distances(addresses, line_size: int = 64) -> np.ndarray:
@@ -107,15 +183,7 @@ def reuse_distances(addresses, line_size: int = 64) -> np.ndarray:
         Distinct lines touched since the previous access to the same line;
         -1 for the first access to a line.
     """
-    if isinstance(line_size, bool) or not isinstance(line_size, (int, np.integer)) or line_size < 1 \
-            or line_size & (line_size - 1):
-        raise ValueError(f"line_size must be a power of two >= 1, got {line_size!r}")
-    addresses = as_addresses(addresses)
-    shift = int(line_size).bit_length() - 1
-    if shift == 0 and addresses.size and addresses.max() >= 2**63:
-        raise ValueError("with 1-byte lines, addresses must be below 2**63")
-    distances = np.empty(addresses.size, dtype=np.int64)
-    _reuse_distances(addresses, shift, distances)
+    distances, _, _ = _pass(addresses, line_size, True)
     return distances
 
 
@@ -195,4 +263,5 @@ class ReuseProfile:
 
 def reuse_profile(addresses, line_size: int = 64) -> ReuseProfile:
     """Reuse-distance histogram of a stream (see :class:`ReuseProfile`)."""
-    return ReuseProfile.from_distances(reuse_distances(addresses, line_size), line_size)
+    _, histogram, cold = _pass(addresses, line_size, False)
+    return ReuseProfile(int(line_size), histogram, cold)

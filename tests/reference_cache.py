@@ -143,3 +143,21 @@ def reference_reuse_distances(addresses, line_size):
             distances.append(-1)
         last_seen[line] = i
     return np.array(distances, dtype=np.int64)
+
+
+def stack_reuse_distances(addresses, line_size):
+    """Reuse distances from an explicit LRU stack (most recent first): the
+    distance is the line's depth in the stack. O(N * D), fast enough for long
+    streams over few lines; shares nothing with the kernel's Fenwick tree."""
+    stack = []
+    distances = []
+    for address in addresses:
+        line = int(address) // line_size
+        if line in stack:
+            depth = stack.index(line)
+            del stack[depth]
+            distances.append(depth)
+        else:
+            distances.append(-1)
+        stack.insert(0, line)
+    return np.array(distances, dtype=np.int64)

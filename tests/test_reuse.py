@@ -4,8 +4,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cachesim import CacheLevel, Hierarchy, reuse_distances, reuse_profile, simulate
-from reference_cache import reference_reuse_distances
+from cachesim import CacheLevel, Hierarchy, ReuseProfile, reuse_distances, reuse_profile, simulate
+from cachesim.reuse import _reuse_pass
+from reference_cache import reference_reuse_distances, stack_reuse_distances
 
 
 def test_by_hand():
@@ -32,6 +33,33 @@ def test_growing_hash_table_keeps_exact_distances():
     distances = reuse_distances(stream, 64)
     assert (distances[:10000] == -1).all()
     assert distances[10000:].tolist() == list(range(10000))
+
+
+@pytest.mark.parametrize("tree_capacity", [1, 2, 7, 64])
+def test_renumbering_a_small_tree_keeps_exact_distances(tree_capacity):
+    # a tree far smaller than the stream: the live times are renumbered many times
+    rng = np.random.default_rng(tree_capacity)
+    lines = rng.integers(0, 300, 20000) ** 2 % 997  # skewed reuse over about 300 lines
+    stream = (np.repeat(lines, rng.integers(1, 3, lines.size)) * 32).astype(np.uint64)
+    distances = np.empty(stream.size, dtype=np.int64)
+    histogram, cold = _reuse_pass(stream, 5, distances, np.zeros(1, dtype=np.int64), tree_capacity)
+    expected = stack_reuse_distances(stream, 32)
+    assert np.array_equal(distances, expected)
+    assert cold == int((expected < 0).sum())
+    assert np.array_equal(histogram, np.bincount(expected[expected >= 0]))
+
+
+def test_long_stream_profile_equals_the_stack_reference():
+    # longer than the default tree: the public path renumbers too
+    rng = np.random.default_rng(11)
+    stream = rng.integers(0, 1 << 15, 30000, dtype=np.uint64)
+    expected = stack_reuse_distances(stream, 64)
+    assert np.array_equal(reuse_distances(stream, 64), expected)
+    profile = reuse_profile(stream, 64)
+    assert profile.cold == int((expected < 0).sum())
+    assert np.array_equal(profile.histogram, np.bincount(expected[expected >= 0]))
+    by_distances = ReuseProfile.from_distances(expected, 64)
+    assert np.array_equal(profile.misses(np.arange(600)), by_distances.misses(np.arange(600)))
 
 
 @settings(max_examples=40, deadline=None)
