@@ -24,12 +24,14 @@ from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, INVA
 
 
 @njit(cache=True)
-def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record):
+def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work):
     """Run ``addresses`` (uint64, (N,)) through one state, one access at a time.
 
     ``writes`` is bool (N,), true where the access is a write, or (0,) for a
-    stream of reads only. Other parameters and the returned clock are those
-    of :func:`cachesim.kernels.simulate_stream`.
+    stream of reads only; ``work`` (:class:`~cachesim.sets.ChunkBuffers`)
+    lends its per-level buffers, so that a call allocates nothing. Other
+    parameters and the returned clock are those of
+    :func:`cachesim.kernels.simulate_stream`.
     """
     rel_shift = geometry.rel_shift
     n_sets = geometry.n_sets
@@ -45,7 +47,7 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
     counts = state.counts
     n_levels = rel_shift.shape[0]
     has_writes = writes.shape[0] > 0
-    lines = np.empty(n_levels, dtype=np.int64)
+    lines = work.level_lines
     # The first level serves most accesses: keep its geometry in scalars and
     # its counters local, and leave the general loop to the misses.
     mask0 = set_mask[0]
@@ -58,9 +60,12 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
     first_hits = np.int64(0)
     first_write_hits = np.int64(0)
     n_writes = np.int64(0)
-    level_hits = np.zeros(n_levels, dtype=np.int64)
-    level_write_hits = np.zeros(n_levels, dtype=np.int64)
-    invalidations = np.zeros(n_levels, dtype=np.int64)
+    level_hits = work.level_hits
+    level_write_hits = work.level_write_hits
+    invalidations = work.level_invalidations
+    level_hits[:n_levels] = 0
+    level_write_hits[:n_levels] = 0
+    invalidations[:n_levels] = 0
     for i in range(addresses.shape[0]):
         line0 = np.int64(addresses[i] >> shift)
         clock += 1

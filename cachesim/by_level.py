@@ -111,7 +111,8 @@ def _simulate_by_level(addresses, geometry, state, clock, served_by, record, wor
     clocks = work.clocks
     n_levels = rel_shift.shape[0]
     n = addresses.shape[0]
-    shifts = np.zeros(n_levels, dtype=np.int64)
+    shifts = work.level_shifts
+    shifts[n_levels - 1] = 0
     for level in range(n_levels - 1):
         shifts[level] = rel_shift[level + 1] - rel_shift[level]
     shift = np.uint64(geometry.line_shift)

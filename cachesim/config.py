@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import write_text_atomic
 from rtcommon.validate import require_int, require_number
 
 POLICIES = ("lru", "fifo", "random")
 INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
-MAX_LEVELS = 8
 
 
 def _is_power_of_two(value: int) -> bool:

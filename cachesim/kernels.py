@@ -108,7 +108,7 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     if geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     return _simulate_by_access(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by,
-                               record)
+                               record, work)
 
 
 @njit(cache=True)
@@ -136,7 +136,7 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     """
     if writes.shape[0] == 0 and geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
-    return _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record)
+    return _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work)
 
 
 @njit(cache=True)

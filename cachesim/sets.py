@@ -24,6 +24,8 @@ N_COUNTERS = 8
 # Accesses handled per chunk by the level-by-level path: the chunk's two
 # buffers (256 KB) stay in the host's second-level cache.
 CHUNK = 16384
+# Levels a hierarchy may have (the per-level work buffers' length).
+MAX_LEVELS = 8
 
 
 class CacheGeometry(NamedTuple):
@@ -89,22 +91,40 @@ class CacheArrays(NamedTuple):
 
 
 class ChunkBuffers(NamedTuple):
-    """Work buffers of :func:`simulate_into`.
+    """Work buffers of the simulation kernels, reused across calls.
+
+    A caller that feeds many short streams (one pixel's reads) to one state
+    passes the same buffers each time, so that no call allocates.
 
     Attributes
     ----------
     lines, clocks : ndarray of int64, shape (CHUNK,)
-        A chunk's line numbers and their access clocks.
+        A chunk's line numbers and their access clocks (level-by-level path).
+    level_lines : ndarray of int64, shape (MAX_LEVELS,)
+        One access's line number at each level (per-access path).
+    level_hits, level_write_hits, level_invalidations : ndarray of int64, shape (MAX_LEVELS,)
+        A call's counts per level before they are added to the state's
+        counters (per-access path).
+    level_shifts : ndarray of int64, shape (MAX_LEVELS,)
+        Line shift from each level to the next (level-by-level path).
     """
 
     lines: np.ndarray
     clocks: np.ndarray
+    level_lines: np.ndarray
+    level_hits: np.ndarray
+    level_write_hits: np.ndarray
+    level_invalidations: np.ndarray
+    level_shifts: np.ndarray
 
 
 @njit(cache=True)
 def chunk_buffers():
     """Fresh :class:`ChunkBuffers` (also callable from compiled code)."""
-    return ChunkBuffers(np.empty(CHUNK, dtype=np.int64), np.empty(CHUNK, dtype=np.int64))
+    return ChunkBuffers(np.empty(CHUNK, dtype=np.int64), np.empty(CHUNK, dtype=np.int64),
+                        np.empty(MAX_LEVELS, dtype=np.int64), np.empty(MAX_LEVELS, dtype=np.int64),
+                        np.empty(MAX_LEVELS, dtype=np.int64), np.empty(MAX_LEVELS, dtype=np.int64),
+                        np.empty(MAX_LEVELS, dtype=np.int64))
 
 
 # The helpers below take the geometry's arrays, not the bundle: a field read

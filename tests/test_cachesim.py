@@ -296,13 +296,16 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
     from cachesim.by_level import _simulate_by_level
 
     no_writes = np.zeros(0, dtype=np.bool_)
+    work = K.chunk_buffers()
+    for buffer in work:
+        buffer[:] = 12345  # left over from an earlier call: every kernel must start its counts afresh
     for kernel in (_simulate_by_level, _simulate_by_access):
         state = CacheState(hierarchy)
         served_by = np.zeros(stream.size, dtype=np.uint8)
         if kernel is _simulate_by_level:
-            clock = kernel(stream, state.geometry, state.arrays, 5, served_by, True, K.chunk_buffers())
+            clock = kernel(stream, state.geometry, state.arrays, 5, served_by, True, work)
         else:
-            clock = kernel(stream, no_writes, state.geometry, state.arrays, 5, served_by, True)
+            clock = kernel(stream, no_writes, state.geometry, state.arrays, 5, served_by, True, work)
         outputs.append((clock, state.tags.copy(), state.counts.copy(), served_by))
     (clock_a, tags_a, counts_a, served_a), (clock_b, tags_b, counts_b, served_b) = outputs
     assert clock_a == clock_b == 5 + stream.size
