@@ -6,6 +6,7 @@
 """
 from __future__ import annotations
 
+import hashlib
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
@@ -104,26 +105,37 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
     placed = place_layout(layout, trace, scene)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
-    jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
+    jobs = [(mapping, mapping.build(trace.width, trace.height, n)) for mapping in mapping_objects for n in counts]
+    # Runs that replay the same pixels in the same order on every process
+    # (S, P and R at one process, say) are simulated once.
+    keys = [_replay_key(distribution) for _, distribution in jobs]
+    first_of = {}
+    for index, key in enumerate(keys):
+        first_of.setdefault(key, index)
+    distinct = sorted(first_of.values())
 
-    def one(job):
-        mapping, n = job
-        distribution = mapping.build(trace.width, trace.height, n)
-        run = simulate_run(trace, distribution, hierarchy, placed, cost, machine, compute=compute)
-        row = {"mapping": mapping.name, **run_summary(run.processes, hierarchy.level_names, cost.clock_hz,
-                                                        run.real_cycles)}
-        row["n_cpus"] = machine.n_cpus
-        processes = run.processes.assign(mapping=mapping.name, n_processes=n)
-        return row, processes
+    def simulate(index):
+        return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute)
 
     workers = n_jobs or os.cpu_count() or 1
-    results = []
-    bar = _progress(len(jobs), progress)
+    simulated = {}
+    bar = _progress(len(distinct), progress)
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        for result in pool.map(one, jobs):
-            results.append(result)
+        for index, run in zip(distinct, pool.map(simulate, distinct)):
+            simulated[index] = run
             bar.update(1)
     bar.close()
+    results = []
+    for (mapping, distribution), key in zip(jobs, keys):
+        run = simulated[first_of[key]]
+        processes = run.processes
+        if not distribution.dynamic:  # the one column that depends on how pixels are cut into tasks
+            processes = processes.assign(tasks=np.bincount(distribution.task_process,
+                                                           minlength=distribution.n_processes).astype(np.int64))
+        row = {"mapping": mapping.name, **run_summary(processes, hierarchy.level_names, cost.clock_hz,
+                                                        run.real_cycles)}
+        row["n_cpus"] = machine.n_cpus
+        results.append((row, processes.assign(mapping=mapping.name, n_processes=distribution.n_processes)))
     runs = add_speedups(pd.DataFrame([row for row, _ in results]))
     front = ["mapping", "n_processes", "n_cpus"]
     runs = runs[front + [c for c in runs.columns if c not in front]]
@@ -133,6 +145,26 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
                   "machine": asdict(machine), "mappings": names, "n_processes": counts}
     return StudyResult(runs, processes, parameters)
+
+
+def _replay_key(distribution) -> tuple:
+    """What a run replays: equal keys, equal runs (every count and cycle).
+
+    A static run depends only on each process's pixels in order (how they
+    are cut into tasks changes nothing but the ``tasks`` column); a dynamic
+    one on its tasks, their order and the hand-out costs.
+    """
+    def digest(array):
+        return hashlib.blake2b(np.ascontiguousarray(array, dtype=np.int64).tobytes(), digest_size=16).digest()
+
+    if distribution.dynamic:
+        return ("dynamic", distribution.n_processes, float(distribution.dispatch_cycles),
+                int(distribution.take_ahead), digest(distribution.task_offsets), digest(distribution.task_pixels))
+    owner = np.asarray(distribution.task_process, dtype=np.int64)
+    pixel_owner = np.repeat(owner, distribution.task_lengths)
+    order = np.argsort(pixel_owner, kind="stable")  # each process's pixels, in its render order
+    return ("static", distribution.n_processes, digest(distribution.task_pixels[order]),
+            digest(np.bincount(pixel_owner, minlength=distribution.n_processes)))
 
 
 def _progress(total: int, enabled: bool):

@@ -2,6 +2,8 @@
 import numpy as np
 import pytest
 
+from coherence.distribution import Distribution
+from coherence.mappings import Mapping
 from coherence.simulation import Machine
 from coherence.studies import study
 from trace_factory import SMALL, random_trace
@@ -21,6 +23,47 @@ def test_one_process_strip_pixel_row_share_one_stream(result):
     for column in ("user_cycles_max", "L1_accesses", "memory_accesses"):
         assert one.loc["S", column] == one.loc["P", column] == one.loc["R", column]
     assert (one["speedup_user"] == 1).all()
+
+
+class _RowTasks(Mapping):
+    """Rows round-robin like R, but one task per row: at one process the same stream as S, cut into
+    as many tasks as there are rows."""
+
+    name = "row-tasks"
+
+    def _build(self, width, height, n_processes):
+        offsets = np.arange(height + 1, dtype=np.int64) * width
+        return Distribution(self.name, width, height, n_processes, offsets, np.arange(width * height),
+                            np.arange(height) % n_processes)
+
+
+def test_shared_runs_equal_their_own_simulation():
+    # S, P, R and row-tasks at one process replay one stream, simulated once; each run must equal
+    # its own simulation, its tasks column included.
+    from coherence.cost import get_cost_model
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.metrics import run_summary
+    from coherence.simulation import simulate_run
+    from coherence.studies import _replay_key, place_layout
+
+    trace = random_trace(width=16, height=8, seed=9)
+    machine = Machine(n_cpus=2, quantum_cycles=5000)
+    mappings = {"S": "S", "P": "P", "R": "R", "DB": "DB", "row-tasks": _RowTasks()}
+    outcome = study(trace, list(mappings.values()), [1, 2], hierarchy=SMALL, machine=machine, progress=False)
+    placed = place_layout(get_layout("compact"), trace)
+    cost = get_cost_model("alpha8400")
+    one = [get_mapping(name).build(16, 8, 1) for name in ("S", "P", "R")] + [_RowTasks().build(16, 8, 1)]
+    assert len({_replay_key(d) for d in one}) == 1  # the case the sharing exists for
+    assert _replay_key(get_mapping("S").build(16, 8, 2)) != _replay_key(get_mapping("R").build(16, 8, 2))
+    for (name, n), frame in outcome.processes.groupby(["mapping", "n_processes"], sort=False):
+        run = simulate_run(trace, get_mapping(mappings[name]).build(16, 8, n), SMALL, placed, cost, machine)
+        mine = frame.drop(columns=["mapping", "n_processes"]).reset_index(drop=True)
+        assert mine.equals(run.processes), (name, n)
+        row = outcome.runs.query("mapping == @name and n_processes == @n").iloc[0]
+        assert row["real_cycles"] == run.real_cycles
+        assert row["user_cycles_max"] == run_summary(run.processes, SMALL.level_names, cost.clock_hz,
+                                                     run.real_cycles)["user_cycles_max"]
 
 
 def test_factors_multiply_to_efficiency(result):
