@@ -256,10 +256,8 @@ class PlacedLayout:
             raise ValueError(f"line_size must be a power of two, got {line_size}")
         self.check_records(records)
         shift = line_size.bit_length() - 1
-        n_lines = int(_lines_touched(records, self.placement, shift).sum())
-        # Sized exactly, so never replaced (at least one slot: growth doubles).
-        out, _ = record_lines(records, 0, records.shape[0], self.placement, shift,
-                              np.empty(max(n_lines, 1), dtype=np.uint64))
+        # an empty buffer is replaced by one of exactly the lines needed
+        out, n_lines = record_lines(records, 0, records.shape[0], self.placement, shift, np.empty(0, dtype=np.uint64))
         return out[:n_lines]
 
 
@@ -336,8 +334,8 @@ def record_lines(records, start, stop, placement, line_shift, buffer):
     placement : RecordPlacement
     line_shift : int
         log2 of the line size.
-    buffer : ndarray of uint64, shape (M,), M >= 1
-        Receives the addresses; replaced by one twice as long when full.
+    buffer : ndarray of uint64, shape (M,)
+        Receives the addresses; replaced by a larger one when too short.
 
     Returns
     -------
@@ -346,30 +344,19 @@ def record_lines(records, start, stop, placement, line_shift, buffer):
     count : int
         Addresses written.
     """
-    record_start = placement.record_start
-    record_size = placement.record_size
-    kind_first = placement.kind_first
-    k = 0
-    for i in range(start, stop):
-        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-        for line in range(first, last + 1):
-            if k == buffer.shape[0]:
-                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
-                grown[:k] = buffer
-                buffer = grown
-            buffer[k] = np.uint64(line << line_shift)
-            k += 1
-    return buffer, k
+    buffer, _, count, _ = record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
+                                                  np.empty(0, dtype=np.bool_))
+    return buffer, count
 
 
 @njit(cache=True, nogil=True)
 def record_lines_and_writes(records, start, stop, placement, line_shift, buffer, writes):
     """:func:`record_lines` that also says which line accesses are writes.
 
-    ``writes`` (bool, shape ``buffer.shape``) receives each address's write
-    flag: every line of a record whose write flag is set
-    (:func:`tracer.records.record_is_write`) is written. Both buffers grow
-    together when full.
+    ``writes`` (bool, shape ``buffer.shape``, or (0,) to leave the flags out)
+    receives each address's write flag: every line of a record whose write
+    flag is set (:func:`tracer.records.record_is_write`) is written. Both
+    buffers are replaced together when too short.
 
     Returns
     -------
@@ -379,10 +366,33 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
         Addresses written.
     n_writes : int
         How many of them are writes.
+
+    The lines are counted first and the buffers grown once, before they are
+    filled: a fill loop that may replace its buffer runs several times slower.
     """
     record_start = placement.record_start
     record_size = placement.record_size
     kind_first = placement.kind_first
+    needed = 0
+    for i in range(start, stop):
+        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+        needed += last - first + 1
+    if needed > buffer.shape[0]:
+        size = max(needed, 2 * buffer.shape[0])  # exact for an empty buffer, else room to spare
+        buffer = np.empty(size, dtype=np.uint64)
+        if writes.shape[0] > 0:
+            writes = np.empty(size, dtype=np.bool_)
+    count, n_writes = _fill_lines(records, start, stop, placement, line_shift, buffer, writes)
+    return buffer, writes, count, n_writes
+
+
+@njit(cache=True, nogil=True)
+def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
+    """Fill ``buffer`` (and ``writes``, unless it is empty), which are long enough."""
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    flag = writes.shape[0] > 0
     k = 0
     n_writes = 0
     for i in range(start, stop):
@@ -391,29 +401,11 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
         if write:
             n_writes += last - first + 1
         for line in range(first, last + 1):
-            if k == buffer.shape[0]:
-                grown = np.empty(2 * buffer.shape[0], dtype=np.uint64)
-                grown[:k] = buffer
-                buffer = grown
-                grown_writes = np.empty(2 * writes.shape[0], dtype=np.bool_)
-                grown_writes[:k] = writes
-                writes = grown_writes
             buffer[k] = np.uint64(line << line_shift)
-            writes[k] = write
+            if flag:
+                writes[k] = write
             k += 1
-    return buffer, writes, k, n_writes
-
-
-@njit(cache=True, nogil=True)
-def _lines_touched(records, placement, line_shift):
-    record_start = placement.record_start
-    record_size = placement.record_size
-    kind_first = placement.kind_first
-    out = np.empty(records.shape[0], dtype=np.int64)
-    for i in range(records.shape[0]):
-        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-        out[i] = last - first + 1
-    return out
+    return k, n_writes
 
 
 def _compact() -> MemoryLayout:
