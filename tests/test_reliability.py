@@ -373,9 +373,6 @@ def _cli(*argv, **options):
     return subprocess.Popen([sys.executable, "-m", "analyses", *argv], env=env, text=True, **options)
 
 
-@pytest.mark.xfail(strict=False, reason="open (issue 13): Ctrl-C that lands while numba's workqueue threading "
-                   "layer runs the parallel render crashes the process (rc -11) before the handler prints in about "
-                   "1 of 15-40 interrupts; never seen with the omp layer (0 of 32) nor without an interrupt (0 of 30)")
 def test_ctrl_c_prints_one_line_and_dies_by_sigint(tmp_path):
     import signal
     import time
