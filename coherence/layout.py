@@ -235,19 +235,16 @@ class PlacedLayout:
 
     def check_records(self, records: np.ndarray) -> None:
         """Raise ValueError if a record names a kind or index outside this layout."""
-        records = np.asarray(records, dtype=np.uint32)
-        if records.size == 0:
+        records = np.ascontiguousarray(records, dtype=np.uint32)
+        limit = np.diff(self.kind_first)
+        first = _first_bad_record(records, limit)  # one pass, no per-record temporaries
+        if first < 0:
             return
-        kinds = records >> np.uint32(KIND_SHIFT)
-        indices = (records & np.uint32(INDEX_MASK)).astype(np.int64)
-        if kinds.max() >= N_KINDS:
-            raise ValueError(f"record kind {int(kinds.max())} is not a RecordKind")
-        limit = np.diff(self.kind_first)[kinds]
-        bad = np.flatnonzero(indices >= limit)
-        if bad.size:
-            first = bad[0]
-            raise ValueError(f"record {first} is {RecordKind(int(kinds[first])).name.lower()} "
-                             f"{int(indices[first])}, but the layout holds only {int(limit[first])} of that kind")
+        kind = int(records[first]) >> KIND_SHIFT
+        if kind >= N_KINDS:
+            raise ValueError(f"record {first} has kind {kind}, which is not a RecordKind")
+        raise ValueError(f"record {first} is {RecordKind(kind).name.lower()} {int(records[first]) & INDEX_MASK}, "
+                         f"but the layout holds only {int(limit[kind])} of that kind")
 
     def addresses(self, records, line_size: int) -> np.ndarray:
         """Byte addresses (uint64, (M,)) of the ``line_size`` lines each record touches, in order."""
@@ -406,6 +403,18 @@ def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
                 writes[k] = write
             k += 1
     return k, n_writes
+
+
+@njit(cache=True, nogil=True)
+def _first_bad_record(records, kind_counts):
+    """Index of the first record whose kind is not below ``kind_counts.size``
+    or whose index is not below its kind's count; -1 when all are good."""
+    n_kinds = kind_counts.shape[0]
+    for i in range(records.shape[0]):
+        kind = record_kind(records[i])
+        if kind >= n_kinds or record_id(records[i]) >= kind_counts[kind]:
+            return i
+    return -1
 
 
 def _compact() -> MemoryLayout:

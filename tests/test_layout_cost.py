@@ -6,6 +6,7 @@ import pytest
 from coherence.cost import CostModel, alpha8400, get_cost_model, modern
 from coherence.layout import MemoryLayout, RecordLayout, get_layout, record_counts_of
 from tracer.trace import COUNTER_NAMES, RecordKind, pack
+from tracer.records import KIND_SHIFT
 
 
 def reference_addresses(placed, records, line_size):
@@ -75,6 +76,12 @@ def test_bad_layouts_and_records():
     placed = get_layout("compact").place({"sphere": 3})
     with pytest.raises(ValueError, match="sphere 7, but the layout holds only 3"):
         placed.addresses(pack([RecordKind.SPHERE], [7]), 32)
+    good = pack([RecordKind.SPHERE] * 3, [0, 2, 1])
+    with pytest.raises(ValueError, match="record 3 is sphere 3, but"):  # the first bad one is named
+        placed.addresses(np.concatenate([good, pack([RecordKind.SPHERE] * 2, [3, 9])]), 32)
+    with pytest.raises(ValueError, match="record 1 has kind 15, which is not a RecordKind"):
+        placed.addresses(np.array([good[0], np.uint32(15 << KIND_SHIFT)], dtype=np.uint32), 32)
+    assert placed.addresses(good, 32).size == 3
     with pytest.raises(ValueError, match="vertex_counts"):
         get_layout("compact").place({"polygon": 2}, {"polygon": [3]})
 
