@@ -61,8 +61,7 @@ SECTIONS = {
     "scene_bytes": "item = record kind or 'total': metric 'bytes', and 'fraction_of_<level>' = bytes / cache size",
     "cache": "item = cache level: size, line_size, ways, latency; item 'memory': latency",
     "runs": "one group per (mapping, n_processes): every numeric column of coherence.study's run table "
-            "(speed-ups, efficiency and its factors and losses, hit rates, misses per ray, cycles), plus "
-            "speedup_real_idle (real-time speed-up without background load)",
+            "(speed-ups, efficiency and its factors and losses, hit rates, misses per ray, cycles)",
     "processes": "item = process index, at the verdict's and the largest process count: user, compute, memory "
                  "and dispatch cycles and pixels",
     "miss_ratio": "mapping = pixel order of the one-process stream, item = cache size in bytes: "
@@ -88,7 +87,7 @@ class Report:
     html : str
         The page ``index.html``.
     runs, processes : DataFrame
-        The study's tables (``runs`` with ``speedup_real_idle`` added).
+        The study's tables.
     curves : DataFrame
         Miss-ratio curves: order, line_size, size, capacity_lines, misses, miss_ratio.
     scene_bytes : DataFrame
@@ -204,7 +203,6 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
 
 
 def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress):
-    from coherence.simulation import processor_sharing_time
     from coherence.studies import place_layout, study
     from tracer.trace import COUNTER_NAMES
 
@@ -214,9 +212,8 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     placed = place_layout(layout, trace, scene)
     result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=cost,
                    machine=machine, scene=scene, progress=progress)
-    runs = result.runs.copy()
+    runs = result.runs
     processes = result.processes
-    runs["speedup_real_idle"] = _idle_speedups(runs, processes, machine.n_cpus, processor_sharing_time)
 
     verdict_n = 8 if 8 in counts else max(counts)
     top_n = max(counts)
@@ -251,17 +248,6 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
                        scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress)
     return Report(results=results, summary=summary, html=page, runs=runs, processes=processes, curves=curves,
                   scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info)
-
-
-def _idle_speedups(runs, processes, n_cpus, sharing_time) -> np.ndarray:
-    """Real-time speed-up with no background load, from per-process user cycles."""
-    real = {}
-    for (mapping, n), frame in processes.groupby(["mapping", "n_processes"], sort=False):
-        real[(mapping, int(n))] = sharing_time(frame["user_cycles"].to_numpy(), n_cpus, 0)
-    out = []
-    for mapping, n in zip(runs["mapping"], runs["n_processes"]):
-        out.append(real[(mapping, 1)] / real[(mapping, int(n))])
-    return np.asarray(out, dtype=np.float64)
 
 
 @njit(cache=True, nogil=True)
@@ -397,7 +383,7 @@ def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hier
     return table
 
 
-_HEADLINE_COLUMNS = ("speedup_user", "speedup_real", "speedup_real_idle", "efficiency", "load_balance",
+_HEADLINE_COLUMNS = ("speedup_user", "speedup_real", "efficiency", "load_balance",
                      "coherence_factor", "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
 
 

@@ -402,24 +402,3 @@ def _warn_idle_processes(distribution: Distribution) -> None:
     if n_idle:
         warnings.warn(f"mapping {distribution.name}: {n_idle} of {n_processes} processes get no pixels "
                       f"of the {size} image; they count with zero user time", stacklevel=3)
-
-
-def processor_sharing_time(user_cycles, n_cpus: int, background_load: int) -> float:
-    """Wall time of jobs of the given CPU times under ideal processor sharing.
-
-    A quick estimate (``analyses.report`` uses it for the idle machine's
-    real-time speed-up); :func:`simulate_run`'s real time comes from its
-    schedule instead.
-
-    With ``k`` jobs left and ``background_load`` endless jobs on ``n_cpus``
-    CPUs, each job runs at ``min(1, n_cpus / (k + background_load))``.
-    """
-    remaining = np.sort(np.asarray(user_cycles, dtype=np.float64))
-    wall = 0.0
-    done = 0.0
-    for index, finish in enumerate(remaining):
-        active = remaining.size - index
-        rate = min(1.0, n_cpus / (active + background_load))
-        wall += (finish - done) / rate
-        done = finish
-    return wall

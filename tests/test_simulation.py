@@ -14,7 +14,7 @@ from coherence.layout import get_layout
 from coherence.distribution import Distribution
 from coherence.mappings import get_mapping
 from coherence.metrics import add_speedups, run_summary
-from coherence.simulation import Machine, processor_sharing_time, simulate_run
+from coherence.simulation import Machine, simulate_run
 from tracer.trace import COUNTER_NAMES, RecordKind
 
 from trace_factory import SMALL, random_trace
@@ -126,14 +126,6 @@ def test_forced_dynamic_order_equals_the_static_assignment():
     assert dynamic.processes["dispatch_cycles"].tolist() == (100.0 * dynamic.processes["tasks"]).tolist()
     # The next free process takes the next task: the first three go to 0, 1, 2.
     assert dynamic.task_owner[:3].tolist() == [0, 1, 2]
-
-
-def test_processor_sharing():
-    assert processor_sharing_time([10, 10], 8, 0) == 10
-    assert processor_sharing_time([10, 10, 10, 10], 2, 0) == 20
-    # One job with 3 background jobs on 2 CPUs: it gets half a CPU.
-    assert processor_sharing_time([10], 2, 3) == 20
-    assert processor_sharing_time([], 2, 3) == 0
 
 
 def test_machine_validation_and_placement():
