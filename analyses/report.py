@@ -280,6 +280,22 @@ def _one_process_orders(mapping_objects, width, height) -> list[tuple[str, np.nd
     return labelled
 
 
+#: Records per piece of a miss-ratio curve's stream (16 MB of records, 32-64 MB of addresses).
+CURVE_PIECE = 1 << 22
+
+
+def _pieces(lengths, budget):
+    """``(first, stop)`` ranges of consecutive entries of ``lengths`` (records per pixel) holding
+    about ``budget`` records each (at least one pixel per piece)."""
+    ends = np.cumsum(lengths)
+    first = 0
+    while first < lengths.size:
+        base = ends[first - 1] if first else 0
+        stop = max(first + 1, int(np.searchsorted(ends, base + budget, side="right")))
+        yield first, stop
+        first = stop
+
+
 def _curve_sizes(line_size: int, hierarchy, top_bytes: int) -> np.ndarray:
     top = max(top_bytes, max(level.size for level in hierarchy.levels)) * 2
     powers = line_size * 2 ** np.arange(int(math.ceil(math.log2(max(top / line_size, 2)))) + 1)
@@ -291,7 +307,7 @@ def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> p
 
     from tqdm.auto import tqdm
 
-    from cachesim import reuse_profile
+    from cachesim import ReuseCounter
 
     orders = _one_process_orders(mapping_objects, trace.width, trace.height)
     line_sizes = sorted({level.line_size for level in hierarchy.levels}, reverse=True)
@@ -299,26 +315,30 @@ def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> p
     bar = tqdm(total=len(orders) * len(line_sizes), desc="reuse distances", unit="curve",
                disable=not progress, leave=False, file=sys.stderr)
 
-    def curves_of(label, order):
-        # the compiled steps release the GIL, so orders run side by side
-        records = np.empty(trace.n_records, dtype=np.uint32)
-        _gather_records(offsets, np.asarray(trace.records), order, records)
-        frames = []
-        for line_size in line_sizes:
-            addresses = placed.addresses(records, line_size)
-            curve = reuse_profile(addresses, line_size).miss_ratio_curve(
-                _curve_sizes(line_size, hierarchy, placed.scene_bytes))
-            del addresses
-            frames.append(curve.assign(order=label, line_size=line_size))
-            bar.update(1)
-        return frames
+    records = np.asarray(trace.records)
+    lengths = np.diff(offsets)
 
-    # two streams at a time: each holds its records, addresses and distances
-    workers = max(1, min(2, os.cpu_count() or 1, len(orders)))
+    def curve_of(label, order, line_size):
+        # The stream is fed in pieces of about CURVE_PIECE records, so memory stays small whatever the
+        # trace's length; the compiled steps release the GIL, so two curves run side by side.
+        counter = ReuseCounter(line_size)
+        buffer = np.empty(0, dtype=np.uint32)
+        for first, stop in _pieces(lengths[order], CURVE_PIECE):
+            n = int(lengths[order[first:stop]].sum())
+            if n > buffer.size:
+                buffer = np.empty(n, dtype=np.uint32)
+            _gather_records(offsets, records, order[first:stop], buffer)
+            counter.update(placed.addresses(buffer[:n], line_size))
+        curve = counter.profile().miss_ratio_curve(_curve_sizes(line_size, hierarchy, placed.scene_bytes))
+        bar.update(1)
+        return curve.assign(order=label, line_size=line_size)
+
+    jobs = [(label, order, line_size) for label, order in orders for line_size in line_sizes]
+    workers = max(1, min(2, os.cpu_count() or 1, len(jobs)))
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        results = list(pool.map(lambda item: curves_of(*item), orders))
+        frames = list(pool.map(lambda job: curve_of(*job), jobs))
     bar.close()
-    curves = pd.concat([frame for frames in results for frame in frames], ignore_index=True)
+    curves = pd.concat(frames, ignore_index=True)
     return curves[["order", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]
 
 

@@ -18,6 +18,7 @@ and stays in cache for scenes of any trace length. O(N log D) time
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -73,28 +74,62 @@ def _renumber(keys, values, distinct, tree):
             tree[parent] += tree[position]
 
 
+class ReuseState(NamedTuple):
+    """The reuse kernel's state between pieces of one stream (see :class:`ReuseCounter`).
+
+    Attributes
+    ----------
+    keys, values : ndarray of int64, shape (H,)
+        Hash table (H a power of two): line number (-1: empty slot) and the
+        time of its last access.
+    tree : ndarray of int64, shape (C + 1,)
+        Fenwick tree over the times 1..C, in which each line's last time is marked.
+    histogram : ndarray of int64, shape (D,)
+        Accesses per finite distance (grown as needed).
+    scalars : ndarray of int64, shape (N_SCALARS,)
+        :data:`DISTINCT` lines, the current :data:`TIME`, the
+        :data:`PREVIOUS` line (-1 at the start), :data:`COLD` first touches
+        and the :data:`LARGEST` distance seen (-1: none).
+    """
+
+    keys: np.ndarray
+    values: np.ndarray
+    tree: np.ndarray
+    histogram: np.ndarray
+    scalars: np.ndarray
+
+
+# Columns of ReuseState.scalars.
+DISTINCT, TIME, PREVIOUS, COLD, LARGEST = 0, 1, 2, 3, 4
+N_SCALARS = 5
+
+
+def _fresh_state(tree_capacity: int = TREE_CAPACITY) -> ReuseState:
+    """An empty stream's state; ``tree_capacity`` (>= 1) is the tree's first size."""
+    scalars = np.zeros(N_SCALARS, dtype=np.int64)
+    scalars[PREVIOUS] = -1
+    scalars[LARGEST] = -1
+    return ReuseState(np.full(1 << 12, -1, dtype=np.int64), np.empty(1 << 12, dtype=np.int64),
+                      np.zeros(tree_capacity + 1, dtype=np.int64), np.zeros(1024, dtype=np.int64), scalars)
+
+
 @njit(cache=True, nogil=True)
-def _reuse_pass(addresses, shift, distances, histogram, tree_capacity):
-    """One pass over ``addresses`` (uint64, (N,)) at lines of ``1 << shift`` bytes.
+def _reuse_pass(addresses, shift, distances, state):
+    """Continue a stream with ``addresses`` (uint64, (N,)) at lines of ``1 << shift`` bytes.
 
     Writes each access's distance into ``distances`` (int64, (N,)) unless
-    that is empty (0,), and counts the finite distances into ``histogram``
-    (int64, grown as needed). Returns ``(histogram, cold)``: the histogram,
-    trimmed after its last non-zero bin, and the number of first touches.
-    ``tree_capacity`` is the Fenwick tree's first size (>= 1): small values
-    only make the renumbering run more often.
+    that is empty (0,), and counts the finite distances into the state's
+    histogram. Returns the new :class:`ReuseState`: its arrays may have been
+    replaced by larger ones (its scalars are updated in place).
     """
-    n = addresses.shape[0]
+    keys, values, tree, histogram, scalars = state
     record = distances.shape[0] > 0
-    tree = np.zeros(tree_capacity + 1, dtype=np.int64)  # Fenwick tree over 1-based times
-    keys = np.full(1 << 12, -1, dtype=np.int64)
-    values = np.empty(1 << 12, dtype=np.int64)
-    distinct = 0
-    cold = 0
-    largest = -1
-    time = 0
-    previous = np.int64(-1)
-    for i in range(n):
+    distinct = scalars[DISTINCT]
+    time = scalars[TIME]
+    previous = scalars[PREVIOUS]
+    cold = scalars[COLD]
+    largest = scalars[LARGEST]
+    for i in range(addresses.shape[0]):
         line = np.int64(addresses[i] >> np.uint64(shift))
         if line == previous:
             distance = 0
@@ -146,7 +181,12 @@ def _reuse_pass(addresses, shift, distances, histogram, tree_capacity):
             histogram[distance] += 1
             if distance > largest:
                 largest = distance
-    return histogram[:largest + 1], cold
+    scalars[DISTINCT] = distinct
+    scalars[TIME] = time
+    scalars[PREVIOUS] = previous
+    scalars[COLD] = cold
+    scalars[LARGEST] = largest
+    return ReuseState(keys, values, tree, histogram, scalars)
 
 
 def _check_line_size(line_size) -> int:
@@ -156,15 +196,49 @@ def _check_line_size(line_size) -> int:
     return int(line_size).bit_length() - 1
 
 
-def _pass(addresses, line_size, record):
-    """Validate, then run :func:`_reuse_pass`: ``(distances or None, histogram, cold)``."""
-    shift = _check_line_size(line_size)
-    addresses = as_addresses(addresses)
-    if shift == 0 and addresses.size and addresses.max() >= 2**63:
-        raise ValueError("with 1-byte lines, addresses must be below 2**63")
-    distances = np.empty(addresses.size if record else 0, dtype=np.int64)
-    histogram, cold = _reuse_pass(addresses, shift, distances, np.zeros(1024, dtype=np.int64), TREE_CAPACITY)
-    return (distances if record else None), histogram, int(cold)
+class ReuseCounter:
+    """Reuse distances of a stream fed in pieces, exactly as if it came in one.
+
+    Its memory is O(distinct lines) however long the stream, so a caller can
+    feed a long trace piece by piece instead of materialising its addresses.
+
+    >>> counter = ReuseCounter(64)
+    >>> for piece in ([0, 64, 128], [0, 64]):
+    ...     _ = counter.update(piece)
+    >>> counter.profile().histogram.tolist(), counter.profile().cold
+    ([0, 0, 2], 3)
+
+    Parameters
+    ----------
+    line_size : int
+        Line size in bytes (a power of two).
+    """
+
+    def __init__(self, line_size: int = 64):
+        self._shift = _check_line_size(line_size)
+        self.line_size = int(line_size)
+        self._state = _fresh_state()
+
+    def update(self, addresses, distances=None) -> "ReuseCounter":
+        """Continue the stream with ``addresses`` (array_like of int, shape (N,)).
+
+        ``distances`` (ndarray of int64, shape (N,)), if given, receives each
+        access's distance (-1 for a first touch). Returns the counter itself.
+        """
+        addresses = as_addresses(addresses)
+        if self._shift == 0 and addresses.size and addresses.max() >= 2**63:
+            raise ValueError("with 1-byte lines, addresses must be below 2**63")
+        if distances is None:
+            distances = np.empty(0, dtype=np.int64)
+        elif distances.shape != addresses.shape or distances.dtype != np.int64:
+            raise ValueError(f"distances must be int64 of shape {addresses.shape}")
+        self._state = _reuse_pass(addresses, self._shift, distances, self._state)
+        return self
+
+    def profile(self) -> "ReuseProfile":
+        """The reuse profile of the stream so far (a copy)."""
+        histogram = self._state.histogram[:self._state.scalars[LARGEST] + 1]
+        return ReuseProfile(self.line_size, histogram.copy(), int(self._state.scalars[COLD]))
 
 
 def reuse_distances(addresses, line_size: int = 64) -> np.ndarray:
@@ -183,7 +257,10 @@ def reuse_distances(addresses, line_size: int = 64) -> np.ndarray:
         Distinct lines touched since the previous access to the same line;
         -1 for the first access to a line.
     """
-    distances, _, _ = _pass(addresses, line_size, True)
+    counter = ReuseCounter(line_size)
+    addresses = as_addresses(addresses)
+    distances = np.empty(addresses.size, dtype=np.int64)
+    counter.update(addresses, distances)
     return distances
 
 
@@ -263,5 +340,4 @@ class ReuseProfile:
 
 def reuse_profile(addresses, line_size: int = 64) -> ReuseProfile:
     """Reuse-distance histogram of a stream (see :class:`ReuseProfile`)."""
-    _, histogram, cold = _pass(addresses, line_size, False)
-    return ReuseProfile(int(line_size), histogram, cold)
+    return ReuseCounter(line_size).update(addresses).profile()

@@ -215,3 +215,28 @@ def test_format_percent():
     assert format_percent(0.00024) == "0.024"
     assert format_percent(0.0) == "0"
     assert format_percent(0.01) == "1.0"
+
+
+def test_curves_fed_in_pieces_equal_the_whole_stream(monkeypatch):
+    # The report feeds each order's stream to the reuse counter in pieces; with pieces of a few
+    # records (so many pieces, some of one pixel) every curve must equal one pass over the stream.
+    from analyses import report
+    from cachesim import reuse_profile
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.studies import place_layout
+    from trace_factory import SMALL, random_trace
+
+    trace = random_trace(width=16, height=12, seed=3)
+    placed = place_layout(get_layout("compact"), trace)
+    mappings = [get_mapping(name) for name in ("S", "B", "DB")]
+    monkeypatch.setattr(report, "CURVE_PIECE", 50)
+    curves = report._miss_ratio_curves(trace, placed, mappings, SMALL, False)
+    records, offsets = np.asarray(trace.records), np.asarray(trace.pixel_offsets)
+    for label, order in report._one_process_orders(mappings, 16, 12):
+        stream = np.concatenate([records[offsets[p]:offsets[p + 1]] for p in order])
+        for line_size in (32, 64):
+            mine = curves[(curves["order"] == label) & (curves["line_size"] == line_size)]
+            whole = reuse_profile(placed.addresses(stream, line_size), line_size)
+            assert mine["misses"].tolist() == whole.misses(mine["capacity_lines"].to_numpy()).tolist(), label
+    assert list(report._pieces(np.array([3, 0, 60, 1, 1]), 50)) == [(0, 2), (2, 3), (3, 5)]

@@ -4,8 +4,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cachesim import CacheLevel, Hierarchy, ReuseProfile, reuse_distances, reuse_profile, simulate
-from cachesim.reuse import _reuse_pass
+from cachesim import CacheLevel, Hierarchy, ReuseCounter, ReuseProfile, reuse_distances, reuse_profile, simulate
+from cachesim.reuse import _fresh_state, _reuse_pass
 from reference_cache import reference_reuse_distances, stack_reuse_distances
 
 
@@ -42,11 +42,28 @@ def test_renumbering_a_small_tree_keeps_exact_distances(tree_capacity):
     lines = rng.integers(0, 300, 20000) ** 2 % 997  # skewed reuse over about 300 lines
     stream = (np.repeat(lines, rng.integers(1, 3, lines.size)) * 32).astype(np.uint64)
     distances = np.empty(stream.size, dtype=np.int64)
-    histogram, cold = _reuse_pass(stream, 5, distances, np.zeros(1, dtype=np.int64), tree_capacity)
+    state = _reuse_pass(stream, 5, distances, _fresh_state(tree_capacity))
     expected = stack_reuse_distances(stream, 32)
     assert np.array_equal(distances, expected)
-    assert cold == int((expected < 0).sum())
-    assert np.array_equal(histogram, np.bincount(expected[expected >= 0]))
+    assert state.tree.size < 2000  # O(distinct lines), not O(accesses)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_stream_in_pieces_equals_the_stream_in_one(seed):
+    rng = np.random.default_rng(seed)
+    stream = (rng.integers(0, 700, 12000) ** 2 % 4099 * 16).astype(np.uint64)
+    cuts = np.sort(rng.integers(0, stream.size, 7))
+    counter = ReuseCounter(32)
+    distances = np.empty(stream.size, dtype=np.int64)
+    for first, stop in zip(np.r_[0, cuts], np.r_[cuts, stream.size]):  # some pieces empty
+        counter.update(stream[first:stop], distances[first:stop])
+    expected = stack_reuse_distances(stream, 32)
+    assert np.array_equal(distances, expected)
+    profile = counter.profile()
+    assert profile.cold == int((expected < 0).sum())
+    assert np.array_equal(profile.histogram, np.bincount(expected[expected >= 0]))
+    with pytest.raises(ValueError, match="distances must be int64"):
+        counter.update(stream[:3], np.empty(2, dtype=np.int64))
 
 
 def test_long_stream_profile_equals_the_stack_reference():
