@@ -333,6 +333,10 @@ def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> p
         bar.update(1)
         return curve.assign(order=label, line_size=line_size)
 
+    for line_size in line_sizes:  # compile the steps once, before the threads race to
+        empty = np.empty(0, dtype=np.uint32)
+        _gather_records(offsets, records, orders[0][1][:0], empty)
+        ReuseCounter(line_size).update(placed.addresses(empty, line_size))
     jobs = [(label, order, line_size) for label, order in orders for line_size in line_sizes]
     workers = max(1, min(2, os.cpu_count() or 1, len(jobs)))
     with ThreadPoolExecutor(max_workers=workers) as pool:

@@ -240,6 +240,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     no_writes = np.zeros(0, dtype=np.bool_)
     work = K.chunk_buffers()
     served = np.zeros(0, dtype=np.uint8)
+    record_served = served.shape[0] > 0  # False, but not a literal: no kernel specialised for it
     hits_before = np.zeros(n_levels, dtype=np.int64)
     while ours_left > 0:
         cpu = _lowest_clock_cpu(cpu_clock, active)
@@ -275,7 +276,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             background_slices[b] += 1
             cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
             cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
-                                               served, False, work)
+                                               served, record_served, work)
             _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
             clock += quantum
             slice_used[cpu] = quantum
@@ -313,7 +314,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             # a pixel without writes keeps the read-only (fast) path
             cache_clock[cpu] = K.simulate_writes_into(buffer[:n_addresses],
                                                       write_flags[:n_addresses] if n_writes else no_writes,
-                                                      geometry, cache, cache_clock[cpu], served, False, work)
+                                                      geometry, cache, cache_clock[cpu], served, record_served, work)
             memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
             memory += _tlb_misses(tlbs, cpu, process, buffer[:n_addresses]) * tlb_miss_cycles
             cycles = compute[pixel] + memory

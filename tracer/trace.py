@@ -59,6 +59,7 @@ class AccessTrace:
         first) are ``records[pixel_offsets[p]:pixel_offsets[p + 1]]``.
     records : ndarray, shape (R,) uint32
         Packed records (see module docstring); may be a read-only memmap.
+        ``pixel_offsets`` and ``records`` are stored as read-only views.
     counters : ndarray, shape (P, K) int64
         Per-pixel counters, columns :data:`COUNTER_NAMES`.
     width, height : int
@@ -84,6 +85,12 @@ class AccessTrace:
             raise ValueError("AccessTrace.records must be a 1-D uint32 array")
         if int(self.pixel_offsets[-1]) != len(self.records):
             raise ValueError("AccessTrace.pixel_offsets[-1] must equal len(records)")
+        # Kept as read-only views, whether loaded (a read-only memmap) or just rendered: numba
+        # compiles a kernel once per array type, and writeable and read-only arrays are two types.
+        for name in ("pixel_offsets", "records"):
+            view = getattr(self, name).view()
+            view.flags.writeable = False
+            setattr(self, name, view)
 
     @property
     def n_pixels(self) -> int:
