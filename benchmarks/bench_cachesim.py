@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 import pycachesim_oracle  # noqa: E402
 
 from cachesim import get_hierarchy, reuse_distances, simulate  # noqa: E402
+from timing import best_of  # noqa: E402
 
 
 def ray_tracer_like_stream(n_accesses: int, seed: int = 2024) -> np.ndarray:
@@ -43,15 +43,6 @@ def ray_tracer_like_stream(n_accesses: int, seed: int = 2024) -> np.ndarray:
     offset = np.arange(burst.size) - np.repeat(np.cumsum(lengths) - lengths, lengths)
     stream = (starts[burst] + 8 * offset) % scene_bytes + 0x10000000
     return stream[:n_accesses].astype(np.uint64)
-
-
-def best_of(repeats, function):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        result = function()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def main():

@@ -31,6 +31,7 @@ from tracer.scenes import PAPER_SCENES, load
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from naive_kdtree import build_per_node_sah_kernel  # noqa: E402  (the test-only peer)
+from timing import best_of  # noqa: E402
 
 CONFIGS = {"sah": KdTreeConfig(), "sah-noclip": KdTreeConfig(clip=False)}
 
@@ -44,15 +45,6 @@ def _scenes(quick: bool):
         yield f"tetra-{size}", "tetra", spd.tetra(size)
     for name in PAPER_SCENES:
         yield f"paper-{name}", "paper", load(name)
-
-
-def _best_of(repeats, fn):
-    best, out = math.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def main(argv=None):
@@ -81,8 +73,8 @@ def main(argv=None):
         nlogn = n * math.log2(n)
         for cname, cfg in CONFIGS.items():
             params = build_params(KdTreeConfig(**{**cfg.to_dict(), "tree_depth": default_tree_depth(n)}))
-            new_s, new = _best_of(args.repeats, lambda: _build_sah(inputs, params))
-            old_s, old = _best_of(args.repeats, lambda: build_per_node_sah_kernel(inputs, params))
+            new_s, new = best_of(args.repeats, lambda: _build_sah(inputs, params))
+            old_s, old = best_of(args.repeats, lambda: build_per_node_sah_kernel(inputs, params))
             same = bool(np.array_equal(new[0], old[0]) and np.array_equal(new[1], old[1]))
             row = {"scene": label, "family": family, "config": cname, "n": n, "nodes": int(len(new[0])),
                    "prep_seconds": prep, "new_seconds": new_s, "old_seconds": old_s,

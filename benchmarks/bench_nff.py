@@ -14,11 +14,11 @@ tessellated into ``pp 3`` triangles written to a temporary folder.
 """
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from timing import best_of
 from tracer.nff import read_nff
 
 REFERENCE = Path("/work/shared/reference/spd")
@@ -33,15 +33,6 @@ def plain_pass(path: Path) -> int:
         except ValueError:
             pass
     return numbers
-
-
-def best_of(function, repeats=5) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def patch_sphere(folder: Path, rings: int = 90, segments: int = 120) -> Path:
@@ -73,8 +64,8 @@ def main():
     print(f"{'file':<20}{'MB':>6}{'read_nff s':>12}{'split+float s':>15}{'ratio':>8}")
     for path in files:
         read_nff(path)  # warm the imports
-        reader = best_of(lambda: read_nff(path))
-        plain = best_of(lambda: plain_pass(path))
+        reader, _ = best_of(5, lambda: read_nff(path))
+        plain, _ = best_of(5, lambda: plain_pass(path))
         print(f"{path.name:<20}{path.stat().st_size / 1e6:>6.2f}{reader:>12.3f}{plain:>15.3f}{reader / plain:>8.2f}")
 
 

@@ -22,18 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from coherence.studies import study
+from timing import best_of
 from tracer.render import render
 from tracer.scenes import load
 from tracer.trace import AccessTrace, _read_meta, verify_trace
-
-
-def best_of(function, repeats=3):
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def main():
@@ -52,11 +44,11 @@ def main():
     checksums = _read_meta(path)["checksums"]
     size_mb = (trace.records.nbytes + trace.pixel_offsets.nbytes + trace.counters.nbytes) / 1e6
 
-    check = best_of(lambda: verify_trace(trace, checksums))
-    plain = best_of(lambda: [np.asarray(np.load(path / f"{name}.npy")) for name in
+    check, _ = best_of(3, lambda: verify_trace(trace, checksums))
+    plain, _ = best_of(3, lambda: [np.asarray(np.load(path / f"{name}.npy")) for name in
                              ("pixel_offsets", "records", "counters")])
     study(trace, ["S"], [8], progress=False)  # compile outside the timing
-    simulate = best_of(lambda: study(trace, ["S"], [8], progress=False), repeats=1)
+    simulate, _ = best_of(1, lambda: study(trace, ["S"], [8], progress=False))
     print(f"{args.scene} {args.size}x{args.size}: {trace.n_records:,} records, {size_mb:.0f} MB of arrays")
     print(f"integrity check (xxh3 + kinds/indices/offsets): {check:8.3f} s  ({size_mb / check:,.0f} MB/s)")
     print(f"plain np.load of the arrays                  : {plain:8.3f} s")

@@ -1,0 +1,92 @@
+"""The main job's wall time and peak memory: ``coherence report SCENE`` as a user runs it.
+
+Runs the CLI in a subprocess (so peak memory is the report's own, from
+``wait4``) three ways:
+
+- cold: an empty numba cache and an empty trace cache, as the first run
+  after a fresh install (JIT compilation, rendering, simulation);
+- trace: numba warm, trace cache empty (rendering and simulation);
+- warm: both caches warm, as a second run (simulation and output only).
+
+The warm run is repeated ``--repeats`` times and the best is kept. Every
+run writes into a fresh folder, and the warm runs' ``results.csv`` must be
+identical to the cold run's. The peer is the render alone (``coherence
+render``, warm numba, no trace cache), measured in the same session: the
+report's cost beyond rendering the scene once. Ends with one JSON line.
+
+    python benchmarks/bench_report.py [--scene balls] [--size 512] [--skip-cold]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def run(argv, env):
+    """Wall seconds and peak RSS (bytes) of one CLI run; fails loudly on a non-zero exit."""
+    with tempfile.TemporaryFile("w+") as log:  # a file, not a pipe: progress bars never block the run
+        start = time.perf_counter()
+        process = subprocess.Popen([sys.executable, "-m", "analyses", *argv], env=env, stdout=subprocess.DEVNULL,
+                                   stderr=log, text=True)
+        _, status, usage = os.wait4(process.pid, 0)
+        seconds = time.perf_counter() - start
+        process.returncode = os.waitstatus_to_exitcode(status)
+        if status != 0:
+            log.seek(0)
+            raise SystemExit(f"{' '.join(argv)} failed (status {status}):\n{log.read()[-4000:]}")
+    return seconds, usage.ru_maxrss * 1024
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scene", default="balls")
+    parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--skip-cold", action="store_true", help="leave out the run with an empty numba cache")
+    args = parser.parse_args()
+
+    figures = {"scene": args.scene, "size": args.size, "cpus": os.cpu_count()}
+    with tempfile.TemporaryDirectory(prefix="bench-report-") as scratch:
+        scratch = Path(scratch)
+        env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+        common = [args.scene, "--size", str(args.size)]
+
+        def report(label, cache, numba_cache=None):
+            out = scratch / f"out-{label}"
+            run_env = dict(env, NUMBA_CACHE_DIR=str(numba_cache)) if numba_cache else env
+            seconds, peak = run(["report", *common, "--out", str(out), "--cache", str(cache)],
+                                run_env)
+            print(f"{label:6s}: {seconds:7.1f} s  peak {peak / 2**30:5.2f} GiB", flush=True)
+            return seconds, peak, (out / "results.csv").read_bytes()
+
+        results = {}
+        if not args.skip_cold:
+            results["cold"] = report("cold", scratch / "cache-cold", scratch / "numba-empty")
+        results["trace"] = report("trace", scratch / "cache")
+        best = None
+        for index in range(args.repeats):
+            outcome = report(f"warm{index + 1}", scratch / "cache")
+            if best is None or outcome[0] < best[0]:
+                best = outcome
+        results["warm"] = best
+        reference = results["trace"][2]
+        if any(outcome[2] != reference for outcome in results.values()):
+            raise SystemExit("results.csv differs between runs: the report is not deterministic")
+        render_seconds, render_peak = run(["render", *common, "--trace", str(scratch / "render-trace")],
+                                          env)
+        print(f"peer  : render alone {render_seconds:7.1f} s  peak {render_peak / 2**30:5.2f} GiB")
+        for label, (seconds, peak, _) in results.items():
+            figures[f"{label}_seconds"] = round(seconds, 2)
+            figures[f"{label}_peak_gib"] = round(peak / 2**30, 3)
+        figures["render_seconds"] = round(render_seconds, 2)
+        figures["warm_over_render"] = round(results["warm"][0] / render_seconds, 3)
+        print(f"warm report / render alone: {figures['warm_over_render']:.2f}")
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()
