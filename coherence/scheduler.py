@@ -187,6 +187,11 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     pixel_offsets = reads.pixel_offsets
     placement = reads.placement
     line_shift = reads.line_shift
+    line_offsets = reads.lines.line_offsets
+    shared_addresses = reads.lines.addresses
+    shared_writes = reads.lines.writes
+    pixel_writes = reads.lines.pixel_writes
+    shared = line_offsets.shape[0] > 0
     compute = cost.compute
     latency = cost.latency
     task_offsets = schedule.task_offsets
@@ -305,18 +310,26 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
                 position[process] = task_offsets[task]
             pixel = task_pixels[position[process]]
             position[process] += 1
-            buffer, write_flags, n_addresses, n_writes = record_lines_and_writes(
-                records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement, line_shift, buffer,
-                write_flags)
+            if shared:  # worked out once for the whole study
+                first = line_offsets[pixel]
+                n_addresses = line_offsets[pixel + 1] - first
+                n_writes = pixel_writes[pixel]
+                addresses = shared_addresses[first:first + n_addresses]
+                flags = shared_writes[first:first + n_addresses]
+            else:
+                buffer, write_flags, n_addresses, n_writes = record_lines_and_writes(
+                    records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement, line_shift, buffer,
+                    write_flags)
+                addresses = buffer[:n_addresses]
+                flags = write_flags[:n_addresses]
             for level in range(n_levels):
                 hits_before[level] = process_counts[level, K.HITS] - process_counts[level, K.WRITE_HITS]
             misses_before = process_counts[n_levels - 1, K.MISSES] - process_counts[n_levels - 1, K.WRITE_MISSES]
             # a pixel without writes keeps the read-only (fast) path
-            cache_clock[cpu] = K.simulate_writes_into(buffer[:n_addresses],
-                                                      write_flags[:n_addresses] if n_writes else no_writes,
+            cache_clock[cpu] = K.simulate_writes_into(addresses, flags if n_writes else no_writes,
                                                       geometry, cache, cache_clock[cpu], served, record_served, work)
             memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
-            memory += _tlb_misses(tlbs, cpu, process, buffer[:n_addresses]) * tlb_miss_cycles
+            memory += _tlb_misses(tlbs, cpu, process, addresses) * tlb_miss_cycles
             cycles = compute[pixel] + memory
             out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
             out_cycles[process, MEMORY_CYCLES] += memory

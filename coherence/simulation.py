@@ -40,10 +40,11 @@ from cachesim import tlb as T
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
+from coherence.pixel_lines import PixelLines, no_pixel_lines
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
                                  RunOutputs, RunQueues, run_schedule)
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import require_int
 
 SCHEDULERS = ("shared-queue", "static")
 PLACEMENTS = ("round-robin", "neighbours")
@@ -184,12 +185,16 @@ class PixelReads(NamedTuple):
     line_shift : int
         log2 of the hierarchy's smallest line size: a record read becomes one
         access per line of that size it spans.
+    lines : coherence.pixel_lines.PixelLines
+        The same accesses worked out in advance, read instead of converting
+        each pixel's records when not empty.
     """
 
     pixel_offsets: np.ndarray
     records: np.ndarray
     placement: RecordPlacement
     line_shift: int
+    lines: PixelLines
 
 
 class PixelCost(NamedTuple):
@@ -257,7 +262,7 @@ class Run:
 
 def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed: PlacedLayout,
                  cost: CostModel, machine: Machine = Machine(), *, counter_names=None,
-                 compute: np.ndarray | None = None) -> Run:
+                 compute: np.ndarray | None = None, lines: PixelLines | None = None) -> Run:
     """Simulate one distribution of a trace on a machine.
 
     Parameters
@@ -278,6 +283,10 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         Names of the trace's counter columns (default: the tracer's).
     compute : ndarray of float64, shape (P,), optional
         Precomputed compute cycles per pixel (saves time over many runs).
+    lines : coherence.pixel_lines.PixelLines, optional
+        Every pixel's line accesses from :func:`~coherence.pixel_lines.pixel_lines`
+        for this trace, layout and the hierarchy's smallest line size (saves
+        time over many runs; the results are the same).
 
     Returns
     -------
@@ -325,6 +334,11 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     latency = np.array([level.latency for level in hierarchy.levels] + [hierarchy.memory_latency],
                        dtype=np.float64)
     line_shift = min(level.line_size for level in hierarchy.levels).bit_length() - 1
+    if lines is None:
+        lines = no_pixel_lines(line_shift)
+    elif lines.line_shift != line_shift or lines.line_offsets.shape != (n_pixels + 1,):
+        raise ValueError(f"lines are for {lines.line_offsets.shape[0] - 1} pixels of {1 << lines.line_shift}-byte "
+                         f"lines; this run needs {n_pixels} pixels of {1 << line_shift}-byte lines")
 
     out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)
     out_placement = np.zeros((n_processes, N_PLACEMENT_COLUMNS), dtype=np.int64)
@@ -332,7 +346,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
     tlbs = _cpu_tlbs(state, n_cpus, n_all)
     run_schedule(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
-                            placed.placement, line_shift),
+                            placed.placement, line_shift, lines),
                  state.geometry, caches, tlbs, PixelCost(compute, latency),
                  Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
                           distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),

@@ -19,6 +19,7 @@ from coherence.cost import CostModel, get_cost_model
 from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_counts_of
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
+from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import require_int
 from tracer.trace import COUNTER_NAMES, RecordKind
@@ -114,8 +115,12 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         first_of.setdefault(key, index)
     distinct = sorted(first_of.values())
 
+    # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
+    smallest_line = min(level.line_size for level in hierarchy.levels)
+    lines = pixel_lines(trace, placed, smallest_line, SHARED_LINES_BUDGET) if len(distinct) > 1 else None
+
     def simulate(index):
-        return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute)
+        return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute, lines=lines)
 
     workers = n_jobs or os.cpu_count() or 1
     simulated = {}

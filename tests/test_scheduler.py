@@ -9,6 +9,7 @@ from coherence.cost import CostModel
 from coherence.layout import RecordLayout, get_layout
 from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip
 from coherence.metrics import run_summary
+from coherence.pixel_lines import pixel_lines
 from coherence.simulation import Machine, simulate_run
 from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
@@ -38,6 +39,10 @@ def compare(trace, mapping, n, hierarchy, machine):
     distribution = MAPPINGS[mapping].build(trace.width, trace.height, n)
     compute = COST.compute_cycles(trace.counters, COUNTER_NAMES)
     run = simulate_run(trace, distribution, hierarchy, placed, COST, machine, compute=compute)
+    # the line accesses worked out once for a study must change nothing
+    lines = pixel_lines(trace, placed, min(level.line_size for level in hierarchy.levels))
+    shared = simulate_run(trace, distribution, hierarchy, placed, COST, machine, compute=compute, lines=lines)
+    assert shared.processes.equals(run.processes) and shared.real_cycles == run.real_cycles
     expected = reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     frame = run.processes
     for column in ("compute", "memory", "dispatch", "user", "finish"):
@@ -256,3 +261,25 @@ def test_tlb_misses_add_to_memory_cycles_only():
     assert summary["tlb_misses"] == with_tlb["tlb_misses"].sum() > 0
     assert summary["tlb_cycles"] == summary["tlb_misses"] * SMALL_TLB.miss_cycles
     assert "tlb_misses" not in run_summary(without, [level.name for level in INCLUSIVE.levels], COST.clock_hz, 1.0)
+
+
+def test_pixel_lines_are_each_pixels_converted_records():
+    from coherence.layout import record_lines_and_writes
+
+    trace = random_trace(width=8, height=6, seed=4)
+    kinds, ids = unpack(trace.records)
+    trace = AccessTrace(trace.pixel_offsets, pack(kinds, ids, np.random.default_rng(4).random(ids.size) < 0.3),
+                        trace.counters, trace.width, trace.height, {})
+    placed = placed_for()
+    lines = pixel_lines(trace, placed, 32)
+    for pixel in range(48):
+        buffer, flags, n, n_writes = record_lines_and_writes(
+            np.asarray(trace.records), trace.pixel_offsets[pixel], trace.pixel_offsets[pixel + 1], placed.placement,
+            5, np.empty(1, dtype=np.uint64), np.empty(1, dtype=np.bool_))
+        first, stop = lines.line_offsets[pixel], lines.line_offsets[pixel + 1]
+        assert lines.addresses[first:stop].tolist() == buffer[:n].tolist()
+        assert lines.writes[first:stop].tolist() == flags[:n].tolist() and lines.pixel_writes[pixel] == n_writes
+    assert pixel_lines(trace, placed, 32, budget_bytes=9 * int(lines.line_offsets[-1]) - 1) is None
+    with pytest.raises(ValueError, match="16-byte lines; this run needs 48 pixels of 32-byte lines"):
+        simulate_run(trace, MAPPINGS["S"].build(8, 6, 2), SMALL, placed, COST, Machine(n_cpus=2),
+                     lines=pixel_lines(trace, placed, 16))

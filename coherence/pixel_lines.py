@@ -1,0 +1,132 @@
+"""Every pixel's line accesses, worked out once and shared by the runs of a study.
+
+A schedule replay turns each pixel's records into line addresses
+(:func:`coherence.layout.record_lines_and_writes`) every time it renders the
+pixel: about 40% of a replay's time on balls at 512x512 without background
+load. A study replays the same trace dozens of times with one layout and one
+smallest line size, so :func:`pixel_lines` does that work once, and
+:func:`coherence.simulation.simulate_run` reads slices of the result instead.
+It costs 9 bytes per line access (address and write flag) and 16 per pixel
+(offset and write count), so a study asks for it only within
+:data:`SHARED_LINES_BUDGET`; the replay's counts are the same either way.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from coherence.layout import PlacedLayout, record_line_span
+from tracer.records import record_is_write
+
+#: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
+SHARED_LINES_BUDGET = 1 << 30
+#: Bytes per line access held: the address (8) and the write flag (1).
+BYTES_PER_LINE = 9
+
+
+class PixelLines(NamedTuple):
+    """The line accesses of every pixel, in order.
+
+    Attributes
+    ----------
+    line_offsets : ndarray of int64, shape (P + 1,)
+        Pixel ``p`` reads ``addresses[line_offsets[p]:line_offsets[p + 1]]``;
+        shape (0,) in :func:`no_pixel_lines` (convert per pixel instead).
+    addresses : ndarray of uint64, shape (M,)
+        Byte address of each line access (a multiple of ``1 << line_shift``).
+    writes : ndarray of bool, shape (M,)
+        True where the access is a write.
+    pixel_writes : ndarray of int64, shape (P,)
+        Writes among each pixel's accesses.
+    line_shift : int
+        log2 of the line size the addresses are of.
+    """
+
+    line_offsets: np.ndarray
+    addresses: np.ndarray
+    writes: np.ndarray
+    pixel_writes: np.ndarray
+    line_shift: int
+
+
+def no_pixel_lines(line_shift: int) -> PixelLines:
+    """The empty :class:`PixelLines`: a replay given it converts each pixel's records itself."""
+    empty = np.zeros(0, dtype=np.int64)
+    return PixelLines(empty, np.zeros(0, dtype=np.uint64), np.zeros(0, dtype=np.bool_), empty, int(line_shift))
+
+
+def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int | None = None) -> PixelLines | None:
+    """Line accesses of every pixel of ``trace`` at ``line_size`` bytes.
+
+    Parameters
+    ----------
+    trace : tracer.trace.AccessTrace
+    placed : PlacedLayout
+        Where the trace's records live (its records are checked against it).
+    line_size : int
+        A power of two: the smallest line size of the hierarchy replayed.
+    budget_bytes : int, optional
+        Return None, having allocated nothing large, when the result would
+        take more than this many bytes.
+
+    Returns
+    -------
+    PixelLines or None
+    """
+    if isinstance(line_size, bool) or not isinstance(line_size, (int, np.integer)) or line_size < 1 \
+            or line_size & (line_size - 1):
+        raise ValueError(f"line_size must be a power of two, got {line_size!r}")
+    line_shift = int(line_size).bit_length() - 1
+    records = np.asarray(trace.records)
+    placed.check_records(records)
+    pixel_offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
+    line_offsets = np.zeros(pixel_offsets.shape[0], dtype=np.int64)
+    _count_lines(records, pixel_offsets, placed.placement, line_shift, line_offsets)
+    n_lines = int(line_offsets[-1])
+    if budget_bytes is not None and n_lines * BYTES_PER_LINE > budget_bytes:
+        return None
+    lines = PixelLines(line_offsets, np.empty(n_lines, dtype=np.uint64), np.empty(n_lines, dtype=np.bool_),
+                       np.zeros(pixel_offsets.shape[0] - 1, dtype=np.int64), line_shift)
+    _fill_pixel_lines(records, pixel_offsets, placed.placement, lines)
+    return lines
+
+
+@njit(cache=True, nogil=True)
+def _count_lines(records, pixel_offsets, placement, line_shift, line_offsets):
+    """Cumulative line counts: ``line_offsets[p + 1]`` lines up to the end of pixel ``p``."""
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    total = 0
+    for pixel in range(pixel_offsets.shape[0] - 1):
+        for i in range(pixel_offsets[pixel], pixel_offsets[pixel + 1]):
+            first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+            total += last - first + 1
+        line_offsets[pixel + 1] = total
+
+
+@njit(cache=True, nogil=True)
+def _fill_pixel_lines(records, pixel_offsets, placement, lines):
+    """Fill ``lines`` (sized by :func:`_count_lines`) with every pixel's addresses and write flags."""
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    addresses = lines.addresses
+    writes = lines.writes
+    pixel_writes = lines.pixel_writes
+    line_shift = lines.line_shift
+    k = 0
+    for pixel in range(pixel_offsets.shape[0] - 1):
+        n_writes = 0
+        for i in range(pixel_offsets[pixel], pixel_offsets[pixel + 1]):
+            first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+            write = record_is_write(records[i])
+            if write:
+                n_writes += last - first + 1
+            for line in range(first, last + 1):
+                addresses[k] = np.uint64(line << line_shift)
+                writes[k] = write
+                k += 1
+        pixel_writes[pixel] = n_writes
