@@ -17,8 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from coherence.layout import PlacedLayout, record_line_span
-from tracer.records import record_is_write
+from coherence.layout import PlacedLayout, _fill_lines, record_line_span
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
 SHARED_LINES_BUDGET = 1 << 30
@@ -110,23 +109,8 @@ def _count_lines(records, pixel_offsets, placement, line_shift, line_offsets):
 @njit(cache=True, nogil=True)
 def _fill_pixel_lines(records, pixel_offsets, placement, lines):
     """Fill ``lines`` (sized by :func:`_count_lines`) with every pixel's addresses and write flags."""
-    record_start = placement.record_start
-    record_size = placement.record_size
-    kind_first = placement.kind_first
-    addresses = lines.addresses
-    writes = lines.writes
-    pixel_writes = lines.pixel_writes
-    line_shift = lines.line_shift
-    k = 0
+    line_offsets = lines.line_offsets
     for pixel in range(pixel_offsets.shape[0] - 1):
-        n_writes = 0
-        for i in range(pixel_offsets[pixel], pixel_offsets[pixel + 1]):
-            first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-            write = record_is_write(records[i])
-            if write:
-                n_writes += last - first + 1
-            for line in range(first, last + 1):
-                addresses[k] = np.uint64(line << line_shift)
-                writes[k] = write
-                k += 1
-        pixel_writes[pixel] = n_writes
+        first = line_offsets[pixel]
+        _, lines.pixel_writes[pixel] = _fill_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement,
+                                                   lines.line_shift, lines.addresses[first:], lines.writes[first:])
