@@ -96,7 +96,7 @@ def simulate_stream(addresses, geometry, state, clock, served_by, record):
     return simulate_into(addresses, geometry, state, clock, served_by, record, chunk_buffers())
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     """:func:`simulate_stream` with caller-owned work buffers.
 
@@ -111,7 +111,7 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
                                record, work)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, record, work):
     """:func:`simulate_into` for a stream of reads and writes.
 
