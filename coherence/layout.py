@@ -367,13 +367,7 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
     The lines are counted first and the buffers grown once, before they are
     filled: a fill loop that may replace its buffer runs several times slower.
     """
-    record_start = placement.record_start
-    record_size = placement.record_size
-    kind_first = placement.kind_first
-    needed = 0
-    for i in range(start, stop):
-        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-        needed += last - first + 1
+    needed = _count_lines(records, start, stop, placement, line_shift)
     if needed > buffer.shape[0]:
         size = max(needed, 2 * buffer.shape[0])  # exact for an empty buffer, else room to spare
         buffer = np.empty(size, dtype=np.uint64)
@@ -381,6 +375,19 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
             writes = np.empty(size, dtype=np.bool_)
     count, n_writes = _fill_lines(records, start, stop, placement, line_shift, buffer, writes)
     return buffer, writes, count, n_writes
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _count_lines(records, start, stop, placement, line_shift):
+    """How many line accesses ``records[start:stop]`` make."""
+    record_start = placement.record_start
+    record_size = placement.record_size
+    kind_first = placement.kind_first
+    needed = 0
+    for i in range(start, stop):
+        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
+        needed += last - first + 1
+    return needed
 
 
 @njit(cache=True, nogil=True)

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from coherence.layout import PlacedLayout, _fill_lines, record_line_span
+from coherence.layout import PlacedLayout, _count_lines, _fill_lines
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
 SHARED_LINES_BUDGET = 1 << 30
@@ -82,7 +82,7 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     placed.check_records(records)
     pixel_offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
     line_offsets = np.zeros(pixel_offsets.shape[0], dtype=np.int64)
-    _count_lines(records, pixel_offsets, placed.placement, line_shift, line_offsets)
+    _pixel_line_offsets(records, pixel_offsets, placed.placement, line_shift, line_offsets)
     n_lines = int(line_offsets[-1])
     if budget_bytes is not None and n_lines * BYTES_PER_LINE > budget_bytes:
         return None
@@ -93,22 +93,17 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
 
 
 @njit(cache=True, nogil=True)
-def _count_lines(records, pixel_offsets, placement, line_shift, line_offsets):
+def _pixel_line_offsets(records, pixel_offsets, placement, line_shift, line_offsets):
     """Cumulative line counts: ``line_offsets[p + 1]`` lines up to the end of pixel ``p``."""
-    record_start = placement.record_start
-    record_size = placement.record_size
-    kind_first = placement.kind_first
     total = 0
     for pixel in range(pixel_offsets.shape[0] - 1):
-        for i in range(pixel_offsets[pixel], pixel_offsets[pixel + 1]):
-            first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-            total += last - first + 1
+        total += _count_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement, line_shift)
         line_offsets[pixel + 1] = total
 
 
 @njit(cache=True, nogil=True)
 def _fill_pixel_lines(records, pixel_offsets, placement, lines):
-    """Fill ``lines`` (sized by :func:`_count_lines`) with every pixel's addresses and write flags."""
+    """Fill ``lines`` (sized by :func:`_pixel_line_offsets`) with every pixel's addresses and write flags."""
     line_offsets = lines.line_offsets
     for pixel in range(pixel_offsets.shape[0] - 1):
         first = line_offsets[pixel]
