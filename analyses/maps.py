@@ -59,3 +59,25 @@ def plot_loss_lines(df, x: str, mapping_column: str = "mapping", ax=None):
     ax.set_ylabel("efficiency lost")
     ax.legend(fontsize=7, ncol=2)
     return ax
+
+
+def plot_texel_misses(df, level: str = "L1", x: str = "texture_layout", ax=None):
+    """Texel misses per texel read at one cache level, against the texel order, per mapping.
+
+    ``df`` holds rows of :func:`analyses.whatif.run_whatif` on a textured
+    scene (columns ``x``, ``mapping`` and ``texel_<level>_misses_per_access``),
+    for one value of every other grid parameter.
+    """
+    ax = _axes(ax, (6, 4))
+    column = f"texel_{level}_misses_per_access"
+    positions = {value: index for index, value in enumerate(dict.fromkeys(df[x]))}
+    mappings = list(dict.fromkeys(df["mapping"]))
+    width = 0.8 / max(1, len(mappings))
+    for k, mapping in enumerate(mappings):
+        rows = df[df["mapping"] == mapping]
+        ax.bar([positions[v] - 0.4 + (k + 0.5) * width for v in rows[x]], rows[column], width, label=mapping)
+    ax.set_xticks(list(positions.values()), [str(value) for value in positions])
+    ax.set_xlabel(x)
+    ax.set_ylabel(f"{level} misses per texel read")
+    ax.legend(fontsize=7, ncol=3)
+    return ax

@@ -134,16 +134,17 @@ def _source_digest() -> str:
 
 def _scene_identity(name_or_path) -> tuple[str, str]:
     """(short label, identity string) of a scene name or file."""
-    from tracer.study import PAPER_SCENES, canonical_scene_name
+    from tracer.scenes import NAMED_SCENES
+    from tracer.study import canonical_scene_name
 
     text = os.fspath(name_or_path)
     lowered = canonical_scene_name(text)
-    if lowered in PAPER_SCENES and not isinstance(name_or_path, Path):
+    if lowered in NAMED_SCENES and not isinstance(name_or_path, Path):
         return lowered, f"name:{lowered}"
     path = Path(text)
     if not path.is_file():
         if path.suffix.lower() not in (".nff", ".obj"):
-            raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(PAPER_SCENES)} "
+            raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(NAMED_SCENES)} "
                              "or a path to a .nff or .obj file")
         raise FileNotFoundError(f"no such scene file: {text!r}")
     content = hashlib.sha256(path.read_bytes()).hexdigest()

@@ -18,13 +18,19 @@ Grid parameters (names as in flags and TOML files):
 ``compute_scale``      factor on every cost model cycle count
 ``cost``               a cost preset (``alpha8400``, ``modern``)
 ``layout``             a memory layout preset (``compact``, ``alpha1997``)
+``texture_layout``     texel order: ``linear``, ``tiled<k>``, ``morton``,
+                       ``blocked<k>x<s>`` (:mod:`coherence.texture_layout`)
 ``scene_size``         SPD size factor of the scene (balls, tetra, shell only)
 ``n_processes``        processes; ``n_cpus``, ``background`` the machine
 =====================  ========================================================
 
 Each row of the result says, for one point, mapping and process count, how
 much efficiency was lost to imbalance and to coherence and which was larger
-(``verdict``: ``"balance"`` or ``"coherence"``).
+(``verdict``: ``"balance"`` or ``"coherence"``). On a textured scene each
+row also says, per cache level, how often a texel read missed
+(``texel_<level>_misses_per_access``) and what share of the level's misses
+were texels (``texture_<level>_miss_share``), from each process's pixels on
+a cold hierarchy of its own (:mod:`coherence.kind_misses`).
 """
 from __future__ import annotations
 
@@ -44,8 +50,8 @@ from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.validate import require_int
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
-SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "scene_size", "n_processes",
-          "n_cpus", "background", "line_size")
+SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
+          "n_processes", "n_cpus", "background", "line_size")
 METRICS = ("speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
            "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
 _UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
@@ -199,6 +205,10 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 
         cost = replace(cost, **{name: getattr(cost, name) * scale for name in OPERATIONS})
     layout = get_layout(point.get("layout", study.layout))
+    if "texture_layout" in point:
+        from coherence.texture_layout import TextureLayout
+
+        layout = layout.with_texels(TextureLayout.from_label(point["texture_layout"]))
     machine = Machine(n_cpus=int(point.get("n_cpus", study.n_cpus)),
                       background_load=int(point.get("background", study.background)))
     n_processes = int(point.get("n_processes", study.n_processes))
@@ -221,10 +231,30 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     runs = result.runs[result.runs["n_processes"] == n_processes]
     level_columns = [c for c in runs.columns if c.endswith(("_hit_rate", "_misses_per_ray"))]
     table = runs[["mapping", "n_processes", *METRICS, *level_columns]].copy()
+    if trace.metadata.get("textures"):
+        texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)
+                                for mapping in table["mapping"]], index=table.index)
+        table = pd.concat([table, texture], axis=1)
     for key, value in reversed(list(point.items())):
         table.insert(0, key, value if not isinstance(value, (list, dict)) else str(value))
     table["verdict"] = np.where(table["coherence_loss"] > table["imbalance_loss"], "coherence", "balance")
     return table.reset_index(drop=True)
+
+
+def _texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost) -> dict:
+    """Texel miss rates and shares per level of one mapping (see the module docstring)."""
+    from coherence.kind_misses import misses_by_kind, texture_summary
+    from coherence.mappings import get_mapping
+    from coherence.simulation import Machine, simulate_run
+    from coherence.studies import place_layout
+
+    placed = place_layout(layout, trace, scene)
+    distribution = get_mapping(mapping).build(trace.width, trace.height, n_processes)
+    owner = None
+    if distribution.dynamic:  # who rendered which block: from a run on dedicated CPUs
+        owner = simulate_run(trace, distribution, hierarchy, placed, cost,
+                             Machine(n_cpus=n_processes, background_load=0)).task_owner
+    return texture_summary(misses_by_kind(trace, placed, hierarchy, distribution, owner))
 
 
 def run_whatif(study: WhatIf, *, cache_dir=None, dask: str | None = None, n_jobs: int | None = None,
@@ -350,7 +380,7 @@ def save_whatif(table: pd.DataFrame, study: WhatIf, folder, curves: pd.DataFrame
     from matplotlib.figure import Figure
 
     from analyses.html import figure_png
-    from analyses.maps import plot_loss_lines, plot_loss_map
+    from analyses.maps import plot_loss_lines, plot_loss_map, plot_texel_misses
     from coherence.provenance import provenance
     from rtcommon.files import write_files_atomic
 
@@ -363,7 +393,19 @@ def save_whatif(table: pd.DataFrame, study: WhatIf, folder, curves: pd.DataFrame
                                     n_cpus=study.n_cpus, background=study.background,
                                     grid={key: [str(v) for v in values] for key, values in study.grid.items()}))
     keys = list(study.grid)
-    if len(keys) >= 2:
+    if "texture_layout" in keys and "texel_L1_misses_per_access" in table.columns:
+        others = [key for key in keys if key != "texture_layout"]
+        panels = list(dict.fromkeys(table[others[0]])) if others else [None]
+        figure = Figure(figsize=(5.5 * len(panels), 4.2))
+        axes = figure.subplots(1, len(panels), squeeze=False)
+        for ax, value in zip(axes[0], panels):
+            rows = table if value is None else table[table[others[0]] == value]
+            if len(others) > 1:
+                rows = rows[(rows[others[1:]] == rows[others[1:]].iloc[0]).all(axis=1)]
+            plot_texel_misses(rows, ax=ax)
+            if value is not None:
+                ax.set_title(f"{others[0]} = {value}", fontsize=10)
+    elif len(keys) >= 2:
         mappings = list(dict.fromkeys(table["mapping"]))
         figure = Figure(figsize=(5.5 * len(mappings), 4.5))
         axes = figure.subplots(1, len(mappings), squeeze=False)
@@ -464,4 +506,8 @@ BUILTIN = {
     "assoc": WhatIf(name="assoc", grid={"L1.assoc": [1, 2, 4, 8, "full"]}),
     "scene-size": WhatIf(name="scene-size", grid={"scene_size": [2, 3, 4], "L3.size": [262144, 1048576, 4194304]}),
     "modern": WhatIf(name="modern", grid={"hierarchy": ["alpha21164", "modern"], "cost": ["alpha8400", "modern"]}),
+    # the study's future work: texel order x image split x first-level cache size, on a textured scene
+    "texture": WhatIf(name="texture", scene="balls-textured", mappings=("S", "P", "R", "B", "DB", "hilbert"),
+                      grid={"texture_layout": ["linear", "tiled4", "morton", "blocked4x8"],
+                            "L1.size": [8192, 32768, 131072]}),
 }

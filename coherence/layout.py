@@ -32,9 +32,18 @@ hit record  16 [8]: distance, element              72 [8]: t, point, normal, obj
 shading     36 [4]: hit point, normal, colour      96 [8]: light and reflected directions,
 temps       sum                                    colour, three dot products
 frame buf.  12 [4]: float RGB                      3 [1]: 24-bit RGB pixel
+texel       4 [4]: RGBA8                           4 [4]: RGBA8
+texture     32 [8]: texel pointer, sizes, levels   64 [8]: texel pointer, sizes, levels,
+                                                   level pointers, filter, wrap modes
 ==========  =====================================  ==========================================
 
-The last four kinds are the tracer's own per-ray data, logged only by the
+Texels are not packed in index order: the layout's
+:class:`~coherence.texture_layout.TextureLayout` (``MemoryLayout.texels``:
+row-major by default; tiled, Morton or blocked) places them, see
+:meth:`MemoryLayout.place`. A custom layout that leaves ``texel`` and
+``texture`` out gets the compact sizes.
+
+Ray stack to frame buffer are the tracer's own per-ray data, logged only by the
 ``study1997`` workload (:mod:`tracer.workload`). The ``alpha1997`` sizes are
 those of ``docs/memory_image.md``, where every struct is spelled out with its
 reasons; they were fixed before any fitting. The study's code is not public:
@@ -48,6 +57,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from coherence.texture_layout import TextureLayout
 from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
@@ -82,6 +92,10 @@ class RecordLayout:
             raise ValueError(f"RecordLayout.align must be a power of two, got {self.align}")
 
 
+# what a layout that does not name the texture kinds gets (the compact sizes)
+_TEXTURE_DEFAULTS = {"texel": RecordLayout(4, 4), "texture": RecordLayout(32, 8)}
+
+
 @dataclass(frozen=True)
 class MemoryLayout:
     """Record sizes per kind and where the regions start.
@@ -91,21 +105,30 @@ class MemoryLayout:
     records : dict of str to RecordLayout
         One entry per :class:`tracer.trace.RecordKind` name (lower case:
         ``kd_node``, ``index_entry``, ``sphere``, ``triangle``, ``polygon``,
-        ``patch``, ``cone``, ``material``, ``light``).
+        ``patch``, ``cone``, ``material``, ``light``, ``ray_stack``,
+        ``hit_record``, ``shading_temp``, ``frame_buffer``, and optionally
+        ``texel`` and ``texture``, which default to 4 [4] and 32 [8] bytes).
     base : int
         Address of the first region.
     region_align : int
         Each kind's region starts on a multiple of this (a power of two).
     name : str
+    texels : TextureLayout
+        The order of texels in their region (row-major by default).
     """
 
     records: dict = field(default_factory=dict)
     base: int = 0x10000000
     region_align: int = 4096
     name: str = "custom"
+    texels: TextureLayout = field(default_factory=TextureLayout)
 
     def __post_init__(self):
         expected = {kind.name.lower() for kind in RecordKind}
+        if isinstance(self.records, dict):
+            object.__setattr__(self, "records", {**_TEXTURE_DEFAULTS, **self.records})
+        if not isinstance(self.texels, TextureLayout):
+            raise ValueError(f"MemoryLayout.texels must be a TextureLayout, got {self.texels!r}")
         given = set(self.records)
         if given != expected:
             missing = sorted(expected - given)
@@ -133,13 +156,27 @@ class MemoryLayout:
         records = {name: RecordLayout(record.size * int(factor), record.align, record.per_vertex * int(factor))
                    for name, record in self.records.items()}
         return MemoryLayout(records=records, base=self.base, region_align=self.region_align,
-                            name=self.name if factor == 1 else f"{self.name} x{int(factor)}")
+                            name=self.name if factor == 1 else f"{self.name} x{int(factor)}", texels=self.texels)
+
+    def with_texels(self, texels: TextureLayout) -> "MemoryLayout":
+        """This layout with its texels in the order of ``texels``."""
+        return MemoryLayout(records=dict(self.records), base=self.base, region_align=self.region_align,
+                            name=self.name, texels=texels)
+
+    def _texel_starts(self, count: int, stride: int, textures):
+        """Offsets of ``count`` texels from their region's start, and the region's bytes."""
+        if textures is None:
+            raise ValueError("the layout needs the textures' level sizes (textures=...) to place texels")
+        offsets = self.texels.texel_offsets(textures)
+        if offsets.shape[0] != count:
+            raise ValueError(f"record_counts has {count} texels but the textures' levels hold {offsets.shape[0]}")
+        return offsets * stride, (int(offsets.max()) + 1) * stride
 
     def record(self, kind: RecordKind | str) -> RecordLayout:
         key = kind.name.lower() if isinstance(kind, RecordKind) else str(kind).lower()
         return self.records[key]
 
-    def place(self, record_counts, vertex_counts=None) -> "PlacedLayout":
+    def place(self, record_counts, vertex_counts=None, textures=None) -> "PlacedLayout":
         """Addresses of every record of a scene.
 
         Parameters
@@ -149,6 +186,10 @@ class MemoryLayout:
         vertex_counts : dict of RecordKind or str to array of int, optional
             Vertices of each polygon / patch, shape (count,); without it every
             polygon and patch is taken to have 4 vertices.
+        textures : sequence of sequence of (int, int), optional
+            Each texture's mip levels as ``(width, height)``, finest first (a
+            trace's ``textures`` metadata); needed when there are texels. The
+            texels are then placed by :attr:`texels`, each at its aligned size.
 
         Returns
         -------
@@ -172,12 +213,17 @@ class MemoryLayout:
                 n_vertices = np.full(count, 4, dtype=np.int64)
             size = np.full(count, record.size, dtype=np.int64) + record.per_vertex * n_vertices
             stride = (size + record.align - 1) // record.align * record.align
-            start = address + np.concatenate(([0], np.cumsum(stride)[:-1])).astype(np.int64) if count else \
-                np.zeros(0, dtype=np.int64)
+            if kind == RecordKind.TEXEL and count:
+                start, region = self._texel_starts(count, int(stride[0]), textures)
+                start = start + address
+            else:
+                start = address + np.concatenate(([0], np.cumsum(stride)[:-1])).astype(np.int64) if count else \
+                    np.zeros(0, dtype=np.int64)
+                region = int(stride.sum())
             starts.append(start)
             sizes.append(size)
             kind_first[kind + 1] = kind_first[kind] + count
-            address = _round_up(address + int(stride.sum()), self.region_align)
+            address = _round_up(address + region, self.region_align)
         return PlacedLayout(self, np.concatenate(starts), np.concatenate(sizes), kind_first, address)
 
 
@@ -432,6 +478,7 @@ def _compact() -> MemoryLayout:
         "cone": RecordLayout(32, 16), "material": RecordLayout(32, 16), "light": RecordLayout(24, 8),
         "ray_stack": RecordLayout(44, 4), "hit_record": RecordLayout(16, 8),
         "shading_temp": RecordLayout(36, 4), "frame_buffer": RecordLayout(12, 4),
+        "texel": RecordLayout(4, 4), "texture": RecordLayout(32, 8),
     })
 
 
@@ -444,6 +491,7 @@ def _alpha1997() -> MemoryLayout:
         "cone": RecordLayout(160, 8), "material": RecordLayout(88, 8), "light": RecordLayout(48, 8),
         "ray_stack": RecordLayout(96, 8), "hit_record": RecordLayout(72, 8),
         "shading_temp": RecordLayout(96, 8), "frame_buffer": RecordLayout(3, 1),
+        "texel": RecordLayout(4, 4), "texture": RecordLayout(64, 8),
     })
 
 

@@ -51,7 +51,8 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
 
     Record counts come from the trace (its metadata, or the records read);
     with ``scene``, polygons and patches get their true vertex counts (else
-    4 each).
+    4 each). Texels are placed by the levels in the trace's ``textures``
+    metadata.
     """
     counts = record_counts_of(trace)
     vertices = {}
@@ -63,7 +64,8 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
                                  "is it the trace of this scene?")
             counts[kind] = sizes.size
             vertices[kind] = sizes
-    return layout.place(counts, vertices)
+    textures = trace.metadata.get("textures") if hasattr(trace, "metadata") else None
+    return layout.place(counts, vertices, textures)
 
 
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,

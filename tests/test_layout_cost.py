@@ -47,7 +47,7 @@ def test_addresses_equal_reference(name, line_size):
     rng = np.random.default_rng(3)
     counts = {kind: int(rng.integers(1, 50)) for kind in RecordKind}
     vertices = {RecordKind.POLYGON: rng.integers(3, 12, counts[RecordKind.POLYGON])}
-    placed = get_layout(name).place(counts, vertices)
+    placed = get_layout(name).place(counts, vertices, [[(counts[RecordKind.TEXEL], 1)]])
     kinds = rng.integers(0, len(RecordKind), 2000)
     indices = np.array([rng.integers(0, counts[RecordKind(k)]) for k in kinds])
     records = pack(kinds, indices)
@@ -160,7 +160,7 @@ def test_record_lines_and_writes_flag_every_line_of_a_written_record():
     from tracer.records import pack
 
     rng = np.random.default_rng(11)
-    placed = get_layout("alpha1997").place({kind: 50 for kind in RecordKind})
+    placed = get_layout("alpha1997").place({kind: 50 for kind in RecordKind}, textures=[[(10, 5)]])
     kinds = rng.integers(0, len(RecordKind), 400)
     ids = rng.integers(0, 50, 400)
     writes = rng.random(400) < 0.3

@@ -39,7 +39,8 @@ def test_counter_names_follow_the_enum():
     assert COUNTER_NAMES[Counter.TESTS_SPHERE + 4] == "tests_cone"
     assert COUNTER_NAMES[Counter.PIXEL_WRITES] == "pixel_writes"
     assert COUNTER_NAMES[Counter.ROOT_TESTS] == "root_tests"
-    assert len(COUNTER_NAMES) == 23
+    assert COUNTER_NAMES[Counter.TEXEL_READS] == "texel_reads"
+    assert len(COUNTER_NAMES) == 25
 
 
 def test_every_kind_has_its_counter():

@@ -31,7 +31,7 @@ def placed_for(sphere_bytes=None):
     layout = get_layout("alpha1997")
     if sphere_bytes is not None:
         layout = replace(layout, records={**layout.records, "sphere": RecordLayout(sphere_bytes, sphere_bytes)})
-    return layout.place({kind: 60 for kind in RecordKind})
+    return layout.place({kind: 60 for kind in RecordKind}, textures=[[(60, 1)]])
 
 
 def compare(trace, mapping, n, hierarchy, machine):

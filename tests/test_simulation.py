@@ -21,7 +21,7 @@ from trace_factory import SMALL, random_trace
 
 
 def placed_for(trace):
-    return get_layout("alpha1997").place({kind: 60 for kind in RecordKind})
+    return get_layout("alpha1997").place({kind: 60 for kind in RecordKind}, textures=[[(60, 1)]])
 
 
 def distribution(trace, owner_of_task, tasks, n, dynamic=False, dispatch=0.0):
@@ -153,7 +153,7 @@ from tracer.trace import RecordKind
 from trace_factory import SMALL
 warnings.simplefilter("ignore")
 trace = random_trace(width=8, height=4, seed=5)
-placed = get_layout("compact").place({{kind: 60 for kind in RecordKind}})
+placed = get_layout("compact").place({{kind: 60 for kind in RecordKind}}, textures=[[(60, 1)]])
 for name, n in (("S", 6), ("R", 7), ("P", 40), ("B", 33), ("DB", 3), ("S", 33)):
     run = simulate_run(trace, get_mapping(name).build(8, 4, n), SMALL, placed, CostModel(), Machine(n_cpus=4))
     print(name, n, int(run.processes["pixels"].sum()))

@@ -14,7 +14,7 @@ import re
 
 import numpy as np
 
-from tracer.scene import Camera, ElementKind, Material, Scene
+from tracer.scene import Camera, ElementKind, Material, Scene, untextured
 
 TOKEN = re.compile(r"\S+")
 DEPTH_PRAGMA = re.compile(r"^[ \t]*#[ \t]*max_depth[ \t]+([0-9]+)[ \t]*$", re.MULTILINE)
@@ -336,6 +336,7 @@ def assemble(parts: SceneParts, name: str, max_depth: int) -> Scene:
         material_ks=np.ascontiguousarray(materials[:, 4]), material_shine=np.ascontiguousarray(materials[:, 5]),
         material_t=np.ascontiguousarray(materials[:, 6]), material_ior=np.ascontiguousarray(materials[:, 7]),
         light_position=np.ascontiguousarray(lights[:, :3]), light_color=np.ascontiguousarray(lights[:, 3:]),
+        **untextured(len(materials), len(triangles), len(polygons), len(patches)),
     )
 
 

@@ -25,13 +25,13 @@ KIND_SHIFT = 28
 WRITE_SHIFT = 27
 WRITE_FLAG = 1 << WRITE_SHIFT
 INDEX_MASK = WRITE_FLAG - 1
-FORMAT_VERSION = 2  # 2: counter ROOT_TESTS added
+FORMAT_VERSION = 3  # 2: counter ROOT_TESTS added; 3: texture kinds and counters
 
 # The budget of the 16 record kinds (4 bits), planned once for every workload:
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
 #   9-12  in use: the study-era tracer's own data (issue 12): ray-stack entry, hit
 #         record, shading temporaries, frame-buffer pixel;
-#   13-14 textures (issue 15): texel (a global texel offset across every
+#   13-14 in use: textures (issue 15): texel (a global texel number across every
 #         texture and mip level, 27 bits = 128 M texels) and texture header;
 #   15    spare.
 # A kind is added to RecordKind when its writer lands, with its counter.
@@ -55,6 +55,10 @@ class RecordKind(enum.IntEnum):
     HIT_RECORD = 10    #: the hit record of a ray tree level: written by a trace, read by shading
     SHADING_TEMP = 11  #: shading temporaries of a level (hit point, normal, colour sum)
     FRAME_BUFFER = 12  #: a pixel of the frame buffer, written once
+    # textures (tracer.texture); index: the texel's global number (textures one
+    # after another, each level after level, each level row-major), the texture
+    TEXEL = 13    #: one texel read by a texture lookup's filter
+    TEXTURE = 14  #: a texture's header (size, levels, where its texels are), read once per lookup
 
 
 N_KINDS = len(RecordKind)
@@ -88,6 +92,8 @@ class Counter(enum.IntEnum):
     #: intersection tests that took a square root (a sphere or cone whose
     #: quadratic has real roots); no record of its own, a subset of the tests
     ROOT_TESTS = 22
+    TEXTURE_LOOKUPS = 23  #: filtered texture lookups (each reads its texture's header once)
+    TEXEL_READS = 24      #: texels the lookups' filters read
 
 
 # Column names of the counters, in column order (the on-disk format's names).
@@ -109,6 +115,8 @@ COUNTER_OF_KIND = {
     RecordKind.HIT_RECORD: "hit_record_accesses",
     RecordKind.SHADING_TEMP: "shading_temp_accesses",
     RecordKind.FRAME_BUFFER: "pixel_writes",
+    RecordKind.TEXEL: "texel_reads",
+    RecordKind.TEXTURE: "texture_lookups",
 }
 
 

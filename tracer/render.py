@@ -47,10 +47,12 @@ from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
 from tracer.render_types import (N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, N_RAY_COLUMNS, LightColumn, MaterialColumn,
                                  RayColumn, RayType, RenderParams, SampleOutputs, SampleScratch, Shading, WorkItems)
-from tracer.scene import Scene
+from tracer.scene import ElementKind, Scene
+from tracer.texture import MipChains, TextureFilter, filtered_lookup, mip_chains
 from rtcommon.versions import package_versions
 from tracer.trace import AccessTrace, TraceWriter
 from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
+from tracer.uv import surface_uv, uv_maps
 from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
@@ -145,9 +147,9 @@ def _log_access(rec, limit, pos, cnt, counter, record):
 
 
 @njit(cache=True, error_model="numpy")
-def _push_ray(rays, n, ray, weight, depth, typ):
-    # put a ray of colour weight (r, g, b) on the ray stack; returns the new
-    # stack size
+def _push_ray(rays, n, ray, weight, depth, typ, cone):
+    # put a ray of colour weight (r, g, b) and ray cone (width, spread) on
+    # the ray stack; returns the new stack size
     ox, oy, oz, dx, dy, dz = ray
     rays[n, RayColumn.ORIGIN] = ox
     rays[n, RayColumn.ORIGIN + 1] = oy
@@ -160,7 +162,27 @@ def _push_ray(rays, n, ray, weight, depth, typ):
     rays[n, RayColumn.WEIGHT + 2] = weight[2]
     rays[n, RayColumn.DEPTH] = depth
     rays[n, RayColumn.TYPE] = np.int64(typ)
+    rays[n, RayColumn.CONE_WIDTH] = cone[0]
+    rays[n, RayColumn.CONE_SPREAD] = cone[1]
     return n + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _texture_colour(shading, material, kind, element, geo, hit, footprint, log, pos, cnt):
+    # the texture colour of a material at a hit: (u, v) of the surface, and
+    # the level of detail of a ray cone of width footprint[0] meeting the
+    # surface at cosine footprint[1]; returns r, g, b and the next position
+    hx, hy, hz = hit
+    cone_width, cosine = footprint
+    texture = shading.material_texture[material]
+    scale = shading.material_uv_scale[material]
+    u, v = surface_uv(kind, element, geo.element_index[element], geo, shading, hx, hy, hz)
+    finest = shading.texture_level[texture]
+    texels_per_unit = scale * math.sqrt(shading.density[element] * shading.level_width[finest]
+                                        * shading.level_height[finest])
+    footprint_texels = cone_width * texels_per_unit / max(abs(cosine), 1e-6)
+    detail = math.log2(footprint_texels) if footprint_texels > 0.0 else 0.0
+    return filtered_lookup(shading, texture, u * scale, v * scale, detail, shading.texture_filter, log, pos, cnt)
 
 
 @njit(cache=True, error_model="numpy")
@@ -184,10 +206,11 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
     lights = shading.lights
     ambient = shading.ambient
     background = shading.background
+    material_texture = shading.material_texture
     cr = 0.0
     cg = 0.0
     cb = 0.0
-    n = _push_ray(rays, 0, primary, (1.0, 1.0, 1.0), 1.0, RayType.PRIMARY)
+    n = _push_ray(rays, 0, primary, (1.0, 1.0, 1.0), 1.0, RayType.PRIMARY, (0.0, params.pixel_spread))
     if own:
         pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
                           make_write_record(RecordKind.RAY_STACK, 0))
@@ -203,6 +226,7 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
         wr, wg, wb = rays[n, RayColumn.WEIGHT], rays[n, RayColumn.WEIGHT + 1], rays[n, RayColumn.WEIGHT + 2]
         depth = np.int64(rays[n, RayColumn.DEPTH])
         typ = np.int64(rays[n, RayColumn.TYPE])
+        spread = rays[n, RayColumn.CONE_SPREAD]
         tmin = params.hither if typ == RayType.PRIMARY else eps
         rays_counter, hits_counter = _ray_counters(typ)
         cnt[rays_counter] += 1
@@ -223,6 +247,7 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
             pos = _log_access(rec, limit, pos, cnt, Counter.SHADING_TEMP_ACCESSES,
                               make_write_record(RecordKind.SHADING_TEMP, level))
         hx, hy, hz = rox + t * rdx, roy + t * rdy, roz + t * rdz
+        cone_width = rays[n, RayColumn.CONE_WIDTH] + spread * t
         k = np.int64(geo.element_kind[e])
         nx, ny, nz = element_normal(k, geo.element_index[e], geo, hx, hy, hz)
         m = shading.element_material[e]
@@ -233,6 +258,12 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
         mr, mg, mb = mats[m, MaterialColumn.COLOR], mats[m, MaterialColumn.COLOR + 1], mats[m, MaterialColumn.COLOR + 2]
         kd, ks = mats[m, MaterialColumn.KD], mats[m, MaterialColumn.KS]
         shine, tr, ior = mats[m, MaterialColumn.SHINE], mats[m, MaterialColumn.TRANSMIT], mats[m, MaterialColumn.IOR]
+        if material_texture[m] >= 0:
+            tex_r, tex_g, tex_b, pos = _texture_colour(shading, m, k, e, geo, (hx, hy, hz),
+                                                       (cone_width, rdx * nx + rdy * ny + rdz * nz), log, pos, cnt)
+            mr *= tex_r
+            mg *= tex_g
+            mb *= tex_b
         lr = ambient * kd * mr
         lg = ambient * kd * mg
         lb = ambient * kd * mb
@@ -279,6 +310,11 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
         if depth >= params.max_depth:
             continue
         ddn = rdx * nx + rdy * ny + rdz * nz
+        # the secondary rays' cone: a sphere's curvature spreads it (ray cones,
+        # Akenine-Moller et al. 2019), a plane keeps its spread
+        if k == ElementKind.SPHERE:
+            spread += 2.0 * cone_width / geo.sphere_radius[geo.element_index[e]]
+        cone = (cone_width, spread)
         if tr > 0.0:
             # Snell; entering when the ray meets the front of the normal
             if ddn < 0.0:
@@ -297,14 +333,14 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
                     pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
                                       make_write_record(RecordKind.RAY_STACK, n))
                 n = _push_ray(rays, n, _normalized(refracted),
-                              (wr * tr, wg * tr, wb * tr), depth + 1, RayType.REFRACTION)
+                              (wr * tr, wg * tr, wb * tr), depth + 1, RayType.REFRACTION, cone)
         if ks > 0.0:
             reflected = Ray(hx, hy, hz, rdx - 2.0 * ddn * nx, rdy - 2.0 * ddn * ny, rdz - 2.0 * ddn * nz)
             if own:
                 pos = _log_access(rec, limit, pos, cnt, Counter.RAY_STACK_ACCESSES,
                                   make_write_record(RecordKind.RAY_STACK, n))
             n = _push_ray(rays, n, _normalized(reflected),
-                          (wr * ks, wg * ks, wb * ks), depth + 1, RayType.REFLECTION)
+                          (wr * ks, wg * ks, wb * ks), depth + 1, RayType.REFLECTION, cone)
     return cr, cg, cb, pos
 
 
@@ -361,7 +397,7 @@ def _render_kernel(work, records, cam, params, tree, geo, shading, out):
 # --------------------------------------------------------------------------
 
 
-def _shading(scene: Scene) -> Shading:
+def _shading(scene: Scene, texture_filter: TextureFilter = TextureFilter.TRILINEAR) -> Shading:
     """Check ``scene``'s materials and gather what shading reads.
 
     Lights are scaled by SPD's rule (``sqrt(L) / (2 L)`` for ``L`` lights,
@@ -382,7 +418,27 @@ def _shading(scene: Scene) -> Shading:
                                                    scene.light_color.reshape(-1, 3) * scale])
                                   .reshape(-1, N_LIGHT_COLUMNS))
     background = np.ascontiguousarray(np.asarray(scene.background, dtype=np.float64).reshape(3))
-    return Shading(emat, mats, lights, scale, background)
+    return Shading(emat, mats, lights, scale, background, *_texturing(scene, emat, len(mats), texture_filter))
+
+
+def _texturing(scene: Scene, element_material: np.ndarray, n_materials: int, texture_filter) -> tuple:
+    """Check ``scene``'s textures and gather what textured shading reads (the
+    texture fields of :class:`Shading`, in order)."""
+    material_texture = np.asarray(scene.material_texture, dtype=np.int64)
+    uv_scale = np.asarray(scene.material_uv_scale, dtype=np.float64)
+    if material_texture.size == 0:  # a scene without the texture fields
+        material_texture = np.full(n_materials, -1, dtype=np.int64)
+        uv_scale = np.ones(n_materials)
+    if material_texture.shape != (n_materials,) or uv_scale.shape != (n_materials,):
+        raise ValueError(f"Scene.material_texture and material_uv_scale must have shape ({n_materials},)")
+    if n_materials and (material_texture.min() < -1 or material_texture.max() >= scene.n_textures):
+        raise ValueError(f"Scene.material_texture names a texture that does not exist "
+                         f"(the scene has {scene.n_textures})")
+    if not (np.isfinite(uv_scale).all() and (uv_scale > 0).all()):
+        raise ValueError("Scene.material_uv_scale must be positive and finite")
+    textured = np.flatnonzero(material_texture[element_material] >= 0)
+    return (np.ascontiguousarray(material_texture), np.ascontiguousarray(uv_scale), *uv_maps(scene, textured),
+            *mip_chains(scene), int(TextureFilter(texture_filter)))
 
 
 class _GrowingRecords:
@@ -451,7 +507,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
            log: bool = True, kd_config: KdTreeConfig | None = None, max_depth: int | None = None,
            trace_path=None, memory_budget: int = DEFAULT_MEMORY_BUDGET,
            metadata: dict | None = None, epsilon: float | None = None,
-           workload: str | Workload | None = None) -> RenderResult:
+           workload: str | Workload | None = None, texture_filter: str = "trilinear") -> RenderResult:
     """Render ``scene`` and, with ``log``, record every scene access per pixel.
 
     Parameters
@@ -488,6 +544,9 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         The tracer imitated, a :data:`tracer.workload.WORKLOADS` name or a
         :class:`~tracer.workload.Workload`; default ``"modern"`` (today's
         SAH tracer). Recorded in the trace's metadata.
+    texture_filter : {"trilinear", "bilinear", "nearest"}
+        How textured surfaces filter their texels (:mod:`tracer.texture`);
+        the level of detail comes from ray cones. Recorded in the metadata.
 
     Returns
     -------
@@ -504,6 +563,9 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         raise ValueError(f"memory_budget must be an int >= 4 bytes, got {memory_budget!r}")
     if epsilon is not None and not (math.isfinite(epsilon) and epsilon > 0):
         raise ValueError(f"epsilon must be a positive finite distance, got {epsilon!r}")
+    filters = {f.name.lower(): f for f in TextureFilter}
+    if texture_filter not in filters:
+        raise ValueError(f"texture_filter must be one of {', '.join(filters)}, got {texture_filter!r}")
     workload = get_workload("modern" if workload is None else workload)
     if kd_config is None and tree is None:
         kd_config = workload.kd_config
@@ -511,7 +573,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     t_start = time.perf_counter()
     tree, tree_arr = tree_arrays(scene, tree, kd_config)
     timings["build"] = time.perf_counter() - t_start
-    shading = _shading(scene)
+    shading = _shading(scene, filters[texture_filter])
     geo = prepare_geometry(scene)
     diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
     if epsilon is not None:
@@ -528,7 +590,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     offsets = np.zeros(n_pix + 1, np.int64)
     # the render kernel's arguments between the work items and the outputs
     kernel_inputs = (cam, RenderParams(n_pix, hither, eps, depth, not workload.shadow_nearest,
-                                              workload.log_ray_data), tree_arr, geo, shading)
+                                       workload.log_ray_data, math.atan(cam.pitch)), tree_arr, geo, shading)
     trace = None
     t0 = time.perf_counter()
     if not log:
@@ -560,6 +622,13 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         own = workload.log_ray_data
         meta["record_counts"].update({"ray_stack": (2 * depth + 2) * own, "hit_record": depth * own,
                                       "shading_temp": depth * own, "frame_buffer": n_pix * own})
+        meta["record_counts"].update({"texel": int(shading.level_first[-1]), "texture": scene.n_textures})
+        if scene.n_textures:
+            # each texture's mip levels, (width, height) finest first: a
+            # memory layout needs them to place the texels
+            meta["textures"] = MipChains(shading.texels, shading.level_first, shading.level_width,
+                                         shading.level_height, shading.texture_level).levels()
+            meta["texture_filter"] = texture_filter
         meta.update(metadata or {})
         if trace_path is None:
             records = _GrowingRecords(memory_budget)

@@ -29,9 +29,11 @@ class RayColumn(enum.IntEnum):
     WEIGHT = 6     # red; green and blue follow
     DEPTH = 9      # primary = 1
     TYPE = 10      # a RayType value
+    CONE_WIDTH = 11   # ray cone: width at the origin (scene units)
+    CONE_SPREAD = 12  # ray cone: spread angle (radians)
 
 
-N_RAY_COLUMNS = 11
+N_RAY_COLUMNS = 13
 
 
 class MaterialColumn(enum.IntEnum):
@@ -57,13 +59,29 @@ N_LIGHT_COLUMNS = 6
 
 
 class Shading(NamedTuple):
-    """What shading reads: materials per element, and the lights (see :func:`_shading`)."""
+    """What shading reads: materials per element, the lights and the textures (see :func:`_shading`).
+
+    Flat (arrays and scalars only): a bundle inside a bundle can't reach a
+    parallel kernel's loop body. The texture fields are those of
+    :class:`tracer.uv.UvMaps` and :class:`tracer.texture.MipChains`, so the
+    texture kernels read this bundle as either.
+    """
 
     element_material: np.ndarray  #: (n,) int64 row of ``materials`` of each element
     materials: np.ndarray         #: (M, N_MATERIAL_COLUMNS) float64, columns MaterialColumn
     lights: np.ndarray            #: (L, N_LIGHT_COLUMNS) float64, columns LightColumn
     ambient: float                #: ambient level, SPD's ``sqrt(L) / (2 L)`` (0.5 without lights)
     background: np.ndarray        #: (3,) float64 colour of rays that hit nothing
+    material_texture: np.ndarray   #: (M,) int64 texture of each material, -1 for none
+    material_uv_scale: np.ndarray  #: (M,) float64 repeats of the texture over (u, v)
+    plane_map: np.ndarray          #: (n, 2, 4) float64 UvMaps.plane_map
+    density: np.ndarray            #: (n,) float64 UvMaps.density
+    texels: np.ndarray             #: (N, 4) uint8 MipChains.texels
+    level_first: np.ndarray        #: (K + 1,) int64 MipChains.level_first
+    level_width: np.ndarray        #: (K,) int64
+    level_height: np.ndarray       #: (K,) int64
+    texture_level: np.ndarray      #: (X + 1,) int64 MipChains.texture_level
+    texture_filter: int            #: a TextureFilter value
 
 
 class RenderParams(NamedTuple):
@@ -75,6 +93,7 @@ class RenderParams(NamedTuple):
     max_depth: int    #: ray-tree depth (primary = 1)
     shadow_anyhit: bool  #: shadow rays stop at the first hit found (else they find the nearest)
     log_ray_data: bool   #: log the tracer's own per-ray data (RecordKind.RAY_STACK .. FRAME_BUFFER)
+    pixel_spread: float  #: spread angle of a primary ray's cone (radians): the angle between pixel centres
 
 
 class SampleOutputs(NamedTuple):

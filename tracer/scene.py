@@ -21,6 +21,16 @@ CONE      cone or cylinder without caps: ``cone_base`` (C, 3),
           visible (NFF convention)
 ========  ==========================================================
 
+Textures (optional; see :mod:`tracer.texture`): ``texture_size`` (X, 2)
+width and height of each image, ``texture_offsets`` (X + 1,) and
+``texture_texels`` (N, 4) uint8 RGBA, the images one after another, each
+row-major from its top row. ``material_texture`` (M,) names the texture that
+multiplies a material's colour (-1: none) and ``material_uv_scale`` (M,) how
+many times it repeats across the surface's (u, v) range. Surfaces get (u, v)
+from ``triangle_uv`` (T, 3, 2), ``polygon_uv`` (V, 2) and ``patch_uv`` (W, 2)
+(NaN where a file gave none); spheres are mapped by latitude and longitude.
+Empty texture and uv arrays mean a scene without them.
+
 All float arrays are float64, index arrays int64, kinds uint8.
 """
 from __future__ import annotations
@@ -133,6 +143,26 @@ class Scene:
     light_position: np.ndarray = _f64((3,))
     light_color: np.ndarray = _f64((3,))
 
+    texture_size: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    texture_offsets: np.ndarray = _i64_offsets()
+    texture_texels: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.uint8))
+    material_texture: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    material_uv_scale: np.ndarray = _f64(())
+    triangle_uv: np.ndarray = _f64((3, 2))
+    polygon_uv: np.ndarray = _f64((2,))
+    patch_uv: np.ndarray = _f64((2,))
+
+    @property
+    def n_textures(self) -> int:
+        """Number of texture images."""
+        return int(self.texture_size.shape[0])
+
+    def texture(self, index: int) -> np.ndarray:
+        """Texture ``index`` as an image, shape (height, width, 4) uint8 RGBA."""
+        width, height = (int(v) for v in self.texture_size[index])
+        first = int(self.texture_offsets[index])
+        return self.texture_texels[first:first + width * height].reshape(height, width, 4)
+
     @property
     def n_elements(self) -> int:
         """Number of elements (primitives) in the scene."""
@@ -195,11 +225,12 @@ class Scene:
             (CSR vertex totals); ``materials``; ``lights``;
             ``bounding_box`` (``{"min": [x, y, z], "max": [x, y, z]}`` or
             ``None``); ``max_depth``; ``camera`` (eye, look_at, up, angle,
-            hither, resolution as lists/floats/ints); ``background``.
+            hither, resolution as lists/floats/ints); ``background``; with
+            textures, ``textures`` (``[width, height]`` of each).
         """
         box = self.bounding_box()
         cam = self.camera
-        return {
+        summary = {
             "name": str(self.name),
             "elements": self.n_elements,
             "counts": self.counts(),
@@ -217,6 +248,9 @@ class Scene:
             },
             "background": [float(v) for v in self.background],
         }
+        if self.n_textures:
+            summary["textures"] = [[int(w), int(h)] for w, h in self.texture_size]
+        return summary
 
 
 # Fields of ``Scene`` that hold arrays, in declaration order.
@@ -238,7 +272,7 @@ def scenes_equal(a: Scene, b: Scene, *, rtol: float = 0.0, atol: float = 0.0) ->
         x, y = getattr(a, name), getattr(b, name)
         if x.dtype != y.dtype or x.shape != y.shape:
             return False
-        if not np.allclose(x, y, rtol=rtol, atol=atol, equal_nan=False):
+        if not np.allclose(x, y, rtol=rtol, atol=atol, equal_nan=True):  # NaN: no (u, v) given
             return False
     return True
 
@@ -260,6 +294,11 @@ class Material:
         Transmittance; ``t > 0`` spawns a refraction ray.
     ior : float
         Index of refraction.
+    texture : int
+        Texture (of :meth:`SceneBuilder.texture`) whose texels multiply
+        ``color``; -1 for none.
+    uv_scale : float
+        Times the texture repeats across the surface's (u, v) range (> 0).
     """
 
     color: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -268,6 +307,8 @@ class Material:
     shine: float = 0.0
     t: float = 0.0
     ior: float = 1.0
+    texture: int = -1
+    uv_scale: float = 1.0
 
     def __post_init__(self):
         if len(self.color) != 3:
@@ -278,10 +319,20 @@ class Material:
         values = (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
         if not all(np.isfinite(v) for v in values):
             raise ValueError(f"Material values must be finite, got {values!r}")
+        if isinstance(self.texture, bool) or not isinstance(self.texture, (int, np.integer)) or self.texture < -1:
+            raise ValueError(f"Material.texture must be a texture number or -1, got {self.texture!r}")
+        object.__setattr__(self, "texture", int(self.texture))
+        object.__setattr__(self, "uv_scale", float(self.uv_scale))
+        if not (np.isfinite(self.uv_scale) and self.uv_scale > 0):
+            raise ValueError(f"Material.uv_scale must be a positive finite number, got {self.uv_scale!r}")
 
     def as_tuple(self) -> tuple[float, ...]:
         """``(r, g, b, kd, ks, shine, t, ior)`` as in NFF ``f``."""
         return (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
+
+    def key(self) -> tuple:
+        """Everything that makes two materials the same row: :meth:`as_tuple`, texture, uv_scale."""
+        return (*self.as_tuple(), self.texture, self.uv_scale)
 
 
 class SceneBuilder:
@@ -320,6 +371,10 @@ class SceneBuilder:
         self._patch_normals: list = []
         self._cones: list[tuple] = []
         self._lights: list[tuple] = []
+        self._textures: list[np.ndarray] = []
+        self._triangle_uv: list = []
+        self._polygon_uv: list = []
+        self._patch_uv: list = []
 
     @property
     def n_elements(self) -> int:
@@ -334,8 +389,23 @@ class SceneBuilder:
         """Add a point light at ``position`` (3,) with ``color`` (3,)."""
         self._lights.append((tuple(map(float, position)), tuple(map(float, color))))
 
+    def texture(self, image) -> int:
+        """Add a texture image, shape (height, width, 4) RGBA or (height, width, 3)
+        RGB, uint8 (row 0 at the top); returns its number for :class:`Material`."""
+        image = np.asarray(image)
+        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (3, 4) or min(image.shape[:2]) < 1:
+            raise ValueError(f"a texture must be a uint8 image of shape (height, width, 3 or 4), "
+                             f"got {image.dtype} {image.shape}")
+        if image.shape[2] == 3:
+            image = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        self._textures.append(np.ascontiguousarray(image))
+        return len(self._textures) - 1
+
     def _add(self, kind: ElementKind, index: int) -> int:
-        key = self._material.as_tuple()
+        if self._material.texture >= len(self._textures):
+            raise ValueError(f"material uses texture {self._material.texture}, but only "
+                             f"{len(self._textures)} textures were added")
+        key = self._material.key()
         row = self._material_rows.setdefault(key, len(self._material_rows))
         self._kind.append(int(kind))
         self._index.append(index)
@@ -347,13 +417,15 @@ class SceneBuilder:
         self._spheres.append((*map(float, center), float(radius)))
         return self._add(ElementKind.SPHERE, len(self._spheres) - 1)
 
-    def triangle(self, vertices) -> int:
-        """Add a triangle from ``vertices`` (3, 3); returns its element id."""
+    def triangle(self, vertices, uv=None) -> int:
+        """Add a triangle from ``vertices`` (3, 3) and optional texture
+        coordinates ``uv`` (3, 2); returns its element id."""
         self._triangles.append(np.asarray(vertices, dtype=np.float64).reshape(3, 3))
+        self._triangle_uv.append(_uv(uv, 3))
         return self._add(ElementKind.TRIANGLE, len(self._triangles) - 1)
 
-    def polygon(self, vertices) -> int:
-        """Add a polygon from ``vertices`` (n, 3).
+    def polygon(self, vertices, uv=None) -> int:
+        """Add a polygon from ``vertices`` (n, 3), optionally with ``uv`` (n, 2).
 
         Three vertices make a TRIANGLE element, more a POLYGON element
         (NFF ``p n``); returns the element id.
@@ -362,18 +434,21 @@ class SceneBuilder:
         if len(v) < 3:
             raise ValueError(f"a polygon needs at least 3 vertices, got {len(v)}")
         if len(v) == 3:
-            return self.triangle(v)
+            return self.triangle(v, uv)
         self._polygons.append(v)
+        self._polygon_uv.append(_uv(uv, len(v)))
         return self._add(ElementKind.POLYGON, len(self._polygons) - 1)
 
-    def patch(self, vertices, normals) -> int:
-        """Add a polygon patch with per-vertex normals, both (n, 3), n >= 3."""
+    def patch(self, vertices, normals, uv=None) -> int:
+        """Add a polygon patch with per-vertex normals, both (n, 3), n >= 3,
+        and optional ``uv`` (n, 2)."""
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         if len(v) < 3 or len(v) != len(n):
             raise ValueError("a patch needs n >= 3 vertices and as many normals")
         self._patches.append(v)
         self._patch_normals.append(n)
+        self._patch_uv.append(_uv(uv, len(v)))
         return self._add(ElementKind.PATCH, len(self._patches) - 1)
 
     def cone(self, base, base_radius: float, apex, apex_radius: float) -> int:
@@ -390,7 +465,12 @@ class SceneBuilder:
             flat = np.concatenate(parts) if parts else np.zeros((0, 3))
             return offsets, np.ascontiguousarray(flat, dtype=np.float64)
 
-        materials = np.array(list(self._material_rows), dtype=np.float64).reshape(-1, 8)
+        materials = np.array(list(self._material_rows), dtype=np.float64).reshape(-1, 10)
+        textures = self._textures
+        texture_size = np.array([(t.shape[1], t.shape[0]) for t in textures], dtype=np.int64).reshape(-1, 2)
+        texture_offsets = np.zeros(len(textures) + 1, dtype=np.int64)
+        texture_offsets[1:] = np.cumsum(texture_size[:, 0] * texture_size[:, 1])
+        texels = np.concatenate([t.reshape(-1, 4) for t in textures]) if textures else np.zeros((0, 4), np.uint8)
         spheres = np.array(self._spheres, dtype=np.float64).reshape(-1, 4)
         polygon_offsets, polygon_vertices = csr(self._polygons)
         patch_offsets, patch_vertices = csr(self._patches)
@@ -425,4 +505,36 @@ class SceneBuilder:
             material_ior=np.ascontiguousarray(materials[:, 7]),
             light_position=np.array([p for p, _ in lights], dtype=np.float64).reshape(-1, 3),
             light_color=np.array([c for _, c in lights], dtype=np.float64).reshape(-1, 3),
+            texture_size=texture_size,
+            texture_offsets=texture_offsets,
+            texture_texels=texels,
+            material_texture=materials[:, 8].astype(np.int64),
+            material_uv_scale=np.ascontiguousarray(materials[:, 9]),
+            triangle_uv=np.array(self._triangle_uv, dtype=np.float64).reshape(-1, 3, 2),
+            polygon_uv=_stacked_uv(self._polygon_uv),
+            patch_uv=_stacked_uv(self._patch_uv),
         )
+
+
+def untextured(n_materials: int, n_triangles: int, n_polygon_vertices: int, n_patch_vertices: int) -> dict:
+    """The texture fields of a :class:`Scene` without textures or (u, v), as
+    :class:`SceneBuilder` makes them (materials untextured, uv NaN)."""
+    return {"material_texture": np.full(n_materials, -1, dtype=np.int64),
+            "material_uv_scale": np.ones(n_materials),
+            "triangle_uv": np.full((n_triangles, 3, 2), np.nan),
+            "polygon_uv": np.full((n_polygon_vertices, 2), np.nan),
+            "patch_uv": np.full((n_patch_vertices, 2), np.nan)}
+
+
+def _uv(uv, n: int) -> np.ndarray:
+    """Texture coordinates of ``n`` vertices as (n, 2) float64; NaN when not given."""
+    if uv is None:
+        return np.full((n, 2), np.nan)
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.shape != (n, 2) or not np.isfinite(uv).all():
+        raise ValueError(f"uv must be {n} finite (u, v) pairs, shape ({n}, 2), got shape {uv.shape}")
+    return uv
+
+
+def _stacked_uv(parts) -> np.ndarray:
+    return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros((0, 2)), dtype=np.float64)

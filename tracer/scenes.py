@@ -16,12 +16,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tracer import spd, standins
+from tracer import spd, standins, textured
 from rtcommon.validate import require_int
 from tracer.scene import Scene
 from tracer.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
 
-__all__ = ["PAPER_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
+__all__ = ["PAPER_SCENES", "NAMED_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
 
 _GENERATORS = {
     "balls": spd.balls,
@@ -29,7 +29,11 @@ _GENERATORS = {
     "shell": spd.shells,
     "room": standins.room,
     "fluid": standins.fluid,
+    "balls-textured": textured.balls_textured,
+    "room-textured": textured.room_textured,
 }
+#: every scene :func:`load` knows by name: the study's five, then their textured variants
+NAMED_SCENES = tuple(_GENERATORS)
 _SUFFIXES = (".nff", ".obj")
 
 
@@ -40,7 +44,9 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     ----------
     name_or_path : str or os.PathLike
         One of :data:`PAPER_SCENES` (case-insensitive; ``"shells"`` is
-        accepted for ``"shell"``), or a path ending in ``.nff`` or ``.obj``.
+        accepted for ``"shell"``), a textured variant (``balls-textured``,
+        ``room-textured``: :mod:`tracer.textured`), or a path ending in
+        ``.nff`` or ``.obj``.
     max_depth : int, optional
         Maximum recursion depth; default the paper's for a named scene and
         the file's (see module docstring) for a path.
@@ -65,7 +71,8 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     if key in _GENERATORS and not isinstance(name_or_path, Path):
         scene = _GENERATORS[key]()
         scene.name = key
-        scene.max_depth = PAPER_DEPTH[key] if max_depth is None else max_depth
+        paper_depth = PAPER_DEPTH[textured.TEXTURED_SCENES.get(key, key)]
+        scene.max_depth = paper_depth if max_depth is None else max_depth
         return scene
     path = Path(text)
     suffix = path.suffix.lower()
@@ -83,5 +90,5 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         raise ValueError(f"unsupported scene file {text!r}: expected a .nff or .obj file")
     if path.suffix or os.sep in text or "/" in text:
         raise FileNotFoundError(f"scene file not found: {text!r}")
-    raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(PAPER_SCENES)} "
+    raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(_GENERATORS)} "
                      "or a path to a .nff or .obj file")

@@ -77,9 +77,10 @@ def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_
 
 def check_scene_argument(scene, option: str = "SCENE") -> None:
     """A scene given as a path must be a regular file (a FIFO would hang the reader)."""
-    from tracer.study import PAPER_SCENES, canonical_scene_name
+    from tracer.scenes import NAMED_SCENES
+    from tracer.study import canonical_scene_name
 
-    if scene is None or canonical_scene_name(str(scene)) in PAPER_SCENES:
+    if scene is None or canonical_scene_name(str(scene)) in NAMED_SCENES:
         return
     if os.path.lexists(scene):
         check_input_file(option, scene)

@@ -68,7 +68,7 @@ class RegistryNames(Sequence):
         return ", ".join(str(name) for name in self.names)
 
 
-SCENES = RegistryNames("tracer.scenes", "PAPER_SCENES")
+SCENES = RegistryNames("tracer.scenes", "NAMED_SCENES")
 MAPPINGS = RegistryNames("coherence.mappings", "MAPPINGS")
 DEFAULT_MAPPINGS = RegistryNames("coherence.mappings", "DEFAULT_MAPPINGS")
 HIERARCHIES = RegistryNames("cachesim.config", "PRESETS")

@@ -1,0 +1,130 @@
+"""Which record kinds the misses belong to: texture misses beside scene misses.
+
+:func:`misses_by_kind` replays each process's pixels, in the order it renders
+them, through a cold hierarchy of its own, and splits every level's accesses
+and misses by the record kind each access came from. It answers "how many of
+the misses are texels, and how often does a texel read miss" per mapping and
+layout. It is the dedicated-CPU case of the schedule (as many CPUs as
+processes, no time slicing, no background load), which is what a texture
+study compares; the schedule simulation (:mod:`coherence.simulation`) counts
+misses per process, not per kind.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from cachesim import Hierarchy
+from cachesim.simulate import simulate
+from coherence.layout import PlacedLayout
+from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, RecordKind
+
+
+def process_pixels(distribution, task_owner=None) -> list[np.ndarray]:
+    """Each process's pixels in the order it renders them.
+
+    Parameters
+    ----------
+    distribution : coherence.distribution.Distribution
+    task_owner : ndarray of int64, shape (T,), optional
+        The process that rendered each task (:attr:`coherence.simulation.Run.task_owner`);
+        required for a dynamic distribution, default the static owners.
+
+    Returns
+    -------
+    list of ndarray of int64
+        Pixel numbers (row-major) per process.
+    """
+    owner = np.asarray(distribution.task_process if task_owner is None else task_owner, dtype=np.int64)
+    if owner.shape != (distribution.n_tasks,) or (owner.size and owner.min() < 0):
+        raise ValueError("process_pixels: a dynamic distribution needs the task owners of a run (task_owner)")
+    sizes = np.diff(distribution.task_offsets)
+    pixel_owner = np.repeat(owner, sizes)
+    pixels = np.asarray(distribution.task_pixels, dtype=np.int64)
+    order = np.argsort(pixel_owner, kind="stable")  # task order within each process
+    bounds = np.searchsorted(pixel_owner[order], np.arange(distribution.n_processes + 1))
+    return [pixels[order[bounds[p]:bounds[p + 1]]] for p in range(distribution.n_processes)]
+
+
+def pixel_records(trace, pixels: np.ndarray) -> np.ndarray:
+    """The records of ``pixels`` (in that order), concatenated, uint32."""
+    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
+    starts, stops = offsets[pixels], offsets[pixels + 1]
+    lengths = stops - starts
+    if lengths.sum() == 0:
+        return np.zeros(0, dtype=np.uint32)
+    # position k of the output reads starts[pixel of k] + (k - first output of that pixel)
+    first_out = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    index = np.arange(int(lengths.sum()), dtype=np.int64) + np.repeat(starts - first_out, lengths)
+    return np.asarray(trace.records)[index]
+
+
+def lines_and_kinds(records: np.ndarray, placed: PlacedLayout, line_size: int):
+    """Byte addresses of the lines ``records`` touch (as :meth:`PlacedLayout.addresses`),
+    the record kind of each and whether it is a write: uint64, uint8 and bool
+    arrays of one length."""
+    records = np.ascontiguousarray(records, dtype=np.uint32)
+    placed.check_records(records)
+    kinds = (records >> np.uint32(KIND_SHIFT)).astype(np.int64)
+    rows = placed.kind_first[kinds] + (records & np.uint32(INDEX_MASK)).astype(np.int64)
+    shift = int(line_size).bit_length() - 1
+    first = placed.record_start[rows] >> shift
+    spans = ((placed.record_start[rows] + placed.record_size[rows] - 1) >> shift) - first + 1
+    within = np.arange(int(spans.sum()), dtype=np.int64) - np.repeat(np.cumsum(spans) - spans, spans)
+    lines = np.repeat(first, spans) + within
+    writes = np.repeat((records & np.uint32(WRITE_FLAG)) != 0, spans)
+    return (lines << shift).astype(np.uint64), np.repeat(kinds, spans).astype(np.uint8), writes
+
+
+def misses_by_kind(trace, placed: PlacedLayout, hierarchy: Hierarchy, distribution, task_owner=None) -> pd.DataFrame:
+    """Accesses and misses per cache level and record kind, summed over processes.
+
+    Parameters
+    ----------
+    trace : tracer.trace.AccessTrace
+    placed : PlacedLayout
+    hierarchy : Hierarchy
+        Every process gets a cold copy.
+    distribution : coherence.distribution.Distribution
+    task_owner : ndarray of int64, optional
+        See :func:`process_pixels`.
+
+    Returns
+    -------
+    DataFrame
+        One row per (level, kind) with any accesses: ``level`` (name),
+        ``kind`` (lower-case :class:`~tracer.records.RecordKind` name),
+        ``accesses``, ``misses`` (accesses the level did not serve).
+    """
+    line_size = min(level.line_size for level in hierarchy.levels)
+    n_levels = len(hierarchy.levels)
+    accesses = np.zeros((n_levels, N_KINDS), dtype=np.int64)
+    misses = np.zeros((n_levels, N_KINDS), dtype=np.int64)
+    for pixels in process_pixels(distribution, task_owner):
+        addresses, kinds, writes = lines_and_kinds(pixel_records(trace, pixels), placed, line_size)
+        if addresses.size == 0:
+            continue
+        served = simulate(addresses, hierarchy, writes=writes, return_levels=True).served_by
+        for level in range(n_levels):
+            reached = served >= level  # accesses that got to this level
+            accesses[level] += np.bincount(kinds[reached], minlength=N_KINDS)
+            misses[level] += np.bincount(kinds[served > level], minlength=N_KINDS)
+    rows = [{"level": hierarchy.levels[level].name, "kind": RecordKind(kind).name.lower(),
+             "accesses": int(accesses[level, kind]), "misses": int(misses[level, kind])}
+            for level in range(n_levels) for kind in range(N_KINDS) if accesses[level, kind]]
+    return pd.DataFrame(rows, columns=["level", "kind", "accesses", "misses"])
+
+
+def texture_summary(by_kind: pd.DataFrame) -> dict:
+    """Per level, from :func:`misses_by_kind`: ``texel_<level>_misses_per_access``
+    (misses of texel reads over the texel reads that reached the level) and
+    ``texture_<level>_miss_share`` (texel misses over all the level's misses)."""
+    out = {}
+    for level, rows in by_kind.groupby("level", sort=False):
+        texel = rows[rows["kind"] == "texel"]
+        texel_accesses = int(texel["accesses"].sum())
+        texel_misses = int(texel["misses"].sum())
+        all_misses = int(rows["misses"].sum())
+        out[f"texel_{level}_misses_per_access"] = texel_misses / texel_accesses if texel_accesses else np.nan
+        out[f"texture_{level}_miss_share"] = texel_misses / all_misses if all_misses else np.nan
+    return out
