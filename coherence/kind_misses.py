@@ -96,23 +96,80 @@ def misses_by_kind(trace, placed: PlacedLayout, hierarchy: Hierarchy, distributi
         ``kind`` (lower-case :class:`~tracer.records.RecordKind` name),
         ``accesses``, ``misses`` (accesses the level did not serve).
     """
+    table = misses_by_kind_per_layout(trace, {"": placed}, hierarchy, distribution, task_owner)
+    return table.drop(columns="layout")
+
+
+def misses_by_kind_per_layout(trace, placements: dict, hierarchy: Hierarchy, distribution,
+                              task_owner=None) -> pd.DataFrame:
+    """:func:`misses_by_kind` for several placements of one trace at once.
+
+    Each process's records are gathered and turned into lines once; when the
+    placements differ only in where texels live and every texel takes one
+    line, only the texel addresses are redone for each placement.
+
+    Parameters
+    ----------
+    placements : dict of str to PlacedLayout
+        Labelled placements (for example one per texel order).
+
+    Returns
+    -------
+    DataFrame
+        :func:`misses_by_kind`'s columns after a first one, ``layout`` (the label).
+    """
+    labels = list(placements)
+    first = placements[labels[0]]
     line_size = min(level.line_size for level in hierarchy.levels)
+    shift = int(line_size).bit_length() - 1
     n_levels = len(hierarchy.levels)
-    accesses = np.zeros((n_levels, N_KINDS), dtype=np.int64)
-    misses = np.zeros((n_levels, N_KINDS), dtype=np.int64)
+    accesses = np.zeros((len(labels), n_levels, N_KINDS), dtype=np.int64)
+    misses = np.zeros_like(accesses)
+    patchable = [_only_texels_move(first, placements[label], line_size) for label in labels]
+    texel_first = first.kind_first[RecordKind.TEXEL]
     for pixels in process_pixels(distribution, task_owner):
-        addresses, kinds, writes = lines_and_kinds(pixel_records(trace, pixels), placed, line_size)
+        records = pixel_records(trace, pixels)
+        addresses, kinds, writes = lines_and_kinds(records, first, line_size)
         if addresses.size == 0:
             continue
-        served = simulate(addresses, hierarchy, writes=writes, return_levels=True).served_by
-        for level in range(n_levels):
-            reached = served >= level  # accesses that got to this level
-            accesses[level] += np.bincount(kinds[reached], minlength=N_KINDS)
-            misses[level] += np.bincount(kinds[served > level], minlength=N_KINDS)
-    rows = [{"level": hierarchy.levels[level].name, "kind": RecordKind(kind).name.lower(),
-             "accesses": int(accesses[level, kind]), "misses": int(misses[level, kind])}
-            for level in range(n_levels) for kind in range(N_KINDS) if accesses[level, kind]]
-    return pd.DataFrame(rows, columns=["level", "kind", "accesses", "misses"])
+        texel_lines = kinds == RecordKind.TEXEL
+        texel_rows = texel_first + (records[(records >> np.uint32(KIND_SHIFT)) == RecordKind.TEXEL]
+                                    & np.uint32(INDEX_MASK)).astype(np.int64)
+        for k, label in enumerate(labels):
+            placed = placements[label]
+            if patchable[k]:
+                addresses[texel_lines] = ((placed.record_start[texel_rows] >> shift) << shift).astype(np.uint64)
+                stream = (addresses, kinds, writes)
+            else:
+                stream = lines_and_kinds(records, placed, line_size)
+            served = simulate(stream[0], hierarchy, writes=stream[2], return_levels=True).served_by
+            for level in range(n_levels):
+                accesses[k, level] += np.bincount(stream[1][served >= level], minlength=N_KINDS)
+                misses[k, level] += np.bincount(stream[1][served > level], minlength=N_KINDS)
+    rows = [{"layout": label, "level": hierarchy.levels[level].name, "kind": RecordKind(kind).name.lower(),
+             "accesses": int(accesses[k, level, kind]), "misses": int(misses[k, level, kind])}
+            for k, label in enumerate(labels) for level in range(n_levels) for kind in range(N_KINDS)
+            if accesses[k, level, kind]]
+    return pd.DataFrame(rows, columns=["layout", "level", "kind", "accesses", "misses"])
+
+
+def _only_texels_move(first: PlacedLayout, other: PlacedLayout, line_size: int) -> bool:
+    """Whether ``other`` places every record as ``first`` does but texels, and
+    every texel of both takes exactly one line (so texel addresses can be
+    swapped in without changing the stream's length)."""
+    if other is first:
+        return True
+    lo, hi = first.kind_first[RecordKind.TEXEL], first.kind_first[RecordKind.TEXEL + 1]
+    if not (np.array_equal(first.kind_first, other.kind_first)
+            and np.array_equal(first.record_start[:lo], other.record_start[:lo])
+            and np.array_equal(first.record_start[hi:], other.record_start[hi:])
+            and np.array_equal(first.record_size, other.record_size)):
+        return False
+    for placed in (first, other):
+        starts, sizes = placed.record_start[lo:hi], placed.record_size[lo:hi]
+        if np.any(starts // line_size != (starts + sizes - 1) // line_size):
+            return False
+    return True
 
 
 def texture_summary(by_kind: pd.DataFrame) -> dict:

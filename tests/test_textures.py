@@ -2,6 +2,7 @@
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from cachesim.config import get_hierarchy
@@ -412,3 +413,46 @@ def test_texture_whatif_runs_on_a_small_image(tmp_path):
     (tmp_path / "out").mkdir()
     csv, png = save_whatif(table, study, tmp_path / "out")
     assert csv.exists() and png.exists()
+
+
+def test_misses_per_layout_equal_one_layout_at_a_time():
+    from coherence.kind_misses import misses_by_kind, misses_by_kind_per_layout
+    from coherence.mappings import get_mapping
+    from tracer.render import render
+
+    scene = _small_textured_scene()
+    trace = render(scene, size=12).trace
+    hierarchy = get_hierarchy("alpha21164")
+    placements = {label: place_layout(get_layout("compact").with_texels(TextureLayout.from_label(label)), trace, scene)
+                  for label in ("linear", "morton", "blocked2x2")}
+    # a placement that moves more than texels (bigger spheres) takes the full path
+    placements["alpha1997"] = place_layout(get_layout("alpha1997"), trace, scene)
+    distribution = get_mapping("B").build(12, 12, 4)
+    together = misses_by_kind_per_layout(trace, placements, hierarchy, distribution)
+    for label, placed in placements.items():
+        alone = misses_by_kind(trace, placed, hierarchy, distribution)
+        mine = together[together["layout"] == label].drop(columns="layout").reset_index(drop=True)
+        pd.testing.assert_frame_equal(mine, alone)
+    texel_l1 = together[(together["kind"] == "texel") & (together["level"] == "L1")].set_index("layout")["misses"]
+    assert texel_l1["linear"] != texel_l1["morton"]  # the order matters to texel misses
+
+
+def test_report_texture_section_tables():
+    from analyses.report_texture import LAYOUTS, texture_section
+    from coherence.cost import get_cost_model
+    from coherence.mappings import get_mapping
+    from tracer.render import render
+
+    scene = _small_textured_scene()
+    trace = render(scene, size=12).trace
+    section = texture_section(trace, scene, get_layout("compact"), get_hierarchy("alpha21164"),
+                              [get_mapping("S"), get_mapping("DB")], 4, get_cost_model("alpha8400"))
+    share, layouts, curves = section["share"], section["layouts"], section["curves"]
+    assert set(share["mapping"]) == {"S", "DB"} and len(share) == 2 * 3
+    l1 = share[share["level"] == "L1"]
+    assert (l1["texel_reads"] == render(scene, size=12, log=False).totals()["texel_reads"]).all()
+    assert ((share["texture_miss_share"] > 0) & (share["texture_miss_share"] <= 1)).all()
+    assert list(dict.fromkeys(layouts["layout"])) == list(LAYOUTS)
+    linear = layouts[(layouts["layout"] == "linear")].reset_index(drop=True)
+    assert np.allclose(linear["texel_hit_rate"], 1 - share["misses_per_texel_read"])
+    assert (np.diff(curves[curves["layout"] == "morton"]["misses"]) <= 0).all()  # LRU curves never rise
