@@ -456,3 +456,18 @@ def test_report_texture_section_tables():
     linear = layouts[(layouts["layout"] == "linear")].reset_index(drop=True)
     assert np.allclose(linear["texel_hit_rate"], 1 - share["misses_per_texel_read"])
     assert (np.diff(curves[curves["layout"] == "morton"]["misses"]) <= 0).all()  # LRU curves never rise
+
+
+def test_render_cli_reports_texture_lookups_for_its_filter():
+    import json
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "analyses", "render", "balls-textured", "--size", "8", "--no-log",
+                           "--texture-filter", "nearest", "--json"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    textures = json.loads(done.stdout)["textures"]
+    assert textures["filter"] == "nearest" and textures["texel_reads"] == textures["lookups"] > 0
+    plain = subprocess.run([sys.executable, "-m", "analyses", "render", "tetra", "--size", "4", "--no-log", "--json"],
+                           capture_output=True, text=True)
+    assert "textures" not in json.loads(plain.stdout)

@@ -89,6 +89,8 @@ class RenderResult:
         The self-intersection tolerance used (scene units).
     workload : dict
         The :class:`~tracer.workload.Workload` imitated, as plain values.
+    texture_filter : str
+        How textured surfaces were filtered.
     """
 
     image: np.ndarray
@@ -100,6 +102,7 @@ class RenderResult:
     height: int = 0
     epsilon: float = 0.0
     workload: dict = field(default_factory=dict)
+    texture_filter: str = "trilinear"
 
     def totals(self) -> dict:
         """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
@@ -647,7 +650,8 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         timings["trace"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
-                        timings=timings, width=sx, height=sy, epsilon=eps, workload=workload.to_dict())
+                        timings=timings, width=sx, height=sy, epsilon=eps, workload=workload.to_dict(),
+                        texture_filter=texture_filter)
 
 
 def save_png(image, path) -> Path:

@@ -59,6 +59,9 @@ def register(subparsers) -> None:
     parser.add_argument("--memory-budget", type=float, metavar="MB", default=1024.0,
                         help="records held in RAM at once, in MB; larger traces go to "
                              "--trace DIR in chunks (default 1024)")
+    parser.add_argument("--texture-filter", choices=("trilinear", "bilinear", "nearest"), default="trilinear",
+                        help="how textured surfaces filter their texels (default: trilinear; the level of "
+                             "detail comes from ray cones)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.set_defaults(func=run)
 
@@ -121,6 +124,9 @@ def report(result, scene_name: str, seconds: float) -> dict:
         "timings": result.timings, "seconds": seconds,
     }
     out["intersection_tests"]["total"] = t["intersection_tests"]
+    if t["texture_lookups"]:  # textured scenes only, so untextured output stays as it was
+        out["textures"] = {"lookups": t["texture_lookups"], "texel_reads": t["texel_reads"],
+                           "filter": result.texture_filter}
     return out
 
 
@@ -141,6 +147,9 @@ def _table(rep: dict) -> str:
             lines.append(f"  {'tests ' + kind:<22}{n:>14,}")
     lines.append(f"  {'node visits':<22}{rep['node_visits']:>14,}")
     lines.append(f"  {'per ray':<22}{rep['per_ray']['tests']:>14.2f} tests {rep['per_ray']['node_visits']:.2f} nodes")
+    if "textures" in rep:
+        lines.append(f"  {'texture lookups':<22}{rep['textures']['lookups']:>14,}")
+        lines.append(f"  {'texel reads':<22}{rep['textures']['texel_reads']:>14,}")
     if rep["records"] is not None:
         lines.append(f"  {'records':<22}{rep['records']:>14,}  ({rep['bytes_per_record']} bytes each)")
     lines.append(f"  {'time':<22}{rep['seconds']:>14.2f} s")
@@ -174,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     tree = None
     if args.trace:
         pilot = render(scene, size=checks.PILOT_SIZE, kd_config=kd_config, epsilon=args.epsilon,
-                       workload=args.workload)
+                       workload=args.workload, texture_filter=args.texture_filter)
         per_sample = 4 * pilot.trace.n_records / pilot.trace.n_pixels
         checks.check_disk("--trace", args.trace, int(1.25 * per_sample * samples * samples))
         tree = pilot.tree
@@ -184,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     result = render(scene, tree, size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
                     epsilon=args.epsilon, kd_config=kd_config, trace_path=args.trace, workload=args.workload,
-                    memory_budget=budget,
+                    memory_budget=budget, texture_filter=args.texture_filter,
                     metadata={"command": "coherence render " + " ".join(sys.argv[2:])})
     seconds = time.perf_counter() - start
     if args.png:
