@@ -15,6 +15,9 @@ built-in studies (STUDY):
   assoc       L1 associativity (1, 2, 4, 8, full)
   scene-size  SPD size factor of the scene x L3 size
   modern      alpha21164 vs modern caches x alpha8400 vs modern costs
+  texture     texel order (linear, tiled4, morton, blocked4x8) x L1 size,
+              on balls-textured with S, P, R, B, DB and hilbert: texel
+              misses per texel read and the texels' share of the misses
 
 your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
 
@@ -27,8 +30,10 @@ your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
   "L3.size" = ["1MB", "4MB"]
 
 parameters: memory_latency, <level>.size|line_size|assoc|latency|policy,
-line_size, hierarchy, compute_scale, cost, layout, scene_size,
-n_processes, n_cpus, background. Sizes take KB/MB suffixes.
+line_size, hierarchy, compute_scale, cost, layout, texture_layout
+(linear, tiled<k>, morton, blocked<k>x<s>), scene_size, n_processes,
+n_cpus, background. Sizes take KB/MB suffixes. On a textured scene the
+CSV also has texel_<level>_misses_per_access and texture_<level>_miss_share.
 
 outputs in --out DIR: whatif-<name>.csv (long form: the grid's columns,
 mapping, n_processes, metric, value) with .meta.json, and whatif-<name>.png
