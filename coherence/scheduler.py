@@ -140,11 +140,18 @@ class RunOutputs(NamedTuple):
         Each process's first CPU (-1: never ran) and migrations.
     task_owner : ndarray of int64, shape (T,)
         The process that rendered each task.
+    pixel_misses : ndarray of int64, shape (P, L), or (0, L) when not wanted
+        Misses of each pixel at each cache level, reads and writes: the
+        change of the level's ``MISSES`` counter of the process that
+        rendered it while it did (a pixel is never split across slices and
+        counters are per process, so the change is the pixel's alone).
+        Shape (0, L): nothing is written.
     """
 
     cycles: np.ndarray
     placement: np.ndarray
     task_owner: np.ndarray
+    pixel_misses: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -176,7 +183,8 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     queues : RunQueues
     background : BackgroundLoad
     out : RunOutputs
-        Receives the cycles, placements and task owners.
+        Receives the cycles, placements and task owners, and each pixel's
+        misses per level if ``out.pixel_misses`` has a row per pixel.
     """
     # Bundle fields are read once here: a read inside the per-pixel loop
     # would cost a reference-count update each time.
@@ -206,6 +214,8 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     out_cycles = out.cycles
     out_placement = out.placement
     task_owner = out.task_owner
+    pixel_misses = out.pixel_misses
+    record_pixel_misses = pixel_misses.shape[0] > 0
     tlb_miss_cycles = tlbs.miss_cycles
     n_ours = out_cycles.shape[0]
     n_all = process_queue.shape[0]
@@ -325,9 +335,15 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             for level in range(n_levels):
                 hits_before[level] = process_counts[level, K.HITS] - process_counts[level, K.WRITE_HITS]
             misses_before = process_counts[n_levels - 1, K.MISSES] - process_counts[n_levels - 1, K.WRITE_MISSES]
+            if record_pixel_misses:  # the counters before, in the pixel's own row; the change after
+                for level in range(n_levels):
+                    pixel_misses[pixel, level] = process_counts[level, K.MISSES]
             # a pixel without writes keeps the read-only (fast) path
             cache_clock[cpu] = K.simulate_writes_into(addresses, flags if n_writes else no_writes,
                                                       geometry, cache, cache_clock[cpu], served, record_served, work)
+            if record_pixel_misses:
+                for level in range(n_levels):
+                    pixel_misses[pixel, level] = process_counts[level, K.MISSES] - pixel_misses[pixel, level]
             memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
             memory += _tlb_misses(tlbs, cpu, process, addresses) * tlb_miss_cycles
             cycles = compute[pixel] + memory

@@ -253,16 +253,24 @@ class Run:
         Process that rendered each task.
     real_cycles : float
         Wall time of the run: when the last of our processes finished.
+    pixel_misses : ndarray of int64, shape (H, W, L), or None
+        Misses of each pixel (row ``y``, column ``x``) at each cache level,
+        in ``hierarchy.levels`` order, reads and writes, on the caches of
+        the CPU its process rendered it on; None unless asked for
+        (``simulate_run(..., pixel_misses=True)``). Summed over the pixels
+        a process rendered, level ``l`` gives its ``<level>_misses``.
     """
 
     processes: pd.DataFrame
     task_owner: np.ndarray
     real_cycles: float
+    pixel_misses: np.ndarray | None = None
 
 
 def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed: PlacedLayout,
                  cost: CostModel, machine: Machine = Machine(), *, counter_names=None,
-                 compute: np.ndarray | None = None, lines: PixelLines | None = None) -> Run:
+                 compute: np.ndarray | None = None, lines: PixelLines | None = None,
+                 pixel_misses: bool = False) -> Run:
     """Simulate one distribution of a trace on a machine.
 
     Parameters
@@ -287,6 +295,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         Every pixel's line accesses from :func:`~coherence.pixel_lines.pixel_lines`
         for this trace, layout and the hierarchy's smallest line size (saves
         time over many runs; the results are the same).
+    pixel_misses : bool
+        Also return each pixel's misses per cache level (``Run.pixel_misses``,
+        shape (H, W, L); 8 bytes per pixel and level).
 
     Returns
     -------
@@ -305,6 +316,8 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")
+    if not isinstance(pixel_misses, (bool, np.bool_)):
+        raise ValueError(f"pixel_misses must be True or False, got {pixel_misses!r}")
     counters = np.asarray(trace.counters)
     if compute is None:
         compute = cost.compute_cycles(counters, counter_names)
@@ -345,12 +358,14 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     out_placement[:, FIRST_CPU] = -1
     task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
     tlbs = _cpu_tlbs(state, n_cpus, n_all)
+    out_misses = np.zeros((n_pixels if pixel_misses else 0, n_levels), dtype=np.int64)
     run_schedule(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
                             placed.placement, line_shift, lines),
                  state.geometry, caches, tlbs, PixelCost(compute, latency),
                  Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
                           distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
-                 queues, machine.background(line_shift), RunOutputs(out_cycles, out_placement, task_owner))
+                 queues, machine.background(line_shift),
+                 RunOutputs(out_cycles, out_placement, task_owner, out_misses))
     if not distribution.dynamic:
         task_owner[:] = distribution.task_process  # empty tasks after a process's last pixel included
 
@@ -384,7 +399,8 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
     frame["finish_cycles"] = out_cycles[:, FINISH_CYCLES]
     processes = pd.DataFrame(frame)
-    return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()))
+    return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()),
+               out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None)
 
 
 def _cpu_tlbs(state: CacheState, n_cpus: int, n_all: int) -> CpuTlbs:

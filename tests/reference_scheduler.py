@@ -72,7 +72,8 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
         ``user``, ``compute``, ``memory``, ``dispatch``, ``finish`` (lists of
         float per process), ``hits``/``misses`` (lists of per-level lists),
         ``cpu`` (first CPU), ``migrations``, ``task_owner`` (list),
-        ``real`` (float) and, with a TLB, ``tlb_accesses``/``tlb_misses``
+        ``real`` (float), ``pixel_misses`` (a list per pixel of its misses per
+        level, reads and writes) and, with a TLB, ``tlb_accesses``/``tlb_misses``
         (lists per process).
 
     A hierarchy's data TLB is one per CPU, like its caches: every access,
@@ -130,6 +131,7 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     result = {key: [0.0] * n for key in ("compute", "memory", "dispatch", "finish")}
     result["hits"] = [[0] * n_levels for _ in range(n)]
     result["misses"] = [[0] * n_levels for _ in range(n)]
+    result["pixel_misses"] = [[0] * n_levels for _ in range(trace.width * trace.height)]
     result["cpu"] = [-1] * n
     result["migrations"] = [0] * n
     last_cpu = [None] * n
@@ -225,6 +227,7 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
                         result["hits"][p][level] += 1
                     else:
                         result["misses"][p][level] += 1
+                        result["pixel_misses"][pixel][level] += 1
                 memory += latency[0] if write else latency[served]  # a store goes to the write buffer
                 if tlb:
                     tlb_accesses[p] += 1
