@@ -12,7 +12,7 @@ import numpy as np
 
 __all__ = [
     "plot_image", "plot_scene_bytes", "plot_level_metric", "plot_miss_ratio_curves", "plot_cost_map",
-    "plot_process_times", "plot_speedup", "plot_speedup_panels", "mapping_colours",
+    "plot_process_times", "plot_speedup", "plot_speedup_panels", "plot_miss_map", "mapping_colours",
 ]
 
 
@@ -178,6 +178,32 @@ def plot_cost_map(image, ax=None, *, label="compute cycles per pixel"):
     ax.figure.colorbar(shown, ax=ax, label=label, shrink=0.85)
     ax.set_xticks([])
     ax.set_yticks([])
+    return ax
+
+
+def plot_miss_map(misses, level, ax=None):
+    """One cache level of a per-pixel miss map, as an image with a colour bar.
+
+    Parameters
+    ----------
+    misses : coherence.missmap.MissMap
+        Misses per pixel per level of one run (:func:`coherence.miss_map`).
+    level : str
+        The level to draw (one of ``misses.levels``).
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib Axes
+        The image upright as rendered (row 0 at the top), titled with the
+        scene, mapping, process count and level.
+    """
+    ax = _axes(ax, (4.6, 4.0))
+    shown = ax.imshow(misses.level(level), origin="upper", cmap="viridis", interpolation="nearest")
+    ax.figure.colorbar(shown, ax=ax, label="misses per pixel", shrink=0.85)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title(f"{misses.scene}, {misses.mapping} at {misses.n_processes} processes: {level}", fontsize=9)
     return ax
 
 

@@ -24,6 +24,7 @@ _EXPORTS = {
     "CurveTiles": "coherence.mappings", "CustomMapping": "coherence.mappings",
     "from_owner_image": "coherence.mappings", "MAPPINGS": "coherence.mappings", "get_mapping": "coherence.mappings",
     "DEFAULT_MAPPINGS": "coherence.mappings",
+    "miss_map": "coherence.missmap", "MissMap": "coherence.missmap",
     "hilbert_order": "coherence.curves", "morton_order": "coherence.curves", "serpentine_order": "coherence.curves",
 }
 
