@@ -181,7 +181,7 @@ def plot_cost_map(image, ax=None, *, label="compute cycles per pixel"):
     return ax
 
 
-def plot_miss_map(misses, level, ax=None):
+def plot_miss_map(misses, level, ax=None, *, log=True):
     """One cache level of a per-pixel miss map, as an image with a colour bar.
 
     Parameters
@@ -191,15 +191,27 @@ def plot_miss_map(misses, level, ax=None):
     level : str
         The level to draw (one of ``misses.levels``).
     ax : matplotlib Axes, optional
+    log : bool
+        Colours linear from 0 to 1 miss and logarithmic above (the lower
+        levels' misses are few per pixel with rare large counts, which a
+        linear scale shows as an empty image); False: linear throughout.
 
     Returns
     -------
     matplotlib Axes
         The image upright as rendered (row 0 at the top), titled with the
-        scene, mapping, process count and level.
+        scene, mapping, process count and level. An image larger than its
+        axes is shown filtered (averaged), not sampled, so single pixels
+        with many misses are not lost.
     """
+    from matplotlib.colors import Normalize, SymLogNorm
+
     ax = _axes(ax, (4.6, 4.0))
-    shown = ax.imshow(misses.level(level), origin="upper", cmap="viridis", interpolation="nearest")
+    image = misses.level(level)
+    top = max(1, int(image.max(initial=0)))
+    norm = SymLogNorm(linthresh=1.0, linscale=0.5, vmin=0, vmax=top, base=10) if log else Normalize(0, top)
+    shown = ax.imshow(image, origin="upper", cmap="viridis", norm=norm, interpolation="antialiased",
+                      interpolation_stage="data")
     ax.figure.colorbar(shown, ax=ax, label="misses per pixel", shrink=0.85)
     ax.set_xticks([])
     ax.set_yticks([])

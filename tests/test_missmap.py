@@ -7,6 +7,7 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from matplotlib.colors import SymLogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from analyses.plots import plot_miss_map  # noqa: E402
@@ -116,5 +117,9 @@ def test_plot_draws_the_level_upright_with_its_labels():
     title = ax.get_title()
     for part in ("balls", "P", "8 processes", "L1"):
         assert part in title
+    # a logarithmic scale above one miss by default, so that rare large counts leave the rest visible
+    assert isinstance(image.norm, SymLogNorm) and (image.norm.vmin, image.norm.vmax) == (0, 6)
+    linear = plot_miss_map(hand, "L2", Figure().subplots(), log=False).images[0].norm
+    assert not isinstance(linear, SymLogNorm) and (linear.vmin, linear.vmax) == (0, 7)
     with pytest.raises(ValueError, match="unknown level"):
         plot_miss_map(hand, "L9", Figure().subplots())
