@@ -7,8 +7,9 @@
 :func:`build_report` renders the scene once (through the trace cache of
 :mod:`analyses.traces`), simulates every mapping at 1..``max_processes``
 processes (:func:`coherence.study`), computes miss-ratio curves from reuse
-distances, and returns a :class:`Report`; :func:`write_report` writes its
-three files into a folder:
+distances, simulates one more run for a per-pixel miss map
+(:func:`coherence.miss_map`), and returns a :class:`Report`;
+:func:`write_report` writes its files into a folder:
 
 ``index.html``
     One self-contained page (figures embedded as base64 PNG, styles inline,
@@ -20,13 +21,21 @@ three files into a folder:
 ``summary.json``
     Parameters, package versions, scene summary, headline numbers per
     mapping and the verdict.
+``miss_map.npy``
+    Misses per pixel per cache level of one run (the miss map's mapping and
+    process count are in ``summary.json``): a (H, W, L) array, rows from the
+    image's top, levels first level first; uint32 (int64 if a count does
+    not fit), readable with ``numpy.load``.
+``miss_map.png``
+    The miss map drawn, one panel per level (also in ``index.html``).
 
 Outputs are deterministic: no timestamps or timings, floats rounded to six
-significant digits, figures saved without metadata; each file is written to
-a temporary name and renamed.
+significant digits, figures saved without metadata; the files are written to
+temporary names and renamed together.
 """
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -39,15 +48,15 @@ import pandas as pd
 
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
-from analyses.report_html import report_html
+from analyses.report_html import miss_map_png, report_html
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain, round_number
+from rtcommon.validate import require_int
 from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
-           "RESULT_COLUMNS",
-           "SECTIONS", "DEFAULT_MAPPINGS"]
+           "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "MISS_MAP_FILES"]
 
 
 #: Columns of ``results.csv``.
@@ -67,8 +76,14 @@ SECTIONS = {
     "miss_ratio": "mapping = pixel order of the one-process stream, item = cache size in bytes: "
                   "metric 'miss_ratio_<line>B' of a fully associative LRU cache with <line>-byte lines",
     "cost_map": "compute cycles per pixel (cost model): min, mean, max, total",
+    "miss_map": "mapping and n_processes of the miss map's run, item = cache level: misses per pixel summed "
+                "('total'), their mean and largest, and the share of the total made by the 1% of pixels "
+                "that miss most ('top_1pct_share')",
     "verdict": "every number the verdict prints, exactly as printed (percentages in percent)",
 }
+
+#: Files of the miss map beside the page: the per-pixel array and its figure.
+MISS_MAP_FILES = ("miss_map.npy", "miss_map.png")
 
 _PROCESS_COLUMNS = ("pixels", "user_cycles", "compute_cycles", "memory_cycles", "dispatch_cycles")
 _SIGNIFICANT = 6
@@ -98,6 +113,10 @@ class Report:
     render_info : dict
         From :func:`analyses.traces.cached_trace` (``cached`` tells whether
         the trace came from the cache).
+    miss_map : coherence.missmap.MissMap or None
+        Misses per pixel per level of the miss map's run.
+    miss_map_png : bytes
+        Its figure, one panel per level (written as ``miss_map.png``).
     """
 
     results: pd.DataFrame
@@ -110,6 +129,8 @@ class Report:
     cost_map: np.ndarray
     verdict: object
     render_info: dict = field(default_factory=dict)
+    miss_map: object = None
+    miss_map_png: bytes = b""
 
 
 # --------------------------------------------------------------------------
@@ -124,6 +145,33 @@ def _process_counts(max_processes, n_processes) -> list[int]:
     return list(range(1, int(max_processes) + 1))
 
 
+def parse_miss_map(value, option: str = "miss_map"):
+    """The miss map's run as ``(Mapping, n_processes)``, from ``"MAPPING:N"`` or a pair; None stays None.
+
+    Raises
+    ------
+    ValueError
+        Naming ``option``: not of the form MAPPING:N, an unknown mapping, or N not an integer >= 1.
+    """
+    from coherence.mappings import get_mapping
+
+    if value is None:
+        return None
+    if isinstance(value, str):
+        name, colon, count = value.rpartition(":")
+        if not colon or not name or not count.strip().isdigit():
+            raise ValueError(f"{option} must be MAPPING:N, a mapping and a process count such as P:8, "
+                             f"got {value!r}")
+        value = (name, int(count))
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ValueError(f"{option} must be 'MAPPING:N' or a (mapping, n_processes) pair, got {value!r}")
+    try:
+        mapping = get_mapping(value[0])
+    except ValueError as error:
+        raise ValueError(f"{option}: {error}") from None
+    return mapping, require_int(f"{option} process count", value[1], 1)
+
+
 # --------------------------------------------------------------------------
 # building
 
@@ -131,7 +179,8 @@ def _process_counts(max_processes, n_processes) -> list[int]:
 def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, max_processes: int = 16,
                  n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
                  layout="compact", cost="alpha8400", kd: str | None = None, max_depth: int | None = None,
-                 cache_dir=None, out=None, progress: bool = True, workload: str = "modern") -> Report:
+                 cache_dir=None, out=None, progress: bool = True, workload: str = "modern",
+                 miss_map=None) -> Report:
     """Render (or load) a scene's trace, simulate the mappings and assemble the report.
 
     Parameters
@@ -164,6 +213,12 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
         are valid, before the long work (:func:`write_report` writes it).
     progress : bool
         Progress bars on stderr.
+    miss_map : str or (str or Mapping, int), optional
+        The run whose misses per pixel the report maps, as ``"MAPPING:N"``
+        or ``(mapping, n_processes)`` (any mapping, not only the compared
+        ones). Default: the compared mapping that loses most to coherence at
+        the verdict's process count (8 if simulated, else the largest), at
+        that count: its misses are the ones the verdict weighs.
 
     Returns
     -------
@@ -186,6 +241,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must be distinct, got {names}")
     counts = _process_counts(max_processes, n_processes)
+    miss_map = parse_miss_map(miss_map)
     hierarchy = get_hierarchy(hierarchy)
     layout = get_layout(layout)
     cost = get_cost_model(cost)
@@ -199,10 +255,12 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
                                           progress=progress, workload=workload)
     return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
-                     size, kd, progress)
+                     size, kd, progress, miss_map)
 
 
-def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress):
+def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress,
+              miss_map_choice):
+    from coherence.missmap import miss_map
     from coherence.studies import place_layout, study
     from tracer.trace import COUNTER_NAMES
 
@@ -219,6 +277,16 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     top_n = max(counts)
     verdict = compute_verdict(runs, verdict_n, order=names)
 
+    if miss_map_choice is None:
+        worst = verdict.worst["coherence_loss"][0]
+        miss_map_choice = (next(m for m in mapping_objects if m.name == worst), verdict_n)
+        chosen_by = f"default: the mapping that loses most to coherence at {verdict_n} processes"
+    else:
+        chosen_by = "given"
+    misses = miss_map(trace, *miss_map_choice, hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
+                      scene=scene)
+    miss_totals = misses.totals()
+
     curves = _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     cost_map = compute.reshape(trace.height, trace.width)
@@ -234,7 +302,7 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     tree = {k: v for k, v in info["tree"].items() if not k.endswith("_seconds")}
     totals = dict(info["totals"])
     results = _results_table(summary_scene, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes,
-                             curves, cost_map, verdict, verdict_n, top_n)
+                             curves, cost_map, verdict, verdict_n, top_n, misses, miss_totals)
     parameters = {
         "scene": scene.name, "size": int(size), "kd": kd, "workload": info.get("workload", "modern"),
         "max_depth": int(scene.max_depth),
@@ -242,12 +310,32 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
         "background_load": int(machine.background_load), "n_cpus": int(machine.n_cpus),
         "machine": result.parameters["machine"], "hierarchy": hierarchy.to_dict(), "layout": layout.name,
         "cost": cost.to_dict(), "trace_key": info["key"],
+        "miss_map": {"mapping": misses.mapping, "n_processes": misses.n_processes, "chosen_by": chosen_by},
     }
-    summary = _summary(parameters, summary_scene, tree, runs, verdict, verdict_n, top_n, names, scene_bytes)
+    summary = _summary(parameters, summary_scene, tree, runs, verdict, verdict_n, top_n, names, scene_bytes,
+                       _miss_map_summary(misses, _miss_map_dtype(misses)))
+    miss_png = miss_map_png(misses)
     page = report_html(scene, info, parameters, summary_scene, tree, totals, runs, processes, curves, cost_map,
-                       scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress)
+                       scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress,
+                       miss_png, miss_totals)
     return Report(results=results, summary=summary, html=page, runs=runs, processes=processes, curves=curves,
-                  scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info)
+                  scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info, miss_map=misses,
+                  miss_map_png=miss_png)
+
+
+def _miss_map_dtype(misses) -> np.dtype:
+    """uint32 (half of int64's bytes) unless a count does not fit."""
+    return np.dtype(np.uint32) if int(misses.misses.max(initial=0)) <= np.iinfo(np.uint32).max \
+        else np.dtype(np.int64)
+
+
+def _miss_map_summary(misses, dtype) -> dict:
+    """What summary.json says about miss_map.npy."""
+    return {"file": MISS_MAP_FILES[0], "figure": MISS_MAP_FILES[1], "mapping": misses.mapping,
+            "n_processes": misses.n_processes, "shape": list(misses.misses.shape), "axes": ["y", "x", "level"],
+            "levels": list(misses.levels), "dtype": dtype.str,
+            "what": "misses of each pixel at each cache level (reads and writes), on the caches of the CPU "
+                    "its process rendered it on; row 0 is the image's top"}
 
 
 @njit(cache=True, nogil=True)
@@ -356,7 +444,7 @@ def _round(value):
 
 
 def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes, curves,
-                   cost_map, verdict, verdict_n, top_n) -> pd.DataFrame:
+                   cost_map, verdict, verdict_n, top_n, misses, miss_totals) -> pd.DataFrame:
     rows = []
 
     def add(section, metric, value, mapping=None, n=None, item=None):
@@ -399,6 +487,9 @@ def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hier
     add("cost_map", "mean_cycles_per_pixel", cost_map.mean())
     add("cost_map", "max_cycles_per_pixel", cost_map.max())
     add("cost_map", "total_cycles", cost_map.sum())
+    for _, level in miss_totals.iterrows():
+        for metric in ("total", "mean_per_pixel", "max_per_pixel", "top_1pct_share"):
+            add("miss_map", metric, level[metric], mapping=misses.mapping, n=misses.n_processes, item=level["level"])
     for _, number in verdict.numbers.iterrows():
         add("verdict", number["metric"], number["value"], mapping=number["mapping"], n=int(number["n_processes"]))
     columns = list(zip(*rows)) if rows else [()] * len(RESULT_COLUMNS)
@@ -415,7 +506,8 @@ def _clean(value):
     return plain(value, _SIGNIFICANT, integral_as_int=True)
 
 
-def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, names, scene_bytes) -> dict:
+def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, names, scene_bytes,
+             miss_map) -> dict:
     from rtcommon.versions import package_versions
 
     headline = {}
@@ -434,6 +526,7 @@ def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, n
         "verdict": {"n_processes": verdict_n, "decided_by": verdict.decided_by, "headline": verdict.headline,
                     "sentences": verdict.sentences, "text": verdict.text,
                     "numbers": verdict.numbers.to_dict(orient="records")},
+        "miss_map": miss_map,
         "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
     })
 
@@ -443,13 +536,19 @@ def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, n
 
 
 def write_report(report: Report, out) -> Path:
-    """Write ``index.html``, ``results.csv`` and ``summary.json`` into ``out`` as one unit (see
-    :func:`rtcommon.files.write_files_atomic`)."""
+    """Write ``index.html``, ``results.csv``, ``summary.json`` and, with a miss map, ``miss_map.npy`` and
+    ``miss_map.png`` into ``out`` as one unit (see :func:`rtcommon.files.write_files_atomic`)."""
     path = prepare_output_folder(out)
-    # one unit: all three are complete before any is renamed into place
-    write_files_atomic({path / "results.csv": report.results.to_csv(index=False, lineterminator="\n"),
-                        path / "summary.json": json.dumps(report.summary, indent=2, allow_nan=False) + "\n",
-                        path / "index.html": report.html})
+    files = {path / "results.csv": report.results.to_csv(index=False, lineterminator="\n"),
+             path / "summary.json": json.dumps(report.summary, indent=2, allow_nan=False) + "\n",
+             path / "index.html": report.html}
+    if report.miss_map is not None:
+        buffer = io.BytesIO()
+        np.save(buffer, report.miss_map.misses.astype(_miss_map_dtype(report.miss_map)), allow_pickle=False)
+        files[path / MISS_MAP_FILES[0]] = buffer.getvalue()
+        files[path / MISS_MAP_FILES[1]] = report.miss_map_png
+    # one unit: all are complete before any is renamed into place
+    write_files_atomic(files)
     return path
 
 

@@ -14,16 +14,37 @@ import pandas as pd
 
 from analyses.html import figure_png, render_page
 
-__all__ = ["report_html"]
+__all__ = ["report_html", "miss_map_png"]
+
+
+def miss_map_png(misses) -> bytes:
+    """The miss map as PNG bytes: one panel per cache level, first level on the left.
+
+    Parameters
+    ----------
+    misses : coherence.missmap.MissMap
+    """
+    from matplotlib.figure import Figure
+
+    from analyses import plots
+
+    n_levels = len(misses.levels)
+    fig = Figure(figsize=(5.2 * n_levels, 4.6))
+    for ax, level in zip(fig.subplots(1, n_levels, squeeze=False)[0], misses.levels):
+        plots.plot_miss_map(misses, level, ax)
+    return figure_png(fig)
 
 
 def report_html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
-                caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress) -> str:
+                caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress, miss_png,
+                miss_totals) -> str:
     """The report page as HTML text, figures embedded as PNG.
 
     Draws on bare :class:`matplotlib.figure.Figure` objects, so it needs no
     pyplot and picks no backend. The arguments are the pieces
-    :func:`analyses.report.build_report` computed.
+    :func:`analyses.report.build_report` computed; ``miss_png`` is the miss
+    map's figure (:func:`miss_map_png`), ``miss_totals`` its
+    :meth:`~coherence.missmap.MissMap.totals`.
     """
     from matplotlib.figure import Figure
     from tqdm.auto import tqdm
@@ -117,7 +138,12 @@ def report_html(scene, info, parameters, scene_summary, tree, totals, runs, proc
     curve_points.columns = [c if not isinstance(c, (int, np.integer)) else f"miss ratio @ {plots._bytes_text(c)}"
                             for c in curve_points.columns]
 
-    return render_page("report.html.j2", scene_name=scene.name, p=parameters, names=names,
+    miss_table = miss_totals.rename(columns={"total": "misses", "mean_per_pixel": "mean per pixel",
+                                             "max_per_pixel": "max per pixel",
+                                             "top_1pct_share": "share of the 1% worst pixels"})
+    figures["miss_map"] = miss_png
+
+    return render_page("report.html.j2", miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
                        hierarchy_name=hierarchy.name, verdict=verdict, verdict_n=verdict_n, top_n=top_n,
                        scene_summary=scene_summary, image=image, figures=figures, counts_table=counts_table,
                        totals_table=totals_table, tree_table=tree_table, bytes_table=bytes_table,

@@ -38,9 +38,9 @@ def reports(tmp_path_factory):
     return first, second
 
 
-def test_writes_three_files(reports):
+def test_writes_its_files(reports):
     first, _ = reports
-    for name in ("index.html", "results.csv", "summary.json"):
+    for name in ("index.html", "results.csv", "summary.json", "miss_map.npy", "miss_map.png"):
         assert (first / name).is_file() and (first / name).stat().st_size > 0
     assert not [p for p in first.iterdir() if p.name.startswith(".")], "temporary files left behind"
 
@@ -51,15 +51,61 @@ def test_html_is_self_contained(reports):
     for forbidden in ("http://", "https://", 'src="file', "<link", "<script"):
         assert forbidden not in page
     sources = re.findall(r'src="([^"]*)"', page)
-    assert len(sources) >= 8 and all(s.startswith("data:image/png;base64,") for s in sources)
-    for heading in ("Verdict", "The scene", "Miss-ratio curves", "Cost per pixel", "Efficiency decomposition"):
+    assert len(sources) >= 9 and all(s.startswith("data:image/png;base64,") for s in sources)
+    for heading in ("Verdict", "The scene", "Miss-ratio curves", "Cost per pixel", "Misses per pixel",
+                    "Efficiency decomposition"):
         assert heading in page
 
 
 def test_outputs_are_deterministic(reports):
     first, second = reports
-    for name in ("results.csv", "summary.json", "index.html"):
+    for name in ("results.csv", "summary.json", "index.html", "miss_map.npy", "miss_map.png"):
         assert (first / name).read_bytes() == (second / name).read_bytes(), name
+
+
+def _miss_map_matches_its_run(folder, mapping, n):
+    """miss_map.npy is the run of ``mapping`` at ``n`` of results.csv: its per-level sums are that run's misses."""
+    summary = json.loads((folder / "summary.json").read_text())
+    misses = np.load(folder / "miss_map.npy")
+    size = summary["parameters"]["size"]
+    assert misses.shape == (size, size, 3) and misses.dtype == np.uint32
+    assert summary["miss_map"]["shape"] == [size, size, 3] and summary["miss_map"]["levels"] == ["L1", "L2", "L3"]
+    assert summary["miss_map"]["mapping"] == mapping and summary["miss_map"]["n_processes"] == n
+    table = pd.read_csv(folder / "results.csv")
+    run = table[(table["section"] == "runs") & (table["mapping"] == mapping) & (table["n_processes"] == n)]
+    run = run.set_index("metric")["value"].astype(float)
+    totals = misses.sum(axis=(0, 1), dtype=np.int64)
+    assert totals[2] == run["memory_accesses"]  # an integer, written exactly
+    for index, level in enumerate(("L1", "L2")):
+        assert totals[index] == pytest.approx(run[f"{level}_misses_per_ray"] * run["rays"], rel=1e-5)
+    mapped = table[table["section"] == "miss_map"]
+    assert set(mapped["mapping"]) == {mapping} and set(mapped["n_processes"]) == {n}
+    assert mapped.set_index(["item", "metric"])["value"].astype(float)[("L3", "total")] == totals[2]
+    return summary
+
+
+def test_miss_map_defaults_to_the_largest_coherence_loss(reports):
+    table = pd.read_csv(reports[0] / "results.csv")
+    losses = table[(table["section"] == "runs") & (table["n_processes"] == 8) & (table["metric"] == "coherence_loss")]
+    worst = losses.set_index("mapping")["value"].astype(float).idxmax()
+    summary = _miss_map_matches_its_run(reports[0], worst, 8)
+    assert summary["parameters"]["miss_map"]["chosen_by"].startswith("default")
+
+
+def test_miss_map_option(tmp_path):
+    out = tmp_path / "out"
+    assert main(["report", "tetra", "--size", "16", "--processes", "2", "--mappings", "S", "R", "--miss-map",
+                 "s:2", "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
+    summary = _miss_map_matches_its_run(out, "S", 2)
+    assert summary["parameters"]["miss_map"] == {"mapping": "S", "n_processes": 2, "chosen_by": "given"}
+
+
+def test_miss_map_option_in_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["report", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--miss-map MAPPING:N map the misses per pixel of MAPPING at N processes" in text
+    assert "miss_map.npy" in text and "miss_map.png" in text
 
 
 def test_results_table_is_tidy_and_complete(reports):
@@ -166,6 +212,9 @@ def test_trace_key_follows_file_content(tmp_path):
     (["report", "balls", "--mappings", "S", "XX"], "XX"),
     (["report", "balls", "--hierarchy", "nosuch"], "nosuch"),
     (["report", "balls", "--max-processes", "0"], "--max-processes"),
+    (["report", "balls", "--miss-map", "P8"], "--miss-map must be MAPPING:N, a mapping and a process count such as P:8"),
+    (["report", "balls", "--miss-map", "XX:8"], "--miss-map: unknown mapping 'XX'"),
+    (["report", "balls", "--miss-map", "P:0"], "--miss-map process count must be >= 1, got 0"),
 ])
 def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tracer.render, "render", _no_render)

@@ -25,20 +25,27 @@ Every mapping runs at 1..--max-processes processes on --cpus simulated CPUs
 Output folder (default report-SCENE):
   index.html    one self-contained page: the scene, bytes of scene data
                 against each cache, hit rates and misses per ray at 1 and 8
-                processes, miss-ratio curves, the per-pixel cost map, mapping
-                pictures, per-process user times, speed-up curves, the
-                efficiency decomposition and the verdict
+                processes, miss-ratio curves, the per-pixel cost map, the
+                per-pixel miss map, mapping pictures, per-process user
+                times, speed-up curves, the efficiency decomposition and the
+                verdict
   results.csv   every number, tidy long form: section, mapping, n_processes,
                 item, metric, value (sections: scene, scene_bytes, cache,
-                runs, processes, miss_ratio, cost_map, verdict)
+                runs, processes, miss_ratio, cost_map, miss_map, verdict)
   summary.json  parameters, versions, headline numbers and the verdict
-The same inputs give byte-identical results.csv and summary.json.
+  miss_map.npy  misses per pixel per cache level of one run (--miss-map):
+                shape (height, width, levels), rows from the image's top,
+                uint32; numpy.load reads it
+  miss_map.png  the same drawn, one panel per cache level
+The same inputs give byte-identical results.csv, summary.json and
+miss_map.npy.
 
 examples:
   coherence report                               # balls at 512x512
   coherence report tetra --size 256 --out tetra-report
   coherence report shell --mappings S B DB hilbert --background 0
   coherence report balls --hierarchy modern --json
+  coherence report balls --miss-map S:8          # map the misses of S at 8 processes
 """
 
 
@@ -58,6 +65,10 @@ def register(subparsers) -> None:
     parser.add_argument("--out", metavar="DIR", help="output folder (default report-SCENE)")
     parser.add_argument("--max-processes", type=int, default=16, metavar="N",
                         help="simulate 1..N processes (default 16)")
+    parser.add_argument("--miss-map", metavar="MAPPING:N",
+                        help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
+                             "(default: the compared mapping that loses most to coherence at 8 processes, or "
+                             "at the largest count without 8: the misses the verdict weighs)")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 
@@ -67,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from analyses.report import build_report, write_report
+    from analyses.report import build_report, parse_miss_map, write_report
 
     from analyses.commands import checks
 
@@ -76,15 +87,16 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--max-depth", args.max_depth, 1, 64)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
+    miss_map = parse_miss_map(args.miss_map, "--miss-map")
     out = args.out or f"report-{Path(args.scene).stem.lower()}"
     progress = sys.stderr.isatty()
     report = build_report(args.scene, args.size, mappings=chosen_mappings(args), max_processes=args.max_processes,
                           n_processes=args.processes, background=args.background, n_cpus=args.cpus,
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
                           max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
-                          workload=args.workload)
+                          workload=args.workload, miss_map=miss_map)
     path = write_report(report, out)
-    print(f"wrote {path / 'index.html'}, results.csv, summary.json"
+    print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
     if args.json:
         print(json.dumps(report.summary, indent=2))
