@@ -48,6 +48,24 @@ def test_miss_map_equals_the_reference_schedule(mapping, background, hierarchy):
         assert result.misses[:, :, index].sum() == run.processes[f"{level}_misses"].sum() > 0
 
 
+def test_a_textured_scene_maps_its_texel_misses_too():
+    from tracer.records import RecordKind, unpack
+    from tracer.render import render
+    from tracer.scenes import load
+
+    scene = load("balls-textured")
+    trace = render(scene, size=8).trace
+    kinds, _ = unpack(trace.records)
+    assert (kinds == RecordKind.TEXEL).sum() > 0
+    machine = Machine(n_cpus=2, quantum_cycles=20000.0, background_load=1, background_footprint=512)
+    result = miss_map(trace, "P", 3, hierarchy=INCLUSIVE, cost=COST, machine=machine, scene=scene)
+    assert result.scene == scene.name
+    placed = place_layout(get_layout("compact"), trace, scene)
+    expected = reference_schedule(trace, Pixel().build(8, 8, 3), INCLUSIVE, placed,
+                                  COST.compute_cycles(trace.counters, COUNTER_NAMES), machine)
+    assert result.misses.tolist() == np.array(expected["pixel_misses"]).reshape(8, 8, 2).tolist()
+
+
 def _hand_map():
     misses = np.zeros((2, 3, 2), dtype=np.int64)
     misses[:, :, 0] = [[1, 2, 3], [4, 5, 6]]
