@@ -20,6 +20,31 @@ two). ``#`` starts a comment to the end of the line. Directives:
 ``pp n`` + n ``x y z nx ny nz`` polygon patch with vertex normals (PATCH)
 ==============================  ==============================================
 
+The texture extension (our own; a file without these keywords is plain NFF):
+
+``texture NAME FILE``
+    a texture read from a PNG or JPEG file (path relative to the NFF file;
+    one token: no whitespace, no ``#``)
+``texture NAME procedural W H SEED [CELLS]``
+    a seeded image of W x H texels (:func:`tracer.texture.procedural_texture`;
+    CELLS default 8)
+``usetexture NAME [SCALE]``
+    the objects that follow use texture NAME (repeated SCALE times across
+    their (u, v), default 1) times the current ``f`` colour, until the next
+    ``f`` or ``usetexture none``
+``tp n`` + n ``x y z u v``
+    ``p`` with (u, v) per vertex (3 vertices: TRIANGLE, more: POLYGON)
+``tpp n`` + n ``x y z nx ny nz u v``
+    ``pp`` with (u, v) per vertex (PATCH)
+
+A texture NAME is one token, neither a keyword nor ``none``; textures are
+numbered in the order they are defined (unused ones too). While a texture
+is in use, spheres are mapped by latitude and longitude, ``tp`` and ``tpp``
+by their (u, v); ``p``, ``pp`` and ``c`` are errors (they have no (u, v)).
+``tp`` and ``tpp`` without a texture in use keep their (u, v) unused. The
+fast pass does not know these keywords and leaves such files to the
+positional reader.
+
 The reader is strict, as a C reader of the format would be: the view
 (``v`` with all six of ``from``, ``at``, ``up``, ``angle``, ``hither`` and
 ``resolution``) is required, a scene without objects is an error, and numbers
@@ -43,17 +68,20 @@ the depth is the SPD procedure's 5 (the :class:`~tracer.scene.Scene` default).
 Materials are deduplicated and numbered in order of first use (see
 :class:`~tracer.scene.SceneBuilder`), which makes read -> write -> read exact:
 the writer prints every number with the shortest representation that reads
-back to the same float64.
+back to the same float64. :func:`write_nff` writes a textured scene's images
+as lossless PNG files beside the NFF file (a procedural texture's parameters
+are not kept in a :class:`~tracer.scene.Scene`, so its texels are written).
 """
 from __future__ import annotations
 
 import os
-import tempfile
+import re
 import warnings
 from pathlib import Path
 
 import numpy as np
 
+from rtcommon.files import write_files_atomic
 from tracer.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
                              OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS, Fallback, SceneParts,
                              assemble, parse_fast, polygon_measures, view_direction_problem)
@@ -151,14 +179,56 @@ class _Tokens:
 
 
 # ------------------------------------------------------------- the positional reader
-def _parse_positioned(text: str, source: str) -> tuple[SceneParts, list[int]]:
+#: numbers per vertex, and their names, of each polygon keyword
+_VERTEX_FIELDS = {"p": (3, "x y z"), "pp": (6, "x y z nx ny nz"), "tp": (5, "x y z u v"),
+                  "tpp": (8, "x y z nx ny nz u v")}
+
+
+def _texture_image(tokens: _Tokens, folder: Path | None) -> np.ndarray:
+    """The image of a ``texture NAME ...`` line, read from the tokens after its name:
+    a PNG or JPEG file, or ``procedural WIDTH HEIGHT SEED [CELLS]``; shape (H, W, 4) uint8."""
+    from tracer.images import read_image
+    from tracer.texture import MAX_TEXELS, procedural_texture
+
+    at = tokens.pos
+    what = tokens.next("an image file or 'procedural' after the texture name")
+    if what in KEYWORDS:
+        raise tokens.error("an image file or 'procedural' after the texture name", at)
+    if what == "procedural":
+        width = tokens.integer("a positive integer (procedural texture width)")
+        height = tokens.integer("a positive integer (procedural texture height)")
+        if width < 1 or height < 1:
+            raise tokens.error("a positive procedural texture size", tokens.pos - 2)
+        if width * height > MAX_TEXELS:
+            raise tokens.error(f"a procedural texture of at most {MAX_TEXELS} texels", tokens.pos - 2)
+        seed = tokens.integer("an integer >= 0 (procedural texture seed)")
+        if seed < 0:
+            raise tokens.error("an integer >= 0 (procedural texture seed)", tokens.pos - 1)
+        cells = 8
+        if not tokens.at_end() and tokens.items[tokens.pos][0] not in KEYWORDS:
+            cells = tokens.integer("a positive integer (procedural texture cells) or a keyword")
+            if cells < 1:
+                raise tokens.error("a positive number of procedural texture cells", tokens.pos - 1)
+        return procedural_texture(width, height, seed=seed, cells=cells)
+    path = Path(what) if folder is None else folder / what
+    try:
+        return read_image(path)
+    except (OSError, ValueError) as error:
+        raise tokens.error(f"a readable PNG or JPEG image file ({error})", at) from None
+
+
+def _parse_positioned(text: str, source: str, folder: Path | None = None) -> tuple[SceneParts, list[int]]:
     """Read NFF token by token, knowing every token's line and column: the reader that says where.
 
     Returns the scene's parts (see :func:`assemble`) and, per element, the
     index of its keyword token. Raises :class:`NFFError` at the first fault.
+    Relative texture files are looked up in ``folder`` (default: the
+    current folder).
     """
     tokens = _Tokens(text, source)
     parts = SceneParts()
+    texture_numbers: dict[str, int] = {}
+    texture_in_use = None
     view: dict | None = None
     view_at = 0
     view_tokens: dict = {}
@@ -208,35 +278,71 @@ def _parse_positioned(text: str, source: str) -> tuple[SceneParts, list[int]]:
             parts.lights.append((*position, *color))
         elif keyword == "f":
             parts.material = tokens.numbers(8, "a number (f: r g b Kd Ks shine T ior)")
+            parts.texture_use, texture_in_use = (), None  # a texture lasts until the next 'f'
         elif keyword == "s":
             values = tokens.numbers(4, "a number (s: x y z radius)")
             if values[3] <= 0.0:
                 raise tokens.error("a positive sphere radius", tokens.pos - 1)
             parts.add_sphere(values, start)
         elif keyword == "c":
+            if parts.texture_use:
+                raise tokens.error(f"no cone while texture {texture_in_use!r} is in use (a cone has no (u, v); "
+                                   "'usetexture none' first)", start)
             values = tokens.numbers(8, "a number (c: base x y z r, apex x y z r)")
             if values[:3] == values[4:7]:
                 raise tokens.error("a cone apex different from its base (degenerate cone)", tokens.pos - 4)
             parts.add_cone(values, start)
-        elif keyword in ("p", "pp"):
+        elif keyword in ("p", "pp", "tp", "tpp"):
+            if keyword in ("p", "pp") and parts.texture_use:
+                raise tokens.error(f"'t{keyword}' (with u v per vertex) while texture {texture_in_use!r} is in use: "
+                                   f"{keyword!r} gives no (u, v) ('usetexture none' first)", start)
             count = tokens.integer(f"a vertex count after {keyword!r}")
             if count < 3:
                 raise tokens.error("a polygon with at least 3 vertices (too few vertices)", tokens.pos - 1)
-            per_vertex = 3 if keyword == "p" else 6
-            what = "x y z" if keyword == "p" else "x y z nx ny nz"
+            per_vertex, what = _VERTEX_FIELDS[keyword]
             values = tokens.numbers(per_vertex * count, f"a number ({keyword} {count}: {count} x {what})")
             table = np.array(values).reshape(count, per_vertex)
             degenerate, _ = polygon_measures(table[:, :3], np.array([0, count]))
             if degenerate[0]:
                 raise tokens.error("a polygon with non-zero area (degenerate polygon)", start)
-            if keyword == "pp" and not np.all(np.any(table[:, 3:] != 0.0, axis=1)):
-                raise tokens.error("a non-zero normal at every vertex of 'pp' (zero normal)", start)
-            parts.add_polygon(keyword, count, values, start)
+            patch = keyword in ("pp", "tpp")
+            if patch and not np.all(np.any(table[:, 3:6] != 0.0, axis=1)):
+                raise tokens.error(f"a non-zero normal at every vertex of {keyword!r} (zero normal)", start)
+            uv = None
+            if keyword in ("tp", "tpp"):
+                uv = table[:, -2:].ravel().tolist()
+                values = table[:, :-2].ravel().tolist()
+            parts.add_polygon("pp" if patch else "p", count, values, start, uv)
+        elif keyword == "texture":
+            name_at = tokens.pos
+            texture_name = tokens.next("a texture name after 'texture'")
+            if texture_name in KEYWORDS:
+                raise tokens.error("a texture name after 'texture' (not a keyword)", name_at)
+            if texture_name == "none" or texture_name in texture_numbers:
+                what = "reserved" if texture_name == "none" else "already defined"
+                raise tokens.error(f"a new texture name ({texture_name!r} is {what})", name_at)
+            texture_numbers[texture_name] = parts.add_texture(_texture_image(tokens, folder))
+        elif keyword == "usetexture":
+            name_at = tokens.pos
+            texture_name = tokens.next("a texture name or 'none' after 'usetexture'")
+            if texture_name == "none":
+                parts.texture_use, texture_in_use = (), None
+                continue
+            if texture_name not in texture_numbers:
+                defined = ", ".join(repr(n) for n in texture_numbers) or "none yet"
+                raise tokens.error(f"a texture defined by an earlier 'texture' line or 'none' (defined: {defined})",
+                                   name_at)
+            scale = 1.0
+            if not tokens.at_end() and tokens.items[tokens.pos][0] not in KEYWORDS:
+                scale = tokens.number("a number (uv scale of 'usetexture') or a keyword")
+                if not scale > 0.0:
+                    raise tokens.error("a positive uv scale", tokens.pos - 1)
+            parts.texture_use, texture_in_use = (texture_numbers[texture_name], scale), texture_name
         elif keyword not in ("v", *VIEW_KEYWORDS):
             raise tokens.error("a keyword (one of " + ", ".join(KEYWORDS) + ")", start)
 
     if not parts.kinds:
-        raise tokens.error("at least one object (s, p, pp or c): the scene is empty", len(tokens.items))
+        raise tokens.error("at least one object (s, p, pp, c, tp or tpp): the scene is empty", len(tokens.items))
     if view is None:
         raise tokens.error("a view ('v' with from, at, up, angle, hither, resolution) before the first object",
                            first_object)
@@ -279,7 +385,7 @@ def _warn_about(scene: Scene, element_tokens: list, text: str, source: str) -> N
 
 
 def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
-              max_depth: int | None = None) -> Scene:
+              max_depth: int | None = None, folder=None) -> Scene:
     """Parse NFF text into a :class:`~tracer.scene.Scene`.
 
     Parameters
@@ -292,6 +398,9 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
         Scene name; default the stem of ``source``.
     max_depth : int, optional
         Recursion depth; default the file's ``# max_depth N`` line, else 5.
+    folder : str or os.PathLike, optional
+        Where relative ``texture`` files are; default the folder of
+        ``source`` when it names a file, else the current folder.
 
     Returns
     -------
@@ -302,8 +411,9 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     Raises
     ------
     NFFError
-        On the first fault, with file, line, column and what was expected;
-        no partial scene is returned.
+        On the first fault, with file, line, column and what was expected
+        (a missing or unreadable texture image included); no partial scene
+        is returned.
 
     Warns
     -----
@@ -319,8 +429,10 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     try:
         parts = parse_fast(text)
         scene = assemble(parts, name, depth)
-    except Fallback:
-        parts, _ = _parse_positioned(text, source)  # raises the error with its position
+    except Fallback:  # a fault, or the texture extension
+        if folder is None and not source.startswith("<"):
+            folder = Path(source).parent
+        parts, _ = _parse_positioned(text, source, None if folder is None else Path(folder))
         scene = assemble(parts, name, depth)
     _warn_about(scene, parts.tokens, text, source)
     return scene
@@ -359,7 +471,7 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
     if not stat.S_ISREG(mode):
         raise ValueError(f"not an NFF file: {str(path)!r} is not a regular file")
     text = path.read_bytes().decode("utf-8", errors="replace")
-    return parse_nff(text, str(path), name=path.stem, max_depth=max_depth)
+    return parse_nff(text, str(path), name=path.stem, max_depth=max_depth, folder=path.parent)
 
 
 def _fmt(value) -> str:
@@ -372,8 +484,48 @@ def _join(values) -> str:
     return " ".join(_fmt(v) for v in values)
 
 
-def format_nff(scene: Scene) -> str:
-    """The NFF text of ``scene`` (see :func:`write_nff`)."""
+def _element_uv(scene: Scene, kind: int, index: int) -> np.ndarray | None:
+    """(n, 2) texture coordinates of a planar element, or None without them (NaN or no uv arrays)."""
+    if kind == ElementKind.TRIANGLE:
+        uv = scene.triangle_uv[index] if len(scene.triangle_uv) else None
+    elif kind == ElementKind.POLYGON:
+        uv = scene.polygon_uv[scene.polygon_offsets[index]:scene.polygon_offsets[index + 1]] \
+            if len(scene.polygon_uv) else None
+    else:
+        uv = scene.patch_uv[scene.patch_offsets[index]:scene.patch_offsets[index + 1]] if len(scene.patch_uv) else None
+    if uv is None or np.isnan(uv).all():
+        return None
+    if not np.isfinite(uv).all():
+        raise ValueError(f"format_nff: a {ElementKind(kind).name.lower()} (row {index}) has (u, v) at some "
+                         "vertices and not at others; NFF gives all or none")
+    return uv
+
+
+def _texture_file_name(name) -> str:
+    text = str(name)
+    if not text or TOKEN.fullmatch(text) is None or "#" in text or text in KEYWORDS or text == "procedural":
+        raise ValueError(f"format_nff: texture file name {text!r} must be one token (no whitespace, no '#') "
+                         "and not a keyword")
+    return text
+
+
+def format_nff(scene: Scene, texture_files=None) -> str:
+    """The NFF text of ``scene`` (see :func:`write_nff`).
+
+    Parameters
+    ----------
+    scene : Scene
+    texture_files : sequence of str, optional
+        The file name of each texture, as its ``texture`` line gives it
+        (relative to the NFF file); required when the scene has textures.
+
+    Raises
+    ------
+    ValueError
+        An element NFF cannot express: a cone with a textured material, a
+        textured polygon or patch without (u, v), (u, v) at only some of an
+        element's vertices; a textured scene without ``texture_files``.
+    """
     cam = scene.camera
     out = [
         f"# {scene.name}: {scene.n_elements} elements, written by raytrace-coherence",
@@ -392,31 +544,53 @@ def format_nff(scene: Scene) -> str:
             out.append("l " + _join(position))
         else:
             out.append("l " + _join(position) + " " + _join(color))
+    if scene.n_textures:
+        if texture_files is None or len(texture_files) != scene.n_textures:
+            raise ValueError(f"format_nff: the scene has {scene.n_textures} textures; texture_files must name "
+                             "a file for each (write_nff writes them)")
+        out.extend(f"texture t{k} {_texture_file_name(name)}" for k, name in enumerate(texture_files))
     materials = np.column_stack([scene.material_color, scene.material_kd, scene.material_ks,
                                  scene.material_shine, scene.material_t, scene.material_ior])
+    n_materials = len(materials)
+    material_texture = scene.material_texture if len(scene.material_texture) == n_materials \
+        else np.full(n_materials, -1, dtype=np.int64)
+    uv_scale = scene.material_uv_scale if len(scene.material_uv_scale) == n_materials else np.ones(n_materials)
     current = -1
-    for kind, index, material in zip(scene.element_kind, scene.element_index,
-                                     scene.element_material):
+    for element, (kind, index, material) in enumerate(zip(scene.element_kind, scene.element_index,
+                                                          scene.element_material)):
+        textured = material_texture[material] >= 0
         if material != current:
             out.append("f " + _join(materials[material]))
+            if textured:
+                scale = "" if uv_scale[material] == 1.0 else " " + _fmt(uv_scale[material])
+                out.append(f"usetexture t{int(material_texture[material])}{scale}")
             current = material
         if kind == ElementKind.SPHERE:
             out.append("s " + _join(scene.sphere_center[index]) + " "
                        + _fmt(scene.sphere_radius[index]))
-        elif kind == ElementKind.TRIANGLE:
-            out.append("p 3")
-            out.extend(_join(v) for v in scene.triangle_vertices[index])
-        elif kind == ElementKind.POLYGON:
-            vertices = scene.polygon_vertices[scene.polygon_offsets[index]:
-                                              scene.polygon_offsets[index + 1]]
-            out.append(f"p {len(vertices)}")
-            out.extend(_join(v) for v in vertices)
-        elif kind == ElementKind.PATCH:
-            lo, hi = scene.patch_offsets[index], scene.patch_offsets[index + 1]
-            out.append(f"pp {hi - lo}")
-            out.extend(_join(v) + " " + _join(n) for v, n in
-                       zip(scene.patch_vertices[lo:hi], scene.patch_normals[lo:hi]))
+        elif kind in (ElementKind.TRIANGLE, ElementKind.POLYGON, ElementKind.PATCH):
+            uv = _element_uv(scene, kind, index)
+            if textured and uv is None:
+                raise ValueError(f"format_nff: element {element} is textured but has no (u, v); "
+                                 "NFF cannot say so")
+            if kind == ElementKind.TRIANGLE:
+                vertices = scene.triangle_vertices[index]
+            elif kind == ElementKind.POLYGON:
+                vertices = scene.polygon_vertices[scene.polygon_offsets[index]:scene.polygon_offsets[index + 1]]
+            else:
+                lo, hi = scene.patch_offsets[index], scene.patch_offsets[index + 1]
+                vertices = np.column_stack([scene.patch_vertices[lo:hi], scene.patch_normals[lo:hi]])
+            keyword = "pp" if kind == ElementKind.PATCH else "p"
+            if uv is None:
+                out.append(f"{keyword} {len(vertices)}")
+                out.extend(_join(v) for v in vertices)
+            else:
+                out.append(f"t{keyword} {len(vertices)}")
+                out.extend(_join(v) + " " + _join(t) for v, t in zip(vertices, uv))
         elif kind == ElementKind.CONE:
+            if textured:
+                raise ValueError(f"format_nff: element {element} is a cone with a textured material; "
+                                 "NFF cones have no (u, v)")
             out.append("c " + _join(scene.cone_base[index]) + " "
                        + _fmt(scene.cone_base_radius[index]))
             out.append("  " + _join(scene.cone_apex[index]) + " "
@@ -428,11 +602,14 @@ def format_nff(scene: Scene) -> str:
 
 
 def write_nff(scene: Scene, path) -> Path:
-    """Write ``scene`` as NFF, atomically (temporary file, then rename).
+    """Write ``scene`` as NFF, atomically (temporary files, then rename).
 
     Every number is printed with the shortest text that reads back to the
     same float64, so :func:`read_nff` gives back identical arrays; the depth
-    goes into a ``# max_depth N`` comment.
+    goes into a ``# max_depth N`` comment. A textured scene's images go
+    beside the NFF file as lossless PNG files ``<stem>.t<k>.png`` (texture
+    ``k``; whitespace and ``#`` in the stem become ``_``), named by its
+    ``texture`` lines; the NFF file and its images are written as one unit.
 
     Parameters
     ----------
@@ -444,19 +621,24 @@ def write_nff(scene: Scene, path) -> Path:
     -------
     Path
         The written path.
+
+    Raises
+    ------
+    FileNotFoundError
+        The destination's folder does not exist.
+    ValueError
+        The scene has an element NFF cannot express (see :func:`format_nff`).
     """
+    from tracer.images import png_bytes
+
     path = Path(path)
-    text = format_nff(scene)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise FileNotFoundError(f"folder of {str(path)!r} does not exist")
-    handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
+    stem = re.sub(r"[\s#]", "_", path.stem) or "scene"
+    names = [f"{stem}.t{k}.png" for k in range(scene.n_textures)]
+    files = {path: format_nff(scene, names if names else None)}
+    for k, name in enumerate(names):
+        files[folder / name] = png_bytes(scene.texture(k))
+    write_files_atomic(files)
     return path

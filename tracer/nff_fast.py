@@ -7,6 +7,11 @@ the file again to say where the fault is. Both readers fill the same
 :class:`SceneParts`, and :func:`assemble` turns them into a
 :class:`~tracer.scene.Scene`, so a file reads the same either way (the tests
 compare the two on fuzzed input).
+
+The texture extension (``texture``, ``usetexture``, ``tp``, ``tpp``; see
+:mod:`tracer.nff`) is read by the positional reader only: its keywords are
+unknown here and raise :class:`Fallback`, so plain NFF keeps this fast path
+unchanged.
 """
 from __future__ import annotations
 
@@ -23,8 +28,10 @@ COMMENT = re.compile(r"#[^\n]*")
 C_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 C_INTEGER = re.compile(r"[+-]?[0-9]+")
 VIEW_KEYWORDS = ("from", "at", "up", "angle", "hither", "resolution")
-OBJECT_KEYWORDS = ("c", "s", "p", "pp")
-KEYWORDS = ("v", *VIEW_KEYWORDS, "b", "l", "f", *OBJECT_KEYWORDS)
+#: the extension's keywords (textures, polygons and patches with (u, v)), read by the positional reader only
+TEXTURE_KEYWORDS = ("texture", "usetexture", "tp", "tpp")
+OBJECT_KEYWORDS = ("c", "s", "p", "pp", "tp", "tpp")
+KEYWORDS = ("v", *VIEW_KEYWORDS, "b", "l", "f", *OBJECT_KEYWORDS, "texture", "usetexture")
 CAMERA_FIELDS = {"from": "eye", "at": "look_at", "up": "up", "angle": "angle", "hither": "hither",
                   "resolution": "resolution"}
 DEFAULT_MATERIAL = Material().as_tuple()
@@ -105,14 +112,25 @@ class Fallback(Exception):
 
 
 class SceneParts:
-    """A scene's contents as flat Python lists, in element order."""
+    """A scene's contents as flat Python lists, in element order.
+
+    A material row's key is the ``f`` line's 8 numbers, followed by the
+    texture's number and uv scale while a texture is in use
+    (``material + texture_use``). Texture images and (u, v) lists are filled
+    by the positional reader only; the fast reader leaves them empty.
+    """
 
     def __init__(self):
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
         self.lights: list = []
         self.material = DEFAULT_MATERIAL
+        self.texture_use: tuple = ()  # () or (texture number, uv scale)
         self.material_rows: dict = {}
+        self.textures: list = []  # images, (height, width, 4) uint8
+        self.triangle_uv: list = []  # 6 per triangle, NaN without (u, v)
+        self.polygon_uv: list = []  # 2 per polygon vertex
+        self.patch_uv: list = []  # 2 per patch vertex
         self.kinds: list[int] = []
         self.index: list[int] = []
         self.element_material: list[int] = []
@@ -127,7 +145,7 @@ class SceneParts:
         self.cone_tokens: list[int] = []
 
     def _element(self, kind: int, index: int, token: int) -> None:
-        material = self.material
+        material = self.material + self.texture_use
         row = self.material_rows.get(material)
         if row is None:
             row = self.material_rows[material] = len(self.material_rows)
@@ -145,18 +163,29 @@ class SceneParts:
         self.cones.extend(values)
         self.cone_tokens.append(token)
 
-    def add_polygon(self, keyword: str, count: int, values, token: int) -> None:
+    def add_polygon(self, keyword: str, count: int, values, token: int, uv=None) -> None:
+        """Add a ``p`` or ``pp`` element (``values``: ``count`` rows of x y z, or
+        x y z nx ny nz), with ``uv`` (2 per vertex) or NaN (u, v)."""
+        uv = [float("nan")] * (2 * count) if uv is None else list(uv)
         if keyword == "pp":
             self._element(PATCH, len(self.patch_counts), token)
             self.patch_counts.append(count)
             self.patches.extend(values)
+            self.patch_uv.extend(uv)
         elif count == 3:
             self._element(TRIANGLE, len(self.triangles) // 9, token)
             self.triangles.extend(values)
+            self.triangle_uv.extend(uv)
         else:
             self._element(POLYGON, len(self.polygon_counts), token)
             self.polygon_counts.append(count)
             self.polygons.extend(values)
+            self.polygon_uv.extend(uv)
+
+    def add_texture(self, image) -> int:
+        """Add a texture image (height, width, 4) uint8; returns its number."""
+        self.textures.append(np.ascontiguousarray(image, dtype=np.uint8))
+        return len(self.textures) - 1
 
 
 def parse_fast(text: str) -> SceneParts:
@@ -269,7 +298,7 @@ def parse_fast(text: str) -> SceneParts:
                     view[CAMERA_FIELDS[keyword]] = point
                     position += 3
                 continue
-            else:
+            else:  # an unknown keyword, or the texture extension's: the positional reader reads both
                 raise Fallback
             # an element was added: its material row and where it stands
             seen_object = True
@@ -307,7 +336,8 @@ def assemble(parts: SceneParts, name: str, max_depth: int) -> Scene:
     spheres, cones, lights = table(parts.spheres, 4), table(parts.cones, 8), table(parts.lights, 6)
     triangles = table(parts.triangles, 9).reshape(-1, 3, 3)
     polygons, patches = table(parts.polygons, 3), table(parts.patches, 6)
-    materials = np.array(list(parts.material_rows), dtype=np.float64).reshape(-1, 8)
+    keys = list(parts.material_rows)
+    materials = np.array([key[:8] for key in keys], dtype=np.float64).reshape(-1, 8)
     numbers = (spheres, cones, lights, triangles, polygons, patches, materials,
                np.asarray(parts.background, dtype=np.float64))
     if not all(np.isfinite(array).all() for array in numbers):
@@ -336,7 +366,31 @@ def assemble(parts: SceneParts, name: str, max_depth: int) -> Scene:
         material_ks=np.ascontiguousarray(materials[:, 4]), material_shine=np.ascontiguousarray(materials[:, 5]),
         material_t=np.ascontiguousarray(materials[:, 6]), material_ior=np.ascontiguousarray(materials[:, 7]),
         light_position=np.ascontiguousarray(lights[:, :3]), light_color=np.ascontiguousarray(lights[:, 3:]),
-        **untextured(len(materials), len(triangles), len(polygons), len(patches)),
+        **_texture_fields(parts, keys, len(triangles), len(polygons), len(patches)),
     )
+
+
+def _texture_fields(parts: SceneParts, keys: list, n_triangles: int, n_polygon_vertices: int,
+                    n_patch_vertices: int) -> dict:
+    """The :class:`Scene` texture fields of a file's parts (as :func:`untextured` without any)."""
+    fields = untextured(len(keys), n_triangles, n_polygon_vertices, n_patch_vertices)
+    for row, key in enumerate(keys):
+        if len(key) > 8:
+            fields["material_texture"][row], fields["material_uv_scale"][row] = key[8], key[9]
+    for name, values, count in (("triangle_uv", parts.triangle_uv, 6 * n_triangles),
+                                ("polygon_uv", parts.polygon_uv, 2 * n_polygon_vertices),
+                                ("patch_uv", parts.patch_uv, 2 * n_patch_vertices)):
+        if values:  # the positional reader's; the fast reader gives no (u, v)
+            if len(values) != count:
+                raise ValueError(f"{name}: {len(values)} values for {count} coordinates")
+            fields[name] = np.array(values, dtype=np.float64).reshape(fields[name].shape)
+    images = parts.textures
+    size = np.array([(image.shape[1], image.shape[0]) for image in images], dtype=np.int64).reshape(-1, 2)
+    offsets = np.zeros(len(images) + 1, dtype=np.int64)
+    np.cumsum(size[:, 0] * size[:, 1], out=offsets[1:])
+    fields.update(texture_size=size, texture_offsets=offsets,
+                  texture_texels=np.concatenate([image.reshape(-1, 4) for image in images]) if images
+                  else np.zeros((0, 4), dtype=np.uint8))
+    return fields
 
 
