@@ -1,4 +1,4 @@
-"""Textures in scene files: the NFF extension, PNG and JPEG images."""
+"""Textures in scene files: the NFF extension, OBJ with MTL, PNG and JPEG images."""
 from __future__ import annotations
 
 import shutil
@@ -14,6 +14,7 @@ import tracer.nff as nff
 from tracer.images import png_bytes, read_image, write_png
 from tracer.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
 from tracer.nff_fast import Fallback, parse_fast
+from tracer.obj import OBJError, read_obj
 from tracer.records import RecordKind
 from tracer.render import render
 from tracer.scene import Camera, ElementKind, Material, SceneBuilder, scenes_equal, untextured
@@ -343,6 +344,105 @@ def test_a_textured_nff_renders_with_texel_records_and_the_plain_one_without():
     plain = render(parse_nff(plain_text, str(DATA / "board.nff")), size=8).trace.kind_counts()
     assert plain[RecordKind.TEXEL] == 0 and plain[RecordKind.TEXTURE] == 0
     assert plain[RecordKind.SPHERE] == counts[RecordKind.SPHERE]  # the same geometry, traversed alike
+
+
+# --------------------------------------------------------------------- OBJ
+def test_obj_with_mtl_parses_to_the_expected_arrays():
+    scene = read_obj(DATA / "quad.obj")
+    assert scene.counts()["triangle"] == 4
+    # the quad (2 fan triangles) and the face without vt use 'board' (its texture only where uv exist)
+    assert list(scene.element_material) == [0, 0, 1, 2]
+    np.testing.assert_array_equal(scene.material_color, [[1, 0.5, 0.25], [1, 0, 0], [1, 0.5, 0.25]])
+    assert list(scene.material_texture) == [0, -1, -1]
+    np.testing.assert_array_equal(scene.material_kd, [0.8] * 3)
+    np.testing.assert_array_equal(scene.texture(0), BOARD)  # map_Kd ../board.png, relative to the MTL
+    np.testing.assert_array_equal(scene.triangle_uv, [[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]],
+                                                      [[0, 0], [1, 0], [1, 1]], [[NAN, NAN]] * 3])
+    np.testing.assert_array_equal(scene.triangle_vertices[2], [[-1, -1, 0], [1, -1, 0], [0, 0, 1]])
+    counts = render(scene, size=8).trace.kind_counts()
+    assert counts[RecordKind.TEXEL] > 0
+
+
+def _write_obj(folder, body, mtl=None):
+    if mtl is not None:
+        (folder / "m.mtl").write_text(mtl)
+    (folder / "t.obj").write_text(body)
+    return folder / "t.obj"
+
+
+GEOMETRY = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
+
+
+def test_obj_without_materials_or_uv_reads_as_before(tmp_path):
+    scene = read_obj(_write_obj(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl ignored\nf 1 2 3\n"))
+    assert list(scene.material_texture) == [-1] and scene.n_textures == 0
+    np.testing.assert_array_equal(scene.material_color, [[0.8, 0.8, 0.8]])
+    assert (scene.material_kd[0], scene.material_ks[0], scene.material_shine[0]) == (0.8, 0.1, 30.0)
+    assert np.isnan(scene.triangle_uv).all()
+
+
+def test_obj_vt_defaults_and_relative_indices(tmp_path):
+    scene = read_obj(_write_obj(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.25\nvt 0.5 0.75 0.1\n"
+                                          "f 1/-2 2/-1 3/1\n"))
+    np.testing.assert_array_equal(scene.triangle_uv[0], [[0.25, 0], [0.5, 0.75], [0.25, 0]])
+
+
+def test_texture_indices_before_any_vt_are_ignored_with_one_warning(tmp_path):
+    path = _write_obj(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/2 3/3\nf 1/7/1 2/7/1 3/7/1\n")
+    with pytest.warns(UserWarning, match=r"t\.obj:4: a face names texture coordinates, but no 'vt'") as caught:
+        scene = read_obj(path)
+    assert len(caught) == 1 and np.isnan(scene.triangle_uv).all()
+
+
+def test_two_materials_sharing_an_image_share_one_texture(tmp_path):
+    shutil.copy(DATA / "board.png", tmp_path / "b.png")
+    mtl = "newmtl a\nKd 1 1 1\nmap_Kd b.png\nnewmtl b\nKd 0.5\nmap_Kd ./b.png\n"
+    scene = read_obj(_write_obj(tmp_path, "mtllib m.mtl\n" + GEOMETRY + "usemtl a\nf 1/1 2/2 3/3\n"
+                                          "usemtl b\nf 1/1 2/2 3/3\n", mtl))
+    assert scene.n_textures == 1 and list(scene.material_texture) == [0, 0]
+    np.testing.assert_array_equal(scene.material_color, [[1, 1, 1], [0.5, 0.5, 0.5]])  # 'Kd 0.5': grey
+
+
+@pytest.mark.parametrize("body, mtl, message", [
+    (GEOMETRY + "vt 1 x\nf 1 2 3", None, r"t\.obj:7: expected one to three finite numbers after 'vt'"),
+    (GEOMETRY + "vt\nf 1 2 3", None, r"t\.obj:7: expected one to three finite numbers after 'vt'"),
+    (GEOMETRY + "f 1/1 2/4 3/3", None, r"t\.obj:7: expected a texture coordinate index in 1\.\.3 or negative, "
+                                       r"found '2/4'"),
+    (GEOMETRY + "f 1/1 2/x 3/3", None, r"t\.obj:7: expected a texture coordinate index, found '2/x'"),
+    (GEOMETRY + "f 1/1 2 3/3", None, r"t\.obj:7: expected texture coordinates at every vertex of the face or at "
+                                     r"none"),
+    (GEOMETRY + "f 1/1/1/1 2 3", None, r"t\.obj:7: expected a vertex reference v, v/vt, v/vt/vn or v//vn"),
+    ("mtllib gone.mtl\n" + GEOMETRY + "f 1 2 3", None, r"t\.obj:1: expected an MTL file \(no such file: "
+                                                       r"'.*gone\.mtl'\), found 'gone\.mtl'"),
+    ("mtllib\n" + GEOMETRY + "f 1 2 3", None, r"t\.obj:1: expected an MTL file after 'mtllib'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "usemtl b\nf 1 2 3", "newmtl a\n", r"t\.obj:8: expected a material defined "
+                                                                     r"by 'newmtl' in the mtllib files "
+                                                                     r"\(defined: 'a'\), found 'b'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "usemtl\nf 1 2 3", "newmtl a\n", r"t\.obj:8: expected a material name"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "Kd 1 1 1\n", r"m\.mtl:1: expected 'newmtl' before 'Kd'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "newmtl\n", r"m\.mtl:1: expected a material name after 'newmtl'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "newmtl a\nKd 1 1\n", r"m\.mtl:2: expected one or three finite"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "newmtl a\nKd spectral x.spd\n",
+     r"m\.mtl:2: expected one or three finite numbers after 'Kd' \(r \[g b\]; 'spectral'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "newmtl a\nmap_Kd\n", r"m\.mtl:2: expected an image file after"),
+    ("mtllib m.mtl\n" + GEOMETRY + "f 1 2 3", "newmtl a\nmap_Kd -s 2 2 1 b.png\n",
+     r"m\.mtl:2: expected an image file after 'map_Kd' \(map options such as -s are not supported\)"),
+    ("mtllib m.mtl\n" + GEOMETRY + "usemtl a\nf 1/1 2/2 3/3", "newmtl a\n\nmap_Kd gone.png\n",
+     r"m\.mtl:3: expected a readable PNG or JPEG image after 'map_Kd' \(no such image file: '.*gone\.png'\), "
+     r"found 'gone\.png'"),
+    ("mtllib m.mtl\n" + GEOMETRY + "usemtl a\nf 1/1 2/2 3/3", "newmtl a\nmap_Kd m.mtl\n",
+     r"m\.mtl:2: expected a readable PNG or JPEG image after 'map_Kd' \(not a PNG or JPEG image"),
+])
+def test_obj_and_mtl_errors_name_file_line_and_what_was_expected(tmp_path, body, mtl, message):
+    with pytest.raises(OBJError, match=message):
+        read_obj(_write_obj(tmp_path, body, mtl))
+
+
+def test_a_missing_image_of_an_unused_or_uv_less_material_is_never_read(tmp_path):
+    mtl = "newmtl a\nmap_Kd gone.png\nnewmtl b\nKd 0 1 0\n"
+    scene = read_obj(_write_obj(tmp_path, "mtllib m.mtl\n" + GEOMETRY + "usemtl a\nf 1 2 3\nusemtl b\n"
+                                          "f 1/1 2/2 3/3\n", mtl))
+    assert scene.n_textures == 0 and list(scene.material_texture) == [-1, -1]
 
 
 # ------------------------------------------------------------------- fuzzing
