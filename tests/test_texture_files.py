@@ -467,3 +467,15 @@ def test_fuzzed_extension_text_gives_a_scene_or_an_nff_error_and_scenes_round_tr
             again = read_nff(write_nff(scene, Path(folder) / "fuzz.nff"))
     assert scenes_equal(scene, again)
 
+
+def test_the_readme_nff_example_reads_as_it_says(tmp_path):
+    import re
+
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+    (example,) = re.findall(r"```nff\n(.*?)```", readme, re.S)
+    write_png(procedural_texture(16, 8, seed=0), tmp_path / "wood.png")
+    scene = parse_nff(VIEW + example, folder=tmp_path)
+    np.testing.assert_array_equal(scene.texture_size, [[16, 8], [256, 256]])
+    assert list(scene.element_kind) == [ElementKind.POLYGON, ElementKind.SPHERE]
+    assert list(scene.material_texture) == [0] and list(scene.material_uv_scale) == [4.0]
+    np.testing.assert_array_equal(scene.polygon_uv, [[0, 0], [1, 0], [1, 1], [0, 1]])
