@@ -76,6 +76,12 @@ SECTIONS = {
     "miss_ratio": "mapping = pixel order of the one-process stream, item = cache size in bytes: "
                   "metric 'miss_ratio_<line>B' of a fully associative LRU cache with <line>-byte lines",
     "cost_map": "compute cycles per pixel (cost model): min, mean, max, total",
+    "texture": "textured scenes only; item = cache level, at the verdict's process count: texel_reads, "
+               "texel_misses, misses_per_texel_read, texture_miss_share (texel misses / the level's misses), "
+               "each process on a cold hierarchy of its own (coherence.kind_misses)",
+    "texture_layouts": "textured scenes only; mapping, item = '<texel order> <level>': texel_hit_rate",
+    "texture_miss_ratio": "textured scenes only; mapping = texel order (the texel reads alone, scan order), "
+                          "item = cache size in bytes: metric 'miss_ratio_<line>B' (fully associative LRU)",
     "miss_map": "mapping and n_processes of the miss map's run, item = cache level: misses per pixel summed "
                 "('total'), their mean and largest, and the share of the total made by the 1% of pixels "
                 "that miss most ('top_1pct_share')",
@@ -288,6 +294,11 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     miss_totals = misses.totals()
 
     curves = _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress)
+    texture = None
+    if trace.metadata.get("textures"):
+        from analyses.report_texture import texture_section
+
+        texture = texture_section(trace, scene, layout, hierarchy, mapping_objects, verdict_n, cost)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     cost_map = compute.reshape(trace.height, trace.width)
     region = placed.region_bytes()
@@ -303,6 +314,8 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     totals = dict(info["totals"])
     results = _results_table(summary_scene, tree, totals, trace, scene_bytes, caches, hierarchy, runs, processes,
                              curves, cost_map, verdict, verdict_n, top_n, misses, miss_totals)
+    if texture is not None:
+        results = pd.concat([results, _texture_rows(texture, verdict_n)], ignore_index=True)
     parameters = {
         "scene": scene.name, "size": int(size), "kd": kd, "workload": info.get("workload", "modern"),
         "max_depth": int(scene.max_depth),
@@ -312,15 +325,37 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
         "cost": cost.to_dict(), "trace_key": info["key"],
         "miss_map": {"mapping": misses.mapping, "n_processes": misses.n_processes, "chosen_by": chosen_by},
     }
+    if texture is not None:
+        parameters["texture"] = {"texel_order": layout.texels.label, "n_processes": verdict_n,
+                                 "filter": trace.metadata.get("texture_filter"),
+                                 "textures": trace.metadata["textures"]}
     summary = _summary(parameters, summary_scene, tree, runs, verdict, verdict_n, top_n, names, scene_bytes,
                        _miss_map_summary(misses, _miss_map_dtype(misses)))
     miss_png = miss_map_png(misses)
     page = report_html(scene, info, parameters, summary_scene, tree, totals, runs, processes, curves, cost_map,
                        scene_bytes, caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress,
-                       miss_png, miss_totals)
+                       miss_png, miss_totals, texture=texture)
     return Report(results=results, summary=summary, html=page, runs=runs, processes=processes, curves=curves,
                   scene_bytes=scene_bytes, cost_map=cost_map, verdict=verdict, render_info=info, miss_map=misses,
                   miss_map_png=miss_png)
+
+
+def _texture_rows(texture: dict, n_processes: int) -> pd.DataFrame:
+    """The texture sections of ``results.csv`` (see :data:`SECTIONS`)."""
+    rows = []
+    for _, row in texture["share"].iterrows():
+        for metric in ("texel_reads", "texel_misses", "misses_per_texel_read", "texture_miss_share"):
+            rows.append(("texture", row["mapping"], n_processes, row["level"], metric, _round(row[metric])))
+    for _, row in texture["layouts"].iterrows():
+        rows.append(("texture_layouts", row["mapping"], n_processes, f"{row['layout']} {row['level']}",
+                     "texel_hit_rate", _round(row["texel_hit_rate"])))
+    for _, point in texture["curves"].iterrows():
+        rows.append(("texture_miss_ratio", point["layout"], 1, str(int(point["size"])),
+                     f"miss_ratio_{int(point['line_size'])}B", _round(point["miss_ratio"])))
+    table = pd.DataFrame({name: pd.Series(list(values), dtype=object)
+                          for name, values in zip(RESULT_COLUMNS, zip(*rows))})
+    table["n_processes"] = table["n_processes"].astype("Int64")
+    return table
 
 
 def _miss_map_dtype(misses) -> np.dtype:

@@ -37,14 +37,15 @@ def miss_map_png(misses) -> bytes:
 
 def report_html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
                 caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress, miss_png,
-                miss_totals) -> str:
+                miss_totals, *, texture=None) -> str:
     """The report page as HTML text, figures embedded as PNG.
 
     Draws on bare :class:`matplotlib.figure.Figure` objects, so it needs no
     pyplot and picks no backend. The arguments are the pieces
     :func:`analyses.report.build_report` computed; ``miss_png`` is the miss
     map's figure (:func:`miss_map_png`), ``miss_totals`` its
-    :meth:`~coherence.missmap.MissMap.totals`.
+    :meth:`~coherence.missmap.MissMap.totals`; ``texture`` the tables of
+    :func:`analyses.report_texture.texture_section` for a textured scene.
     """
     from matplotlib.figure import Figure
     from tqdm.auto import tqdm
@@ -142,8 +143,22 @@ def report_html(scene, info, parameters, scene_summary, tree, totals, runs, proc
                                              "max_per_pixel": "max per pixel",
                                              "top_1pct_share": "share of the 1% worst pixels"})
     figures["miss_map"] = miss_png
+    texture_share = None
+    if texture is not None:
+        from analyses.report_texture import plot_texel_curves, plot_texel_hit_rates
 
-    return render_page("report.html.j2", miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
+        def hit_rates(axes):
+            for ax, level in zip(axes, hierarchy.level_names[:2]):
+                plot_texel_hit_rates(texture["layouts"], level, ax)
+                ax.set_title(f"texel hit rate at {level}, {verdict_n} processes", fontsize=10)
+
+        draw("texture_layouts", (12, 3.8), hit_rates, ncols=2)
+        draw("texture_curves", (7, 4), lambda ax: plot_texel_curves(texture["curves"], ax))
+        texture_share = texture["share"].rename(columns={
+            "texel_reads": "texel reads", "texel_misses": "texel misses",
+            "misses_per_texel_read": "misses per texel read", "texture_miss_share": "texel share of misses"})
+
+    return render_page("report.html.j2", texture_share=texture_share, miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
                        hierarchy_name=hierarchy.name, verdict=verdict, verdict_n=verdict_n, top_n=top_n,
                        scene_summary=scene_summary, image=image, figures=figures, counts_table=counts_table,
                        totals_table=totals_table, tree_table=tree_table, bytes_table=bytes_table,

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from analyses.plots import _axes
+from analyses.plots import _axes, _bytes_text
 
 #: texel orders the section compares (TextureLayout labels)
 LAYOUTS = ("linear", "tiled4", "morton", "blocked4x8")
@@ -122,8 +122,8 @@ def plot_texel_hit_rates(df, level: str = "L1", ax=None):
         ax.bar(np.arange(len(mappings)) - 0.4 + (k + 0.5) * width, values, width, label=label)
     ax.set_xticks(range(len(mappings)), mappings)
     ax.set_ylabel(f"texel hit rate at {level}")
-    ax.set_ylim(0, 1)
-    ax.legend(fontsize=8, ncol=len(layouts), loc="lower right")
+    ax.set_ylim(0, 1.15)
+    ax.legend(fontsize=8, ncol=len(layouts), loc="upper center")
     return ax
 
 
@@ -132,11 +132,14 @@ def plot_texel_curves(df, ax=None):
 
     ``df``: the ``curves`` table of :func:`texture_section`.
     """
+    from matplotlib.ticker import FuncFormatter
+
     ax = _axes(ax, (6.5, 4))
     for label, rows in df.groupby("layout", sort=False):
-        ax.plot(rows["size"] / 1024, rows["miss_ratio"], marker=".", label=label)
+        ax.plot(rows["size"], rows["miss_ratio"], marker=".", label=label)
     ax.set_xscale("log", base=2)
-    ax.set_xlabel("cache size (KB, fully associative LRU)")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: _bytes_text(value)))
+    ax.set_xlabel("cache size (fully associative LRU)")
     ax.set_ylabel("texel miss ratio")
     ax.legend(fontsize=8)
     return ax

@@ -471,3 +471,38 @@ def test_render_cli_reports_texture_lookups_for_its_filter():
     plain = subprocess.run([sys.executable, "-m", "analyses", "render", "tetra", "--size", "4", "--no-log", "--json"],
                            capture_output=True, text=True)
     assert "textures" not in json.loads(plain.stdout)
+
+
+def test_report_of_a_textured_scene_has_the_texture_section(tmp_path):
+    import json
+
+    from analyses.cli import main
+    from analyses.report import SECTIONS
+
+    out = tmp_path / "out"
+    assert main(["report", "balls-textured", "--size", "12", "--processes", "2", "--mappings", "S", "B",
+                 "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
+    results = pd.read_csv(out / "results.csv")
+    for section in ("texture", "texture_layouts", "texture_miss_ratio"):
+        assert section in SECTIONS and (results["section"] == section).any(), section
+    share = results[(results["section"] == "texture") & (results["metric"] == "texture_miss_share")]
+    assert ((share["value"] > 0) & (share["value"] <= 1)).all() and len(share) == 2 * 3
+    page = (out / "index.html").read_text()
+    assert "<h2>Textures</h2>" in page and "<h2>Misses per pixel" in page
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["parameters"]["texture"]["textures"][0][0] == [2048, 2048]
+
+
+def test_textured_paper_scenes_round_trip_through_nff(tmp_path):
+    from tracer.nff import read_nff, write_nff
+    from tracer.scene import scenes_equal
+    from tracer.textured import balls_textured, room_textured
+
+    for scene in (balls_textured(floor_size=64, sphere_size=32), room_textured(floor_size=32, wall_size=16)):
+        path = tmp_path / f"{scene.name}.nff"
+        write_nff(scene, path)
+        back = read_nff(path, max_depth=scene.max_depth)
+        assert scenes_equal(scene, back), scene.name
+        # every material row is used, numbered by first use
+        first = np.unique(scene.element_material, return_index=True)[1]
+        assert np.array_equal(np.sort(first), first) and first.size == scene.material_kd.size

@@ -80,6 +80,16 @@ def add_textures(scene: Scene, images, element_texture, uv_scale, planar_period:
         element_material[e] = rows[key]
     extra = np.array(source, dtype=np.int64)
     new = {name: np.concatenate([values, values[extra]]) for name, values in materials.items()}
+    # rows numbered by first use, unused ones dropped: SceneBuilder's canonical order, so that an NFF
+    # round trip gives the same scene
+    used, first_use = np.unique(element_material, return_index=True)
+    order = used[np.argsort(first_use)]
+    renumber = np.full(n_materials + len(source), -1, dtype=np.int64)
+    renumber[order] = np.arange(order.size)
+    element_material = renumber[element_material]
+    new = {name: values[order] for name, values in new.items()}
+    material_texture = np.array(material_texture, dtype=np.int64)[order]
+    material_scale = np.array(material_scale, dtype=np.float64)[order]
     triangle_uv = scene.triangle_uv.copy()
     polygon_uv = scene.polygon_uv.copy()
     for e in np.flatnonzero(element_texture >= 0):
@@ -97,8 +107,7 @@ def add_textures(scene: Scene, images, element_texture, uv_scale, planar_period:
     np.cumsum(sizes[:, 0] * sizes[:, 1], out=offsets[1:])
     return dataclasses.replace(
         scene, element_material=element_material, **new,
-        material_texture=np.array(material_texture, dtype=np.int64),
-        material_uv_scale=np.array(material_scale, dtype=np.float64),
+        material_texture=material_texture, material_uv_scale=material_scale,
         triangle_uv=triangle_uv, polygon_uv=polygon_uv, texture_size=sizes, texture_offsets=offsets,
         texture_texels=np.concatenate([image.reshape(-1, 4) for image in images]))
 
