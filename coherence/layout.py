@@ -3,9 +3,10 @@
 A :class:`MemoryLayout` gives each record kind of an access trace a size, an
 alignment and, for polygons and patches, a size per vertex. Placing it for a
 scene (:meth:`MemoryLayout.place`) lays the kinds out one after another from
-``base``, each region starting on a ``region_align`` boundary, records packed
-in index order at their aligned sizes. A record read touches every cache line
-its bytes span, so a 96-byte triangle read costs three or four 32-byte lines.
+``base`` (in kind order, texels last), each region starting on a
+``region_align`` boundary, records packed in index order at their aligned
+sizes. A record read touches every cache line its bytes span, so a 96-byte
+triangle read costs three or four 32-byte lines.
 
 Presets (sizes in bytes, alignment in brackets):
 
@@ -198,9 +199,12 @@ class MemoryLayout:
         counts = _by_kind(record_counts, "record_counts")
         vertices = _by_kind(vertex_counts or {}, "vertex_counts")
         kind_first = np.zeros(N_KINDS + 1, dtype=np.int64)
-        starts, sizes = [], []
+        starts, sizes = {}, {}
         address = _round_up(int(self.base), self.region_align)
-        for kind in RecordKind:
+        # Regions in kind order, but texels last: the texel order pads levels differently, and a
+        # texel region of another size must not move any other record (their conflicts would
+        # change with the texel order).
+        for kind in sorted(RecordKind, key=lambda k: (k == RecordKind.TEXEL, k)):
             count = int(counts.get(kind, 0))
             if count < 0:
                 raise ValueError(f"record_counts[{kind.name.lower()}] must be >= 0, got {count}")
@@ -220,11 +224,13 @@ class MemoryLayout:
                 start = address + np.concatenate(([0], np.cumsum(stride)[:-1])).astype(np.int64) if count else \
                     np.zeros(0, dtype=np.int64)
                 region = int(stride.sum())
-            starts.append(start)
-            sizes.append(size)
-            kind_first[kind + 1] = kind_first[kind] + count
+            starts[kind] = start
+            sizes[kind] = size
             address = _round_up(address + region, self.region_align)
-        return PlacedLayout(self, np.concatenate(starts), np.concatenate(sizes), kind_first, address)
+        for kind in RecordKind:
+            kind_first[kind + 1] = kind_first[kind] + sizes[kind].size
+        return PlacedLayout(self, np.concatenate([starts[kind] for kind in RecordKind]),
+                            np.concatenate([sizes[kind] for kind in RecordKind]), kind_first, address)
 
 
 class RecordPlacement(NamedTuple):

@@ -506,3 +506,18 @@ def test_textured_paper_scenes_round_trip_through_nff(tmp_path):
         # every material row is used, numbered by first use
         first = np.unique(scene.element_material, return_index=True)[1]
         assert np.array_equal(np.sort(first), first) and first.size == scene.material_kd.size
+
+
+def test_the_texel_order_moves_no_other_record():
+    counts = {kind: 5 for kind in RecordKind}
+    textures = [[(6, 6), (3, 3), (1, 1)]]
+    counts[RecordKind.TEXEL] = 36 + 9 + 1
+    placed = {label: get_layout("compact").with_texels(TextureLayout.from_label(label)).place(counts, textures=textures)
+              for label in ("linear", "tiled4", "morton", "blocked4x8")}
+    lo = placed["linear"].kind_first[RecordKind.TEXEL]
+    hi = placed["linear"].kind_first[RecordKind.TEXEL + 1]
+    for label, other in placed.items():
+        assert np.array_equal(other.record_start[:lo], placed["linear"].record_start[:lo]), label
+        assert np.array_equal(other.record_start[hi:], placed["linear"].record_start[hi:]), label
+        # texels come after every other region
+        assert other.record_start[lo:hi].min() > np.delete(other.record_start, np.arange(lo, hi)).max()
