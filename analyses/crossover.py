@@ -43,7 +43,7 @@ def _scales(name: str, values) -> list:
 
 def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", scene=None, n_processes: int = 8,
                     machine=None, record_scales=RECORD_SCALES, latency_scales=LATENCY_SCALES,
-                    fine_mappings=FINE_MAPPINGS) -> pd.DataFrame:
+                    fine_mappings=FINE_MAPPINGS, executor=None, trace_folder=None) -> pd.DataFrame:
     """Losses of S and the fine mappings at every (record scale, latency scale).
 
     Parameters
@@ -63,6 +63,8 @@ def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", sc
         Factors ``m`` on the memory latency, increasing, >= 1.
     fine_mappings : sequence of str
         The mappings held against S.
+    executor, trace_folder : optional
+        Simulate the runs there (see :func:`coherence.studies.study`).
 
     Returns
     -------
@@ -87,7 +89,8 @@ def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", sc
         for m in latency_scales:
             slower = replace(hierarchy, memory_latency=hierarchy.memory_latency * m)
             result = study(trace, mappings, [n_processes], hierarchy=slower, layout=scaled, cost=cost,
-                           machine=machine, scene=scene, progress=False)
+                           machine=machine, scene=scene, progress=False, executor=executor,
+                           trace_folder=trace_folder)
             runs = result.runs[result.runs["n_processes"] == n_processes]
             frames.append(runs[["mapping", "n_processes", "speedup_user", "imbalance_loss", "coherence_loss"]]
                           .assign(record_scale=k, latency_scale=m, memory_latency=slower.memory_latency))

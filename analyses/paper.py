@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analyses.cluster import dask_executor
 from analyses.output import check_output_folder
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
 from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, N_CPUS, STUDY_SIZE,
@@ -73,7 +74,7 @@ _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tes
 def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None, mappings=DEFAULT_MAPPINGS,
               background: int = DEFAULT_BACKGROUND, cache_dir=None, progress: bool = True, *,
               hierarchy="alpha21164", layout="alpha1997", costs=None, n_cpus: int = N_CPUS,
-              crossover: bool = False, workload: str = "study1997") -> PaperResult:
+              crossover: bool = False, workload: str = "study1997", dask=None) -> PaperResult:
     """Calibrate the cost model to the study's times and simulate its runs for every scene.
 
     Parameters
@@ -110,6 +111,10 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         verdict's process count with the calibrated model: where would
         coherence have mattered more than balance? (16 more runs of S, P
         and R per scene.)
+    dask : str or distributed.Client, optional
+        Simulate the runs of step 4 (and the crossover's) on that Dask
+        scheduler (:mod:`analyses.cluster`); every worker must read the trace
+        cache under the same path. The results are the same as a local run's.
 
     Returns
     -------
@@ -175,20 +180,23 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     frames = []
     crossings = []
     verdict_n = 8 if 8 in counts else max(counts)
-    for name in scenes:
-        scene, _, info = loaded[name]
-        if progress:
-            print(f"simulating {name}", file=sys.stderr)
-        trace = AccessTrace.load(Path(info["path"]) / "trace", mmap=True)  # the entry of step 1
-        result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
-                       machine=machine, scene=scene, progress=progress)
-        frames.append(result.runs.assign(scene=name))
-        if crossover and verdict_n > 1:
-            from analyses.crossover import crossover_study
+    with dask_executor(dask) as executor:
+        for name in scenes:
+            scene, _, info = loaded[name]
+            if progress:
+                print(f"simulating {name}", file=sys.stderr)
+            folder = Path(info["path"]) / "trace"
+            trace = AccessTrace.load(folder, mmap=True)  # the entry of step 1
+            result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
+                           machine=machine, scene=scene, progress=progress, executor=executor, trace_folder=folder)
+            frames.append(result.runs.assign(scene=name))
+            if crossover and verdict_n > 1:
+                from analyses.crossover import crossover_study
 
-            crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout, scene=scene,
-                                             machine=machine, n_processes=verdict_n).assign(scene=name))
-        del trace
+                crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout, scene=scene,
+                                                 machine=machine, n_processes=verdict_n, executor=executor,
+                                                 trace_folder=folder).assign(scene=name))
+            del trace
     runs = pd.concat(frames, ignore_index=True)
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
 

@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analyses.cluster import dask_executor
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_html import miss_map_png, report_html
@@ -186,7 +187,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
                  n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
                  layout="compact", cost="alpha8400", kd: str | None = None, max_depth: int | None = None,
                  cache_dir=None, out=None, progress: bool = True, workload: str = "modern",
-                 miss_map=None) -> Report:
+                 miss_map=None, dask=None) -> Report:
     """Render (or load) a scene's trace, simulate the mappings and assemble the report.
 
     Parameters
@@ -225,6 +226,10 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
         ones). Default: the compared mapping that loses most to coherence at
         the verdict's process count (8 if simulated, else the largest), at
         that count: its misses are the ones the verdict weighs.
+    dask : str or distributed.Client, optional
+        Simulate the runs on that Dask scheduler (:mod:`analyses.cluster`);
+        the trace cache must be readable by every worker under the same path.
+        The report is the same as a local one.
 
     Returns
     -------
@@ -260,12 +265,13 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
 
     scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
                                           progress=progress, workload=workload)
-    return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
-                     size, kd, progress, miss_map)
+    with dask_executor(dask) as executor:
+        return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
+                         size, kd, progress, miss_map, executor)
 
 
 def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress,
-              miss_map_choice):
+              miss_map_choice, executor=None):
     from coherence.missmap import miss_map
     from coherence.studies import place_layout, study
     from tracer.trace import COUNTER_NAMES
@@ -275,7 +281,8 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     names = [m.name for m in mapping_objects]
     placed = place_layout(layout, trace, scene)
     result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=cost,
-                   machine=machine, scene=scene, progress=progress)
+                   machine=machine, scene=scene, progress=progress, executor=executor,
+                   trace_folder=Path(info["path"]) / "trace")
     runs = result.runs
     processes = result.processes
 

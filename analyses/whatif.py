@@ -441,15 +441,11 @@ def _table_files(table: pd.DataFrame, path: Path, meta: dict) -> dict:
 
 
 def _run_dask(tasks, address, progress):
-    from distributed import Client
+    from analyses.cluster import dask_executor
 
-    client = address if isinstance(address, Client) else Client(address)
-    try:
-        futures = [client.submit(evaluate_point, *task, pure=False) for task in tasks]
-        return client.gather(futures)
-    finally:
-        if client is not address:
-            client.close()
+    with dask_executor(address) as executor:
+        futures = [executor.submit(evaluate_point, *task) for task in tasks]
+        return [future.result() for future in futures]
 
 
 def _scene_key(point: dict):

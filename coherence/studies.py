@@ -71,7 +71,7 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
           hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
           cost: CostModel | str = "alpha8400", machine: Machine | None = None, scene=None,
-          progress: bool = True, n_jobs: int | None = None) -> StudyResult:
+          progress: bool = True, n_jobs: int | None = None, executor=None, trace_folder=None) -> StudyResult:
     """Simulate every mapping at every process count on one trace.
 
     Parameters
@@ -92,6 +92,14 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         Show a progress bar on stderr.
     n_jobs : int, optional
         Runs simulated at once (threads; default: the number of CPUs).
+    executor : concurrent.futures.Executor, optional
+        Simulate the runs there instead (a Dask cluster's
+        ``Client.get_executor()``, say); each run is a task that loads the
+        trace from ``trace_folder`` where it executes. The results are the
+        same as a local study's.
+    trace_folder : path, optional
+        Where ``trace`` was saved (:meth:`~tracer.trace.AccessTrace.save`);
+        needed with ``executor``, and must be readable there.
 
     Returns
     -------
@@ -106,6 +114,9 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must have distinct names, got {names}")
     counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
+    if executor is not None and trace_folder is None:
+        raise ValueError("study: runs on an executor load the trace where they execute; give trace_folder, "
+                         "the folder the trace was saved in")
     placed = place_layout(layout, trace, scene)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     jobs = [(mapping, mapping.build(trace.width, trace.height, n)) for mapping in mapping_objects for n in counts]
@@ -117,23 +128,30 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         first_of.setdefault(key, index)
     distinct = sorted(first_of.values())
 
-    # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
-    smallest_line = min(level.line_size for level in hierarchy.levels)
-    lines = pixel_lines(trace, placed, smallest_line, SHARED_LINES_BUDGET) if len(distinct) > 1 else None
-
-    def simulate(index):
-        return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute, lines=lines)
-
-    workers = n_jobs or os.cpu_count() or 1
     simulated = {}
     bar = _progress(len(distinct), progress)
-    # The first run alone: its kernels compile once, not once per thread that reaches them first.
-    simulated[distinct[0]] = simulate(distinct[0])
-    bar.update(1)
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for index, run in zip(distinct[1:], pool.map(simulate, distinct[1:])):
-            simulated[index] = run
+    if executor is not None:
+        futures = [executor.submit(simulate_stored, str(trace_folder), jobs[index][1], hierarchy, placed, cost,
+                                   machine, compute) for index in distinct]
+        for index, future in zip(distinct, futures):
+            simulated[index] = future.result()
             bar.update(1)
+    else:
+        # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
+        smallest_line = min(level.line_size for level in hierarchy.levels)
+        lines = pixel_lines(trace, placed, smallest_line, SHARED_LINES_BUDGET) if len(distinct) > 1 else None
+
+        def simulate(index):
+            return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute,
+                                lines=lines)
+
+        # The first run alone: its kernels compile once, not once per thread that reaches them first.
+        simulated[distinct[0]] = simulate(distinct[0])
+        bar.update(1)
+        with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
+            for index, run in zip(distinct[1:], pool.map(simulate, distinct[1:])):
+                simulated[index] = run
+                bar.update(1)
     bar.close()
     results = []
     for (mapping, distribution), key in zip(jobs, keys):
@@ -155,6 +173,26 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
                   "machine": asdict(machine), "mappings": names, "n_processes": counts}
     return StudyResult(runs, processes, parameters)
+
+
+#: traces loaded by :func:`simulate_stored` in this process, by folder (a worker runs many runs of one trace)
+_STORED = {}
+
+
+def simulate_stored(trace_folder: str, distribution, hierarchy, placed, cost, machine, compute):
+    """:func:`~coherence.simulation.simulate_run` of the trace saved in ``trace_folder``.
+
+    A task for an executor: the trace is loaded (memory-mapped, checked) where
+    the task runs, once per process, instead of travelling with the task.
+    """
+    from tracer.trace import AccessTrace
+
+    folder = os.path.abspath(trace_folder)
+    key = (folder, os.stat(os.path.join(folder, "meta.json")).st_mtime_ns)  # a trace saved again is loaded again
+    if key not in _STORED:
+        _STORED.clear()  # one trace at a time: a worker's memory holds one study
+        _STORED[key] = AccessTrace.load(folder, mmap=True)
+    return simulate_run(_STORED[key], distribution, hierarchy, placed, cost, machine, compute=compute)
 
 
 def _replay_key(distribution) -> tuple:

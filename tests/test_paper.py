@@ -40,12 +40,20 @@ def result(cache):
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory, cache):
+    """The paper written twice: locally, then with its runs on a Dask cluster (the same bytes, checked below)."""
+    distributed = pytest.importorskip("distributed")
     outs = []
     for index in range(2):
         out = tmp_path_factory.mktemp(f"paper{index}") / "out"
-        status = main(["paper", "--out", str(out), "--size", str(SIZE), "--scenes", *SCENES,
-                       "--processes", *map(str, COUNTS), "--cache", str(cache)])
-        assert status == 0
+        argv = ["paper", "--out", str(out), "--size", str(SIZE), "--scenes", *SCENES,
+                "--processes", *map(str, COUNTS), "--cache", str(cache)]
+        if index == 0:
+            assert main(argv) == 0
+        else:
+            with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                          dashboard_address=None) as cluster:
+                assert main([*argv, "--dask", cluster.scheduler_address]) == 0
+                assert "simulate_stored" in cluster.scheduler.task_prefixes  # the runs went to the cluster
         outs.append(out)
     return outs
 

@@ -290,3 +290,15 @@ def test_curves_fed_in_pieces_equal_the_whole_stream(monkeypatch):
             whole = reuse_profile(placed.addresses(stream, line_size), line_size)
             assert mine["misses"].tolist() == whole.misses(mine["capacity_lines"].to_numpy()).tolist(), label
     assert list(report._pieces(np.array([3, 0, 60, 1, 1]), 50)) == [(0, 2), (2, 3), (3, 5)]
+
+
+def test_report_on_a_dask_cluster_is_byte_identical(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    args = ["tetra", "--size", "16", "--processes", "2", "4", "--mappings", "S", "DB", "--cache", str(tmp_path / "cache")]
+    assert main(["report", *args, "--out", str(tmp_path / "local")]) == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        assert main(["report", *args, "--out", str(tmp_path / "dask"), "--dask", cluster.scheduler_address]) == 0
+        assert "simulate_stored" in cluster.scheduler.task_prefixes  # the runs did go to the cluster
+    for name in ("results.csv", "summary.json", "miss_map.npy"):
+        assert (tmp_path / "local" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes(), name

@@ -166,3 +166,11 @@ def check_range(option: str, value, minimum=None, maximum=None) -> None:
             else:
                 wanted = f">= {minimum}" if minimum is not None else f"<= {maximum}"
             raise ValueError(f"{option} must be {wanted}, got {item}")
+
+
+def require_distributed() -> None:
+    """Raise ValueError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise ValueError("--dask needs the 'distributed' package: pip install 'raytrace-coherence[cluster]'") from None

@@ -43,6 +43,7 @@ examples:
   coherence paper                                   # 512x512, ~ minutes
   coherence paper --size 128 --out paper-128
   coherence paper --scenes balls tetra --processes 1 2 4 8 16
+  coherence paper --dask tcp://scheduler:8786 --cache /shared/cache
 """
 
 
@@ -67,6 +68,9 @@ def register(subparsers) -> None:
                         help="also find, per scene at 8 processes, how much bigger the records (x1..x64) and "
                              "slower the memory (x1..x64) would have to be before P or R lose more to coherence "
                              "than S loses to imbalance (48 more runs per scene; crossover.csv, crossover.png)")
+    parser.add_argument("--dask", metavar="ADDRESS",
+                        help="simulate the runs on a Dask scheduler (tcp://host:8786); every worker must read "
+                             "the trace cache (--cache) under the same path. Same results as a local run")
     parser.set_defaults(func=run)
 
 
@@ -80,10 +84,12 @@ def run(args: argparse.Namespace) -> int:
     from tracer.scenes import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
-    from analyses.commands.checks import check_memory
+    from analyses.commands.checks import check_memory, require_distributed
     from analyses.traces import check_cache_dir
 
     check_at_least(args, size=1, background=0)
+    if args.dask:
+        require_distributed()
     check_memory("--size", args.size)
     check_cache_dir(args.cache)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
@@ -95,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty()
     result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
                        background=args.background, cache_dir=args.cache, progress=progress,
-                       crossover=args.crossover, workload=args.workload)
+                       crossover=args.crossover, workload=args.workload, dask=args.dask)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
           "speedup_user.png", file=sys.stderr)

@@ -46,6 +46,7 @@ examples:
   coherence report shell --mappings S B DB hilbert --background 0
   coherence report balls --hierarchy modern --json
   coherence report balls --miss-map S:8          # map the misses of S at 8 processes
+  coherence report shell --dask tcp://scheduler:8786 --cache /shared/cache
 """
 
 
@@ -69,6 +70,9 @@ def register(subparsers) -> None:
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
                              "at the largest count without 8: the misses the verdict weighs)")
+    parser.add_argument("--dask", metavar="ADDRESS",
+                        help="simulate the runs on a Dask scheduler (tcp://host:8786); every worker must read "
+                             "the trace cache (--cache) under the same path. Same results as a local run")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 
@@ -88,13 +92,15 @@ def run(args: argparse.Namespace) -> int:
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
+    if args.dask:
+        checks.require_distributed()
     out = args.out or f"report-{Path(args.scene).stem.lower()}"
     progress = sys.stderr.isatty()
     report = build_report(args.scene, args.size, mappings=chosen_mappings(args), max_processes=args.max_processes,
                           n_processes=args.processes, background=args.background, n_cpus=args.cpus,
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
                           max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
-                          workload=args.workload, miss_map=miss_map)
+                          workload=args.workload, miss_map=miss_map, dask=args.dask)
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)

@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     for name in study.mappings:
         get_mapping(name)
     if args.dask:
-        require_distributed()
+        checks.require_distributed()
     check_cache_dir(args.cache)
     checks.check_memory("--size", study.size)
     out = check_output_folder(args.out)
@@ -145,11 +145,3 @@ def run(args: argparse.Namespace) -> int:
     print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
     print(f"wrote {csv} and {png}")
     return 0
-
-
-def require_distributed() -> None:
-    """Raise ValueError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
-    try:
-        import distributed  # noqa: F401
-    except ImportError:
-        raise ValueError("--dask needs the 'distributed' package: pip install 'raytrace-coherence[cluster]'") from None
