@@ -175,3 +175,29 @@ class _interrupts_deferred:
             if self.pending:
                 raise KeyboardInterrupt
         return False
+
+
+def regular_file(path: str | os.PathLike, what: str) -> Path:
+    """``path`` as a Path if it is an existing regular file, else a clear error.
+
+    ``what`` names the file with its article (``"an NFF file"``); messages
+    read ``no such NFF file: 'p'``, ``not an NFF file: 'p' is a folder`` and
+    ``not an NFF file: 'p' is not a regular file`` (a FIFO or device, which
+    would hang or be read only once).
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, ValueError
+    """
+    import stat
+
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise FileNotFoundError(f"no such {what.split(' ', 1)[-1]}: {str(path)!r}") from None
+    if stat.S_ISDIR(mode):
+        raise IsADirectoryError(f"not {what}: {str(path)!r} is a folder")
+    if not stat.S_ISREG(mode):
+        raise ValueError(f"not {what}: {str(path)!r} is not a regular file")
+    return path

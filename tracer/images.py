@@ -9,13 +9,11 @@ losslessly, so reading it back gives the same texels.
 from __future__ import annotations
 
 import io
-import os
-import stat
 from pathlib import Path
 
 import numpy as np
 
-from rtcommon.files import write_bytes_atomic
+from rtcommon.files import regular_file, write_bytes_atomic
 
 __all__ = ["read_image", "png_bytes", "write_png", "IMAGE_FORMATS"]
 
@@ -47,15 +45,7 @@ def read_image(path) -> np.ndarray:
     """
     from PIL import Image, UnidentifiedImageError
 
-    path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except (FileNotFoundError, NotADirectoryError):
-        raise FileNotFoundError(f"no such image file: {str(path)!r}") from None
-    if stat.S_ISDIR(mode):
-        raise IsADirectoryError(f"not an image file: {str(path)!r} is a folder")
-    if not stat.S_ISREG(mode):
-        raise ValueError(f"not an image file: {str(path)!r} is not a regular file")
+    path = regular_file(path, "an image file")
     try:
         with Image.open(path, formats=IMAGE_FORMATS) as image:
             image.load()

@@ -74,14 +74,13 @@ are not kept in a :class:`~tracer.scene.Scene`, so its texels are written).
 """
 from __future__ import annotations
 
-import os
 import re
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from rtcommon.files import write_files_atomic
+from rtcommon.files import regular_file, write_files_atomic
 from tracer.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
                              OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS, Fallback, SceneParts,
                              assemble, parse_fast, polygon_measures, view_direction_problem)
@@ -459,17 +458,7 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
     NFFError
         If the file is malformed.
     """
-    import stat
-
-    path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except (FileNotFoundError, NotADirectoryError):
-        raise FileNotFoundError(f"no such NFF file: {str(path)!r}") from None
-    if stat.S_ISDIR(mode):
-        raise IsADirectoryError(f"not an NFF file: {str(path)!r} is a folder")
-    if not stat.S_ISREG(mode):
-        raise ValueError(f"not an NFF file: {str(path)!r} is not a regular file")
+    path = regular_file(path, "an NFF file")
     text = path.read_bytes().decode("utf-8", errors="replace")
     return parse_nff(text, str(path), name=path.stem, max_depth=max_depth, folder=path.parent)
 

@@ -22,7 +22,7 @@ from importlib import import_module
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
-           "machine_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS",
+           "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS",
            "WORKLOADS", "workload_options"]
 
 
@@ -192,6 +192,15 @@ def cache_options() -> argparse.ArgumentParser:
     parent = _parent()
     parent.add_argument("--cache", metavar="DIR",
                         help="trace cache folder (default: $COHERENCE_CACHE, else ~/.cache/raytrace-coherence)")
+    return parent
+
+
+def dask_options(what: str = "the runs") -> argparse.ArgumentParser:
+    """``--dask ADDRESS``: send ``what`` to a Dask scheduler (:mod:`analyses.cluster`)."""
+    parent = _parent()
+    parent.add_argument("--dask", metavar="ADDRESS",
+                        help=f"simulate {what} on a Dask scheduler (tcp://host:8786); every worker must read the "
+                             "trace cache (--cache) under the same path. Same results as a local run")
     return parent
 
 

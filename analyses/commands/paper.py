@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least,
+from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
                                        machine_options, mappings_options, size_options, workload_options)
 
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
@@ -57,7 +57,7 @@ def register(subparsers) -> None:
                               "processes as on the study's shared machine", cpus=False)
     parser = subparsers.add_parser("paper", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter,
-                                   parents=[size_options(), mappings_options(), machine, cache_options(),
+                                   parents=[size_options(), mappings_options(), machine, cache_options(), dask_options(),
                                             workload_options("study1997", "the study's tracer, whose test counts "
                                                              "and memory image the calibration needs")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
@@ -68,9 +68,6 @@ def register(subparsers) -> None:
                         help="also find, per scene at 8 processes, how much bigger the records (x1..x64) and "
                              "slower the memory (x1..x64) would have to be before P or R lose more to coherence "
                              "than S loses to imbalance (48 more runs per scene; crossover.csv, crossover.png)")
-    parser.add_argument("--dask", metavar="ADDRESS",
-                        help="simulate the runs on a Dask scheduler (tcp://host:8786); every worker must read "
-                             "the trace cache (--cache) under the same path. Same results as a local run")
     parser.set_defaults(func=run)
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least,
+from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
                                        machine_options, mappings_options, model_options, scene_options,
                                        size_options, tree_options, workload_options)
 
@@ -60,7 +60,7 @@ def register(subparsers) -> None:
     parents = [scene_options(default="balls"), size_options(),
                tree_options(kd_default=None, kd_why="the workload's: sah for modern, the study's median tree for "
                             "study1997"), workload_options(), mappings_options(), machine, model_options(),
-               cache_options()]
+               cache_options(), dask_options()]
     parser = subparsers.add_parser("report", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter, parents=parents)
     parser.add_argument("--out", metavar="DIR", help="output folder (default report-SCENE)")
@@ -70,9 +70,6 @@ def register(subparsers) -> None:
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
                              "at the largest count without 8: the misses the verdict weighs)")
-    parser.add_argument("--dask", metavar="ADDRESS",
-                        help="simulate the runs on a Dask scheduler (tcp://host:8786); every worker must read "
-                             "the trace cache (--cache) under the same path. Same results as a local run")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import HelpFormatter, cache_options, mappings_options, size_options
+from analyses.commands.options import HelpFormatter, cache_options, dask_options, mappings_options, size_options
 
 HELP = "what-if studies: where would coherence matter more than load balance?"
 
@@ -57,7 +57,8 @@ def register(subparsers) -> None:
                                           "full replay")
     mappings = mappings_options(why="the study's, %(default_mappings)s")
     parser = subparsers.add_parser("whatif", help=HELP, description=HELP[0].upper() + HELP[1:],
-                                   epilog=EPILOG, formatter_class=HelpFormatter, parents=[size, mappings, cache_options()])
+                                   epilog=EPILOG, formatter_class=HelpFormatter, parents=[size, mappings, cache_options(),
+                                                                              dask_options("the grid points")])
     parser.add_argument("study", nargs="?", metavar="STUDY", help="a built-in study (see below)")
     parser.add_argument("--grid", action="append", metavar="NAME=V1,V2", help="vary a parameter (repeatable)")
     parser.add_argument("--file", metavar="TOML", help="a study file with a [grid] table")
@@ -66,7 +67,6 @@ def register(subparsers) -> None:
     parser.add_argument("--processes", type=int, metavar="N",
                         help="processes per run (default: the study's, 8; vary it with --grid n_processes=...)")
     parser.add_argument("--out", default="whatif", metavar="DIR", help="output folder (default: ./whatif)")
-    parser.add_argument("--dask", metavar="ADDRESS", help="run the grid points on a Dask scheduler")
     parser.add_argument("--jobs", type=int, metavar="N", help="local worker processes (default: CPUs)")
     parser.add_argument("--list", action="store_true", help="list the built-in studies' grids and exit")
     parser.set_defaults(func=run)
