@@ -194,12 +194,12 @@ def test_round_trip_is_exact_for_every_kind(tmp_path):
 def test_write_is_atomic_and_keeps_the_old_file_on_failure(tmp_path, monkeypatch):
     path = tmp_path / "scene.nff"
     path.write_text("old")
-    import tracer.nff as nff
+    import os
 
     def explode(*args):
         raise OSError("disk full")
 
-    monkeypatch.setattr(nff.os, "replace", explode)
+    monkeypatch.setattr(os, "replace", explode)  # the rename that would put the new file in place
     with pytest.raises(OSError):
         write_nff(_every_kind_scene(), path)
     assert path.read_text() == "old"
