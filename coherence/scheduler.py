@@ -48,6 +48,7 @@ from numba import njit
 
 from cachesim import kernels as K
 from cachesim import tlb as T
+from cachesim.fresh import skip_fresh_lines
 from coherence.layout import record_lines_and_writes
 
 # Columns of the per-process cycle totals the event loop writes.
@@ -97,10 +98,16 @@ class BackgroundLoad(NamedTuple):
         of them.
     footprint_lines : int
         Distinct lines one background slice reads.
+    skip : bool
+        Apply each slice with :func:`cachesim.fresh.skip_fresh_lines`
+        instead of walking it access by access: the caller has checked
+        that it is exact (:func:`cachesim.fresh.skips_exactly`), that no TLB
+        is looked up, and that lines are the first level's.
     """
 
     first_line: np.ndarray
     footprint_lines: int
+    skip: bool = False
 
 
 class CpuTlbs(NamedTuple):
@@ -211,6 +218,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     switch_cycles = queues.switch_cycles
     first_line = background.first_line
     footprint_lines = background.footprint_lines
+    skip_background = background.skip
     out_cycles = out.cycles
     out_placement = out.placement
     task_owner = out.task_owner
@@ -286,13 +294,16 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
                 continue
             b = process - n_ours
             start = first_line[b] + background_slices[b] * footprint_lines
-            for i in range(footprint_lines):
-                buffer[i] = np.uint64((start + i) << line_shift)
             background_slices[b] += 1
             cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
-            cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
-                                               served, record_served, work)
-            _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
+            if skip_background:  # fresh lines: the state after them is known without walking them
+                cache_clock[cpu] = skip_fresh_lines(start, footprint_lines, geometry, cache, cache_clock[cpu])
+            else:
+                for i in range(footprint_lines):
+                    buffer[i] = np.uint64((start + i) << line_shift)
+                cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
+                                                   served, record_served, work)
+                _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
             clock += quantum
             slice_used[cpu] = quantum
             cpu_clock[cpu] = clock

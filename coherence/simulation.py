@@ -37,6 +37,7 @@ import pandas as pd
 from cachesim import CacheState, Hierarchy
 from cachesim import kernels as K
 from cachesim import tlb as T
+from cachesim.fresh import skips_exactly
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
@@ -364,7 +365,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
                  state.geometry, caches, tlbs, PixelCost(compute, latency),
                  Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
                           distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
-                 queues, machine.background(line_shift),
+                 queues, _background(machine, line_shift, state, tlbs),
                  RunOutputs(out_cycles, out_placement, task_owner, out_misses))
     if not distribution.dynamic:
         task_owner[:] = distribution.task_process  # empty tasks after a process's last pixel included
@@ -401,6 +402,15 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     processes = pd.DataFrame(frame)
     return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()),
                out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None)
+
+
+def _background(machine: Machine, line_shift: int, state: CacheState, tlbs: CpuTlbs) -> BackgroundLoad:
+    """The machine's background load, its slices skipped rather than walked where that is exact
+    (:mod:`cachesim.fresh`: the caches' state and our processes' counts are the same either way)."""
+    load = machine.background(line_shift)
+    skip = (machine.background_load > 0 and not tlbs.enabled and line_shift == state.geometry.line_shift
+            and skips_exactly(state.geometry, load.footprint_lines))
+    return BackgroundLoad(load.first_line, load.footprint_lines, bool(skip))
 
 
 def _cpu_tlbs(state: CacheState, n_cpus: int, n_all: int) -> CpuTlbs:
