@@ -25,6 +25,8 @@ _EXPORTS = {
     "from_owner_image": "coherence.mappings", "MAPPINGS": "coherence.mappings", "get_mapping": "coherence.mappings",
     "DEFAULT_MAPPINGS": "coherence.mappings",
     "miss_map": "coherence.missmap", "MissMap": "coherence.missmap",
+    "TextureLayout": "coherence.texture_layout", "misses_by_kind": "coherence.kind_misses",
+    "misses_by_kind_per_layout": "coherence.kind_misses",
     "hilbert_order": "coherence.curves", "morton_order": "coherence.curves", "serpentine_order": "coherence.curves",
 }
 
