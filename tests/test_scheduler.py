@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cachesim import CacheLevel, CacheState, Hierarchy, Tlb, simulate
+from cachesim import CacheState, Hierarchy, Tlb, simulate
 from coherence.cost import CostModel
 from coherence.layout import RecordLayout, get_layout
 from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip

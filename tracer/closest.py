@@ -40,22 +40,33 @@ def _batch_ray(rays, r):
     return Ray(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
-def _closest_kernel(rays, tree, geo, out):
-    # stores go to arrays taken out of ``out`` first, by attribute: numba
-    # drops a prange body's stores into ``bundle.array[i]``, and into arrays
-    # unpacked from the bundle
+#: rays per parallel work item of the closest-hit kernel (its counters and stack are allocated once per item)
+RAY_CHUNK = 256
+
+
+@njit(cache=True, error_model="numpy")
+def _closest_chunk(rays, first, stop, tree, geo, out):
+    # rays first..stop-1 with one counter array and one stack between them
     out_t = out.t
     out_element = out.element
     out_nodes = out.node_visits
     no_log = RecordLog(np.empty(0, np.uint32), 0)
-    for r in prange(rays.origins.shape[0]):
-        cnt = np.zeros(N_COUNTERS, np.int64)
+    cnt = np.zeros(N_COUNTERS, np.int64)
+    stack = new_stack()
+    for r in range(first, stop):
+        before = cnt[Counter.NODE_VISITS]
         t, e, _ = traverse(tree, geo, _batch_ray(rays, r), rays.tmin[r], rays.tmax[r], False,
-                           no_log, 0, cnt, new_stack())
+                           no_log, 0, cnt, stack)
         out_t[r] = t
         out_element[r] = e
-        out_nodes[r] = cnt[Counter.NODE_VISITS]
+        out_nodes[r] = cnt[Counter.NODE_VISITS] - before
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _closest_kernel(rays, tree, geo, out):
+    n = rays.origins.shape[0]
+    for k in prange((n + RAY_CHUNK - 1) // RAY_CHUNK):
+        _closest_chunk(rays, k * RAY_CHUNK, min(n, (k + 1) * RAY_CHUNK), tree, geo, out)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

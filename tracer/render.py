@@ -41,7 +41,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from tracer.camera import CameraFrame, _resolve_size, camera_frame
+from tracer.camera import _resolve_size, camera_frame
 from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
