@@ -9,10 +9,9 @@ prints ``coherence CMD: error: ...`` and exits with 2 before any work.
 from __future__ import annotations
 
 import os
-import stat
 from pathlib import Path
 
-from rtcommon.files import check_writable_ancestor
+from rtcommon.files import check_writable_ancestor, regular_file
 
 #: Bytes a render holds in memory per pixel: the image (3 float64), 18 int64
 #: counters, offsets and record counts, with room for temporaries. Measured:
@@ -99,19 +98,12 @@ def check_input_file(option: str, path) -> Path:
     Raises
     ------
     FileNotFoundError, IsADirectoryError, ValueError
+        :func:`rtcommon.files.regular_file`'s, with ``option`` in front.
     """
-    path = Path(path)
     try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{option} {str(path)!r}: no such file") from None
-    except NotADirectoryError:
-        raise FileNotFoundError(f"{option} {str(path)!r}: a parent on the path is a file") from None
-    if stat.S_ISDIR(mode):
-        raise IsADirectoryError(f"{option} {str(path)!r} is a folder, not a file")
-    if not stat.S_ISREG(mode):
-        raise ValueError(f"{option} {str(path)!r} is not a regular file (a pipe or device cannot be read twice)")
-    return path
+        return regular_file(path, "a file")
+    except (FileNotFoundError, IsADirectoryError, ValueError) as error:
+        raise type(error)(f"{option}: {error}") from None
 
 
 def check_output_file(option: str, path) -> Path:
