@@ -85,6 +85,14 @@ def main():
         figures["render_seconds"] = round(render_seconds, 2)
         figures["warm_over_render"] = round(results["warm"][0] / render_seconds, 3)
         print(f"warm report / render alone: {figures['warm_over_render']:.2f}")
+        # issue 16's targets at 512x512 on 2 cores
+        targets = {"warm": (40.0, 2.0), "cold": (90.0, 2.0)}
+        for label, (limit, gigabytes) in targets.items():
+            if label in results:
+                seconds, peak, _ = results[label]
+                met = seconds <= limit and peak <= gigabytes * 1e9
+                print(f"target {label}: <= {limit:g} s and <= {gigabytes:g} GB peak: {seconds:.1f} s, "
+                      f"{peak / 1e9:.2f} GB: {'met' if met else 'NOT met'}")
     print(json.dumps(figures))
 
 
