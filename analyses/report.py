@@ -359,10 +359,7 @@ def _texture_rows(texture: dict, n_processes: int) -> pd.DataFrame:
     for _, point in texture["curves"].iterrows():
         rows.append(("texture_miss_ratio", point["layout"], 1, str(int(point["size"])),
                      f"miss_ratio_{int(point['line_size'])}B", _round(point["miss_ratio"])))
-    table = pd.DataFrame({name: pd.Series(list(values), dtype=object)
-                          for name, values in zip(RESULT_COLUMNS, zip(*rows))})
-    table["n_processes"] = table["n_processes"].astype("Int64")
-    return table
+    return _rows_table(rows)
 
 
 def _miss_map_dtype(misses) -> np.dtype:
@@ -534,6 +531,11 @@ def _results_table(scene_summary, tree, totals, trace, scene_bytes, caches, hier
             add("miss_map", metric, level[metric], mapping=misses.mapping, n=misses.n_processes, item=level["level"])
     for _, number in verdict.numbers.iterrows():
         add("verdict", number["metric"], number["value"], mapping=number["mapping"], n=int(number["n_processes"]))
+    return _rows_table(rows)
+
+
+def _rows_table(rows) -> pd.DataFrame:
+    """``results.csv``'s table of ``(section, mapping, n_processes, item, metric, value)`` tuples."""
     columns = list(zip(*rows)) if rows else [()] * len(RESULT_COLUMNS)
     table = pd.DataFrame({name: pd.Series(list(values), dtype=object) for name, values in zip(RESULT_COLUMNS, columns)})
     table["n_processes"] = table["n_processes"].astype("Int64")

@@ -45,7 +45,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     -------
     dict with ``share``, ``layouts`` and ``curves`` DataFrames
     """
-    from coherence.kind_misses import misses_by_kind_per_layout
+    from coherence.kind_misses import dedicated_task_owners, misses_by_kind_per_layout
     from coherence.studies import place_layout
     from coherence.texture_layout import TextureLayout
 
@@ -58,7 +58,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     frames = []
     for mapping in mappings:
         distribution = mapping.build(trace.width, trace.height, n_processes)
-        owners = _owners(trace, distribution, hierarchy, placements[base], cost)
+        owners = dedicated_task_owners(trace, distribution, hierarchy, placements[base], cost)
         frames.append(misses_by_kind_per_layout(trace, placements, hierarchy, distribution, owners)
                       .assign(mapping=mapping.name))
     by_kind = pd.concat(frames, ignore_index=True)
@@ -77,16 +77,6 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     layouts = layouts.sort_values("layout", key=lambda column: column.map(order), kind="stable")
     return {"share": share.reset_index(drop=True), "layouts": layouts.reset_index(drop=True),
             "curves": curves[["layout", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]}
-
-
-def _owners(trace, distribution, hierarchy, placed, cost):
-    """Task owners of a dynamic distribution, from a run on dedicated CPUs; None when static."""
-    if not distribution.dynamic:
-        return None
-    from coherence.simulation import Machine, simulate_run
-
-    return simulate_run(trace, distribution, hierarchy, placed, cost,
-                        Machine(n_cpus=distribution.n_processes, background_load=0)).task_owner
 
 
 def _texel_curve(trace, placed, hierarchy) -> pd.DataFrame:

@@ -243,17 +243,13 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
 
 def _texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost) -> dict:
     """Texel miss rates and shares per level of one mapping (see the module docstring)."""
-    from coherence.kind_misses import misses_by_kind, texture_summary
+    from coherence.kind_misses import dedicated_task_owners, misses_by_kind, texture_summary
     from coherence.mappings import get_mapping
-    from coherence.simulation import Machine, simulate_run
     from coherence.studies import place_layout
 
     placed = place_layout(layout, trace, scene)
     distribution = get_mapping(mapping).build(trace.width, trace.height, n_processes)
-    owner = None
-    if distribution.dynamic:  # who rendered which block: from a run on dedicated CPUs
-        owner = simulate_run(trace, distribution, hierarchy, placed, cost,
-                             Machine(n_cpus=n_processes, background_load=0)).task_owner
+    owner = dedicated_task_owners(trace, distribution, hierarchy, placed, cost)
     return texture_summary(misses_by_kind(trace, placed, hierarchy, distribution, owner))
 
 

@@ -46,6 +46,18 @@ def process_pixels(distribution, task_owner=None) -> list[np.ndarray]:
     return [pixels[order[bounds[p]:bounds[p + 1]]] for p in range(distribution.n_processes)]
 
 
+def dedicated_task_owners(trace, distribution, hierarchy: Hierarchy, placed: PlacedLayout, cost):
+    """Who rendered each task of a dynamic ``distribution`` with a CPU per process and no
+    other load (one :func:`~coherence.simulation.simulate_run`), for :func:`process_pixels`;
+    None for a static distribution, whose owners are fixed."""
+    if not distribution.dynamic:
+        return None
+    from coherence.simulation import Machine, simulate_run
+
+    return simulate_run(trace, distribution, hierarchy, placed, cost,
+                        Machine(n_cpus=distribution.n_processes, background_load=0)).task_owner
+
+
 def pixel_records(trace, pixels: np.ndarray) -> np.ndarray:
     """The records of ``pixels`` (in that order), concatenated, uint32."""
     offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)

@@ -129,6 +129,13 @@ def _newell(offsets: np.ndarray, vertices: np.ndarray, what: str) -> np.ndarray:
     return _unit_rows(normals, what)
 
 
+def newell_normal(vertices) -> np.ndarray:
+    """Unit Newell normal, shape (3,), of one planar polygon's ``vertices`` (n, 3), n >= 3
+    (counter-clockwise front, as the kernels use it)."""
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    return _newell(np.array([0, len(vertices)]), vertices, "polygon")[0]
+
+
 def prepare_geometry(scene: Scene) -> Geometry:
     """Check the element table and precompute the per-primitive arrays the kernels read.
 

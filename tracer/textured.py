@@ -19,6 +19,7 @@ import dataclasses
 import numpy as np
 
 from tracer import spd, standins
+from tracer.geometry import newell_normal
 from tracer.scene import ElementKind, Scene
 from tracer.texture import procedural_texture
 
@@ -31,10 +32,7 @@ def planar_uv(vertices: np.ndarray, period: float) -> np.ndarray:
     its plane does not face most, over ``period`` (one texture repeat per
     ``period`` scene units). Returns (n, 2)."""
     vertices = np.asarray(vertices, dtype=np.float64)
-    normal = np.zeros(3)
-    for k in range(len(vertices)):
-        normal += np.cross(vertices[k], vertices[(k + 1) % len(vertices)])
-    kept = [axis for axis in range(3) if axis != int(np.argmax(np.abs(normal)))]
+    kept = [axis for axis in range(3) if axis != int(np.argmax(np.abs(newell_normal(vertices))))]
     return vertices[:, kept] / period
 
 

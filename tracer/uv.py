@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from tracer.geometry import newell_normal
 from tracer.scene import ElementKind, Scene
 
 
@@ -84,10 +85,7 @@ def _plane_map(vertices: np.ndarray, uv: np.ndarray):
     """The affine (u, v) map of a planar element's plane, (2, 4), and its density."""
     origin = vertices[0]
     edges = vertices - origin
-    normal = np.zeros(3)
-    for k in range(len(vertices)):  # Newell's normal
-        normal += np.cross(vertices[k], vertices[(k + 1) % len(vertices)])
-    normal /= np.linalg.norm(normal)
+    normal = newell_normal(vertices)
     first = edges[np.argmax(np.linalg.norm(edges, axis=1))]
     e1 = first / np.linalg.norm(first)
     e2 = np.cross(normal, e1)
