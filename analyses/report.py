@@ -37,9 +37,7 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import os
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,12 +47,12 @@ import pandas as pd
 from analyses.cluster import dask_executor
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
+from analyses.report_curves import miss_ratio_curves
 from analyses.report_html import miss_map_png, report_html
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain, round_number
 from rtcommon.validate import require_int
-from numba import njit
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
            "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "MISS_MAP_FILES"]
@@ -300,7 +298,7 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
                       scene=scene)
     miss_totals = misses.totals()
 
-    curves = _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress)
+    curves = miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress)
     texture = None
     if trace.metadata.get("textures"):
         from analyses.report_texture import texture_section
@@ -375,102 +373,6 @@ def _miss_map_summary(misses, dtype) -> dict:
             "levels": list(misses.levels), "dtype": dtype.str,
             "what": "misses of each pixel at each cache level (reads and writes), on the caches of the CPU "
                     "its process rendered it on; row 0 is the image's top"}
-
-
-@njit(cache=True, nogil=True)
-def _gather_records(pixel_offsets, records, order, out):
-    k = 0
-    for i in range(order.size):
-        p = order[i]
-        for j in range(pixel_offsets[p], pixel_offsets[p + 1]):
-            out[k] = records[j]
-            k += 1
-    return k
-
-
-def _one_process_orders(mapping_objects, width, height) -> list[tuple[str, np.ndarray]]:
-    """Distinct pixel orders of the mappings run by one process, labelled by the mappings sharing them."""
-    orders = []
-    for mapping in mapping_objects:
-        order = np.ascontiguousarray(mapping.build(width, height, 1).task_pixels, dtype=np.int64)
-        for entry in orders:
-            if np.array_equal(entry[1], order):
-                entry[2].append(mapping.name)
-                break
-        else:
-            orders.append([None, order, [mapping.name]])
-    scan = np.arange(width * height, dtype=np.int64)
-    labelled = []
-    for _, order, users in orders:
-        base = "scan" if np.array_equal(order, scan) else f"{users[0]} order"
-        labelled.append((f"{base} ({' '.join(users)})", order))
-    return labelled
-
-
-#: Records per piece of a miss-ratio curve's stream (16 MB of records, 32-64 MB of addresses).
-CURVE_PIECE = 1 << 22
-
-
-def _pieces(lengths, budget):
-    """``(first, stop)`` ranges of consecutive entries of ``lengths`` (records per pixel) holding
-    about ``budget`` records each (at least one pixel per piece)."""
-    ends = np.cumsum(lengths)
-    first = 0
-    while first < lengths.size:
-        base = ends[first - 1] if first else 0
-        stop = max(first + 1, int(np.searchsorted(ends, base + budget, side="right")))
-        yield first, stop
-        first = stop
-
-
-def _curve_sizes(line_size: int, hierarchy, top_bytes: int) -> np.ndarray:
-    top = max(top_bytes, max(level.size for level in hierarchy.levels)) * 2
-    powers = line_size * 2 ** np.arange(int(math.ceil(math.log2(max(top / line_size, 2)))) + 1)
-    return np.unique(np.concatenate([powers, [level.size for level in hierarchy.levels]]).astype(np.int64))
-
-
-def _miss_ratio_curves(trace, placed, mapping_objects, hierarchy, progress) -> pd.DataFrame:
-    from concurrent.futures import ThreadPoolExecutor
-
-    from tqdm.auto import tqdm
-
-    from cachesim import ReuseCounter
-
-    orders = _one_process_orders(mapping_objects, trace.width, trace.height)
-    line_sizes = sorted({level.line_size for level in hierarchy.levels}, reverse=True)
-    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
-    bar = tqdm(total=len(orders) * len(line_sizes), desc="reuse distances", unit="curve",
-               disable=not progress, leave=False, file=sys.stderr)
-
-    records = np.asarray(trace.records)
-    lengths = np.diff(offsets)
-
-    def curve_of(label, order, line_size):
-        # The stream is fed in pieces of about CURVE_PIECE records, so memory stays small whatever the
-        # trace's length; the compiled steps release the GIL, so two curves run side by side.
-        counter = ReuseCounter(line_size)
-        buffer = np.empty(0, dtype=np.uint32)
-        for first, stop in _pieces(lengths[order], CURVE_PIECE):
-            n = int(lengths[order[first:stop]].sum())
-            if n > buffer.size:
-                buffer = np.empty(n, dtype=np.uint32)
-            _gather_records(offsets, records, order[first:stop], buffer)
-            counter.update(placed.addresses(buffer[:n], line_size))
-        curve = counter.profile().miss_ratio_curve(_curve_sizes(line_size, hierarchy, placed.scene_bytes))
-        bar.update(1)
-        return curve.assign(order=label, line_size=line_size)
-
-    for line_size in line_sizes:  # compile the steps once, before the threads race to
-        empty = np.empty(0, dtype=np.uint32)
-        _gather_records(offsets, records, orders[0][1][:0], empty)
-        ReuseCounter(line_size).update(placed.addresses(empty, line_size))
-    jobs = [(label, order, line_size) for label, order in orders for line_size in line_sizes]
-    workers = max(1, min(2, os.cpu_count() or 1, len(jobs)))
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        frames = list(pool.map(lambda job: curve_of(*job), jobs))
-    bar.close()
-    curves = pd.concat(frames, ignore_index=True)
-    return curves[["order", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]
 
 
 # --------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from cachesim import Hierarchy
 from cachesim.simulate import simulate
@@ -58,17 +59,26 @@ def dedicated_task_owners(trace, distribution, hierarchy: Hierarchy, placed: Pla
                         Machine(n_cpus=distribution.n_processes, background_load=0)).task_owner
 
 
+@njit(cache=True, nogil=True)
+def gather_records(pixel_offsets, records, order, out):
+    """Copy the records of the pixels ``order`` (int64, (K,)), one pixel after another, to the
+    front of ``out`` (uint32, long enough); returns how many were copied."""
+    k = 0
+    for i in range(order.size):
+        p = order[i]
+        for j in range(pixel_offsets[p], pixel_offsets[p + 1]):
+            out[k] = records[j]
+            k += 1
+    return k
+
+
 def pixel_records(trace, pixels: np.ndarray) -> np.ndarray:
     """The records of ``pixels`` (in that order), concatenated, uint32."""
     offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
-    starts, stops = offsets[pixels], offsets[pixels + 1]
-    lengths = stops - starts
-    if lengths.sum() == 0:
-        return np.zeros(0, dtype=np.uint32)
-    # position k of the output reads starts[pixel of k] + (k - first output of that pixel)
-    first_out = np.concatenate(([0], np.cumsum(lengths)[:-1]))
-    index = np.arange(int(lengths.sum()), dtype=np.int64) + np.repeat(starts - first_out, lengths)
-    return np.asarray(trace.records)[index]
+    pixels = np.ascontiguousarray(pixels, dtype=np.int64)
+    out = np.empty(int((offsets[pixels + 1] - offsets[pixels]).sum()), dtype=np.uint32)
+    gather_records(offsets, np.asarray(trace.records), pixels, out)
+    return out
 
 
 def lines_and_kinds(records: np.ndarray, placed: PlacedLayout, line_size: int):

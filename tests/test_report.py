@@ -270,7 +270,7 @@ def test_format_percent():
 def test_curves_fed_in_pieces_equal_the_whole_stream(monkeypatch):
     # The report feeds each order's stream to the reuse counter in pieces; with pieces of a few
     # records (so many pieces, some of one pixel) every curve must equal one pass over the stream.
-    from analyses import report
+    from analyses import report_curves as report
     from cachesim import reuse_profile
     from coherence.layout import get_layout
     from coherence.mappings import get_mapping
@@ -281,15 +281,15 @@ def test_curves_fed_in_pieces_equal_the_whole_stream(monkeypatch):
     placed = place_layout(get_layout("compact"), trace)
     mappings = [get_mapping(name) for name in ("S", "B", "DB")]
     monkeypatch.setattr(report, "CURVE_PIECE", 50)
-    curves = report._miss_ratio_curves(trace, placed, mappings, SMALL, False)
+    curves = report.miss_ratio_curves(trace, placed, mappings, SMALL, False)
     records, offsets = np.asarray(trace.records), np.asarray(trace.pixel_offsets)
-    for label, order in report._one_process_orders(mappings, 16, 12):
+    for label, order in report.one_process_orders(mappings, 16, 12):
         stream = np.concatenate([records[offsets[p]:offsets[p + 1]] for p in order])
         for line_size in (32, 64):
             mine = curves[(curves["order"] == label) & (curves["line_size"] == line_size)]
             whole = reuse_profile(placed.addresses(stream, line_size), line_size)
             assert mine["misses"].tolist() == whole.misses(mine["capacity_lines"].to_numpy()).tolist(), label
-    assert list(report._pieces(np.array([3, 0, 60, 1, 1]), 50)) == [(0, 2), (2, 3), (3, 5)]
+    assert list(report.pieces(np.array([3, 0, 60, 1, 1]), 50)) == [(0, 2), (2, 3), (3, 5)]
 
 
 def test_report_on_a_dask_cluster_is_byte_identical(tmp_path):
