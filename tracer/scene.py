@@ -516,6 +516,18 @@ class SceneBuilder:
         )
 
 
+def vertices_and_uv(scene: Scene, kind: ElementKind, index: int):
+    """Vertices (n, 3) and (u, v) (n, 2; NaN where the scene has none) of a triangle, polygon or patch."""
+    if kind == ElementKind.TRIANGLE:
+        uv = scene.triangle_uv[index] if scene.triangle_uv.size else np.full((3, 2), np.nan)
+        return scene.triangle_vertices[index], uv
+    offsets, vertices, uv = ((scene.polygon_offsets, scene.polygon_vertices, scene.polygon_uv)
+                             if kind == ElementKind.POLYGON else
+                             (scene.patch_offsets, scene.patch_vertices, scene.patch_uv))
+    first, stop = int(offsets[index]), int(offsets[index + 1])
+    return vertices[first:stop], uv[first:stop] if uv.size else np.full((stop - first, 2), np.nan)
+
+
 def untextured(n_materials: int, n_triangles: int, n_polygon_vertices: int, n_patch_vertices: int) -> dict:
     """The texture fields of a :class:`Scene` without textures or (u, v), as
     :class:`SceneBuilder` makes them (materials untextured, uv NaN)."""

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from tracer.geometry import newell_normal
-from tracer.scene import ElementKind, Scene
+from tracer.scene import ElementKind, Scene, vertices_and_uv
 
 
 class UvMaps(NamedTuple):
@@ -62,23 +62,12 @@ def uv_maps(scene: Scene, elements=None) -> UvMaps:
             continue
         if kind == ElementKind.CONE:
             raise ValueError(f"element {e} is a cone: textures on cones are not supported")
-        vertices, uv = _vertices_and_uv(scene, kind, index)
+        vertices, uv = vertices_and_uv(scene, kind, index)
         if not np.isfinite(uv).all():
             raise ValueError(f"element {e} ({kind.name.lower()} {index}) has a textured material "
                              "but no (u, v) at its vertices")
         plane_map[e], density[e] = _plane_map(vertices, uv)
     return UvMaps(plane_map, density)
-
-
-def _vertices_and_uv(scene: Scene, kind: ElementKind, index: int):
-    if kind == ElementKind.TRIANGLE:
-        uv = scene.triangle_uv[index] if scene.triangle_uv.size else np.full((3, 2), np.nan)
-        return scene.triangle_vertices[index], uv
-    offsets, vertices, uv = ((scene.polygon_offsets, scene.polygon_vertices, scene.polygon_uv)
-                             if kind == ElementKind.POLYGON else
-                             (scene.patch_offsets, scene.patch_vertices, scene.patch_uv))
-    first, stop = int(offsets[index]), int(offsets[index + 1])
-    return vertices[first:stop], uv[first:stop] if uv.size else np.full((stop - first, 2), np.nan)
 
 
 def _plane_map(vertices: np.ndarray, uv: np.ndarray):
