@@ -45,14 +45,14 @@ from tracer.camera import _resolve_size, camera_frame
 from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
-from tracer.render_types import (N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, N_RAY_COLUMNS, LightColumn, MaterialColumn,
-                                 RayColumn, RayType, RenderParams, SampleOutputs, SampleScratch, Shading, WorkItems)
+from tracer.render_types import (N_RAY_COLUMNS, LightColumn, MaterialColumn, RayColumn, RayType, RenderParams,
+                                 SampleOutputs, SampleScratch, WorkItems)
 from tracer.scene import ElementKind, Scene
-from tracer.texture import MipChains, TextureFilter, filtered_lookup, mip_chains
+from tracer.shading import shading_of, texture_colour
+from tracer.texture import MipChains, TextureFilter
 from rtcommon.versions import package_versions
 from tracer.trace import AccessTrace, TraceWriter
 from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
-from tracer.uv import surface_uv, uv_maps
 from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
@@ -171,24 +171,6 @@ def _push_ray(rays, n, ray, weight, depth, typ, cone):
 
 
 @njit(cache=True, error_model="numpy")
-def _texture_colour(shading, material, kind, element, geo, hit, footprint, log, pos, cnt):
-    # the texture colour of a material at a hit: (u, v) of the surface, and
-    # the level of detail of a ray cone of width footprint[0] meeting the
-    # surface at cosine footprint[1]; returns r, g, b and the next position
-    hx, hy, hz = hit
-    cone_width, cosine = footprint
-    texture = shading.material_texture[material]
-    scale = shading.material_uv_scale[material]
-    u, v = surface_uv(kind, element, geo.element_index[element], geo, shading, hx, hy, hz)
-    finest = shading.texture_level[texture]
-    texels_per_unit = scale * math.sqrt(shading.density[element] * shading.level_width[finest]
-                                        * shading.level_height[finest])
-    footprint_texels = cone_width * texels_per_unit / max(abs(cosine), 1e-6)
-    detail = math.log2(footprint_texels) if footprint_texels > 0.0 else 0.0
-    return filtered_lookup(shading, texture, u * scale, v * scale, detail, shading.texture_filter, log, pos, cnt)
-
-
-@njit(cache=True, error_model="numpy")
 def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
     # Whitted ray tree of one primary ray, depth first with an explicit
     # stack (scratch.rays, columns RayColumn); pushing refraction before
@@ -262,7 +244,7 @@ def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
         kd, ks = mats[m, MaterialColumn.KD], mats[m, MaterialColumn.KS]
         shine, tr, ior = mats[m, MaterialColumn.SHINE], mats[m, MaterialColumn.TRANSMIT], mats[m, MaterialColumn.IOR]
         if material_texture[m] >= 0:
-            tex_r, tex_g, tex_b, pos = _texture_colour(shading, m, k, e, geo, (hx, hy, hz),
+            tex_r, tex_g, tex_b, pos = texture_colour(shading, m, k, e, geo, (hx, hy, hz),
                                                        (cone_width, rdx * nx + rdy * ny + rdz * nz), log, pos, cnt)
             mr *= tex_r
             mg *= tex_g
@@ -400,50 +382,6 @@ def _render_kernel(work, records, cam, params, tree, geo, shading, out):
 # --------------------------------------------------------------------------
 
 
-def _shading(scene: Scene, texture_filter: TextureFilter = TextureFilter.TRILINEAR) -> Shading:
-    """Check ``scene``'s materials and gather what shading reads.
-
-    Lights are scaled by SPD's rule (``sqrt(L) / (2 L)`` for ``L`` lights,
-    the ambient level too).
-    """
-    n = scene.n_elements
-    if scene.element_material.shape != (n,):
-        raise ValueError(f"Scene.element_material must have shape ({n},)")
-    emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
-    mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
-                            scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
-    mats = np.ascontiguousarray(mats.reshape(-1, N_MATERIAL_COLUMNS))
-    if n and (emat.min() < 0 or emat.max() >= len(mats)):
-        raise ValueError("Scene.element_material refers to a material row that does not exist")
-    n_lights = scene.n_lights
-    scale = math.sqrt(n_lights) / (2.0 * n_lights) if n_lights else 0.5
-    lights = np.ascontiguousarray(np.column_stack([scene.light_position.reshape(-1, 3),
-                                                   scene.light_color.reshape(-1, 3) * scale])
-                                  .reshape(-1, N_LIGHT_COLUMNS))
-    background = np.ascontiguousarray(np.asarray(scene.background, dtype=np.float64).reshape(3))
-    return Shading(emat, mats, lights, scale, background, *_texturing(scene, emat, len(mats), texture_filter))
-
-
-def _texturing(scene: Scene, element_material: np.ndarray, n_materials: int, texture_filter) -> tuple:
-    """Check ``scene``'s textures and gather what textured shading reads (the
-    texture fields of :class:`Shading`, in order)."""
-    material_texture = np.asarray(scene.material_texture, dtype=np.int64)
-    uv_scale = np.asarray(scene.material_uv_scale, dtype=np.float64)
-    if material_texture.size == 0:  # a scene without the texture fields
-        material_texture = np.full(n_materials, -1, dtype=np.int64)
-        uv_scale = np.ones(n_materials)
-    if material_texture.shape != (n_materials,) or uv_scale.shape != (n_materials,):
-        raise ValueError(f"Scene.material_texture and material_uv_scale must have shape ({n_materials},)")
-    if n_materials and (material_texture.min() < -1 or material_texture.max() >= scene.n_textures):
-        raise ValueError(f"Scene.material_texture names a texture that does not exist "
-                         f"(the scene has {scene.n_textures})")
-    if not (np.isfinite(uv_scale).all() and (uv_scale > 0).all()):
-        raise ValueError("Scene.material_uv_scale must be positive and finite")
-    textured = np.flatnonzero(material_texture[element_material] >= 0)
-    return (np.ascontiguousarray(material_texture), np.ascontiguousarray(uv_scale), *uv_maps(scene, textured),
-            *mip_chains(scene), int(TextureFilter(texture_filter)))
-
-
 class _GrowingRecords:
     """A uint32 array that grows in place (``realloc``) as records arrive."""
 
@@ -576,7 +514,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     t_start = time.perf_counter()
     tree, tree_arr = tree_arrays(scene, tree, kd_config)
     timings["build"] = time.perf_counter() - t_start
-    shading = _shading(scene, filters[texture_filter])
+    shading = shading_of(scene, filters[texture_filter])
     geo = prepare_geometry(scene)
     diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
     if epsilon is not None:

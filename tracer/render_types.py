@@ -59,7 +59,7 @@ N_LIGHT_COLUMNS = 6
 
 
 class Shading(NamedTuple):
-    """What shading reads: materials per element, the lights and the textures (see :func:`_shading`).
+    """What shading reads: materials per element, the lights and the textures (see :func:`tracer.shading.shading_of`).
 
     Flat (arrays and scalars only): a bundle inside a bundle can't reach a
     parallel kernel's loop body. The texture fields are those of
