@@ -99,14 +99,18 @@ def embree_rate(scene, size):
 
 
 def _primary_seconds(scene, tree, size):
-    """Seconds of closest_hit for the primary rays alone, as Embree traces them (compiled first)."""
+    """Seconds of closest_hit for the primary rays alone, as Embree traces them (compiled first; best of 3,
+    as Embree's own figure is)."""
     origin, dirs = camera_rays(scene, size=size)
     d = dirs.reshape(-1, 3)
     o = np.broadcast_to(origin, d.shape)
     closest_hit(scene, tree, o[:8], d[:8])
-    t0 = time.perf_counter()
-    closest_hit(scene, tree, o, d)
-    return time.perf_counter() - t0
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        closest_hit(scene, tree, o, d)
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def main(argv=None):
