@@ -182,7 +182,8 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
 
 
 def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | None = None,
-                 max_depth: int | None = None, progress: bool = True, workload: str = "modern"):
+                 max_depth: int | None = None, progress: bool = True, workload: str = "modern",
+                 memory_budget: int | None = None):
     """The scene and its access trace at ``size`` x ``size``, rendered once and then loaded.
 
     Parameters
@@ -203,6 +204,9 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
         Show a progress bar on stderr while rendering.
     workload : str
         The tracer imitated: a :data:`tracer.workload.WORKLOADS` name.
+    memory_budget : int, optional
+        Bytes of records a render holds in RAM before it writes them to the
+        entry in chunks (default :data:`tracer.render.DEFAULT_MEMORY_BUDGET`).
 
     Returns
     -------
@@ -254,7 +258,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
         folder = _writable_traces_folder(root)
         remove_stale_temporaries(folder)
         entry = folder / key
-        _render_entry(scene, size, kd, explicit_kd, workload, key, entry, progress)
+        _render_entry(scene, size, kd, explicit_kd, workload, key, entry, progress, memory_budget)
         info = _read_entry(entry)
         if info is None:
             raise RuntimeError(f"trace cache entry {entry} was not written completely")
@@ -288,12 +292,12 @@ def _read_entry(entry: Path) -> dict | None:
 
 
 def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: str, entry: Path,
-                  progress: bool) -> None:
+                  progress: bool, memory_budget: int | None) -> None:
     # explicit_kd: a builder other than the workload's, with its defaults
     from tqdm.auto import tqdm
 
     from tracer.kdtree import KdTreeConfig
-    from tracer.render import render, save_png
+    from tracer.render import DEFAULT_MEMORY_BUDGET, render, save_png
 
     kd_config = KdTreeConfig(builder=explicit_kd) if explicit_kd else None
     tree = None
@@ -312,7 +316,8 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
                    disable=not progress, leave=False, file=sys.stderr)
         start = time.perf_counter()
         result = render(scene, tree, size=size, kd_config=kd_config, trace_path=tmp / "trace",
-                        metadata={"cache_key": key}, workload=workload)
+                        metadata={"cache_key": key}, workload=workload,
+                        memory_budget=DEFAULT_MEMORY_BUDGET if memory_budget is None else memory_budget)
         seconds = time.perf_counter() - start
         bar.update(1)
         bar.close()

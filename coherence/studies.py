@@ -71,7 +71,8 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
           hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
           cost: CostModel | str = "alpha8400", machine: Machine | None = None, scene=None,
-          progress: bool = True, n_jobs: int | None = None, executor=None, trace_folder=None) -> StudyResult:
+          progress: bool = True, n_jobs: int | None = None, executor=None, trace_folder=None,
+          shared_lines_budget: int = SHARED_LINES_BUDGET) -> StudyResult:
     """Simulate every mapping at every process count on one trace.
 
     Parameters
@@ -100,6 +101,10 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     trace_folder : path, optional
         Where ``trace`` was saved (:meth:`~tracer.trace.AccessTrace.save`);
         needed with ``executor``, and must be readable there.
+    shared_lines_budget : int
+        Bytes the runs may share in line addresses worked out once
+        (:mod:`coherence.pixel_lines`); beyond it each run converts its
+        pixels' records itself. The counts are the same either way.
 
     Returns
     -------
@@ -114,15 +119,31 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must have distinct names, got {names}")
     counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
+    shared_lines_budget = require_int("shared_lines_budget", shared_lines_budget, 0)
     if executor is not None and trace_folder is None:
         raise ValueError("study: runs on an executor load the trace where they execute; give trace_folder, "
                          "the folder the trace was saved in")
     placed = place_layout(layout, trace, scene)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
-    jobs = [(mapping, mapping.build(trace.width, trace.height, n)) for mapping in mapping_objects for n in counts]
+    jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
+
+    def distribution_of(index):
+        mapping, n = jobs[index]
+        return mapping.build(trace.width, trace.height, n)
+
     # Runs that replay the same pixels in the same order on every process
-    # (S, P and R at one process, say) are simulated once.
-    keys = [_replay_key(distribution) for _, distribution in jobs]
+    # (S, P and R at one process, say) are simulated once. A distribution holds
+    # arrays per pixel, so each is built when needed and not kept: a study of
+    # 80 runs at 2048x2048 held 2.5 GB of them.
+    keys = []
+    task_counts = []  # tasks per process of a static run (the one column its key leaves out); None if dynamic
+    process_counts = []
+    for index in range(len(jobs)):
+        distribution = distribution_of(index)
+        keys.append(_replay_key(distribution))
+        process_counts.append(distribution.n_processes)
+        task_counts.append(None if distribution.dynamic else np.bincount(
+            distribution.task_process, minlength=distribution.n_processes).astype(np.int64))
     first_of = {}
     for index, key in enumerate(keys):
         first_of.setdefault(key, index)
@@ -131,18 +152,18 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     simulated = {}
     bar = _progress(len(distinct), progress)
     if executor is not None:
-        futures = [executor.submit(simulate_stored, str(trace_folder), jobs[index][1], hierarchy, placed, cost,
-                                   machine, compute) for index in distinct]
+        futures = [executor.submit(simulate_stored, str(trace_folder), distribution_of(index), hierarchy, placed,
+                                   cost, machine, compute) for index in distinct]
         for index, future in zip(distinct, futures):
             simulated[index] = future.result()
             bar.update(1)
     else:
         # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
         smallest_line = min(level.line_size for level in hierarchy.levels)
-        lines = pixel_lines(trace, placed, smallest_line, SHARED_LINES_BUDGET) if len(distinct) > 1 else None
+        lines = pixel_lines(trace, placed, smallest_line, shared_lines_budget) if len(distinct) > 1 else None
 
         def simulate(index):
-            return simulate_run(trace, jobs[index][1], hierarchy, placed, cost, machine, compute=compute,
+            return simulate_run(trace, distribution_of(index), hierarchy, placed, cost, machine, compute=compute,
                                 lines=lines)
 
         # The first run alone: its kernels compile once, not once per thread that reaches them first.
@@ -154,16 +175,15 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
                 bar.update(1)
     bar.close()
     results = []
-    for (mapping, distribution), key in zip(jobs, keys):
+    for (mapping, _), key, tasks, n in zip(jobs, keys, task_counts, process_counts):
         run = simulated[first_of[key]]
         processes = run.processes
-        if not distribution.dynamic:  # the one column that depends on how pixels are cut into tasks
-            processes = processes.assign(tasks=np.bincount(distribution.task_process,
-                                                           minlength=distribution.n_processes).astype(np.int64))
+        if tasks is not None:  # the one column that depends on how pixels are cut into tasks
+            processes = processes.assign(tasks=tasks)
         row = {"mapping": mapping.name, **run_summary(processes, hierarchy.level_names, cost.clock_hz,
                                                         run.real_cycles)}
         row["n_cpus"] = machine.n_cpus
-        results.append((row, processes.assign(mapping=mapping.name, n_processes=distribution.n_processes)))
+        results.append((row, processes.assign(mapping=mapping.name, n_processes=n)))
     runs = add_speedups(pd.DataFrame([row for row, _ in results]))
     front = ["mapping", "n_processes", "n_cpus"]
     runs = runs[front + [c for c in runs.columns if c not in front]]

@@ -66,6 +66,18 @@ def test_shared_runs_equal_their_own_simulation():
                                                      run.real_cycles)["user_cycles_max"]
 
 
+def test_shared_lines_budget_changes_no_result():
+    # With no budget every run converts its pixels itself; with room, the runs share the line addresses.
+    trace = random_trace(width=16, height=8, seed=4)
+    machine = Machine(n_cpus=2, quantum_cycles=5000)
+    frames = [study(trace, ["S", "P", "B"], [1, 3], hierarchy=SMALL, machine=machine, progress=False,
+                    shared_lines_budget=budget) for budget in (0, 1 << 20)]
+    assert frames[0].runs.equals(frames[1].runs)
+    assert frames[0].processes.equals(frames[1].processes)
+    with pytest.raises(ValueError, match="shared_lines_budget"):
+        study(trace, ["S"], [1], hierarchy=SMALL, progress=False, shared_lines_budget=-1)
+
+
 def test_factors_multiply_to_efficiency(result):
     _, outcome = result
     runs = outcome.runs

@@ -31,6 +31,7 @@ import xxhash
 from numba import njit
 
 from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
+from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.jsonio import json_default
 from tracer.records import (  # noqa: F401  (re-exported: the format's names)
     COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
@@ -268,8 +269,11 @@ def _verify_records(trace: AccessTrace, checksums: dict | None, where: str) -> N
     limits = _index_limits(trace.metadata)
     hasher = xxhash.xxh3_64()
     records = trace.records
+    mapped = mapping_of(records)
     for a in range(0, trace.n_records, _CHUNK):
         piece = np.ascontiguousarray(records[a:a + _CHUNK])
+        if mapped is not None:  # checked pages leave the resident set: a long trace never sits in it whole
+            drop_pages(mapped)
         hasher.update(piece)
         bad = _first_record_out_of_range(piece, limits)
         if bad >= 0:

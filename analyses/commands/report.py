@@ -70,6 +70,12 @@ def register(subparsers) -> None:
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
                              "at the largest count without 8: the misses the verdict weighs)")
+    parser.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
+                        help="memory the trace may take, in MB (default 2048): half for the records a render "
+                             "holds before writing them out, half for line addresses the runs share, a "
+                             "quarter for the trace's pages resident while runs read it, so a trace of any "
+                             "length streams from disk; the report's other arrays grow with the image, not "
+                             "the trace. Results do not depend on it")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 
@@ -88,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--max-depth", args.max_depth, 1, 64)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
+    if not 64 <= args.memory_budget <= 2.0 ** 40:  # also refuses NaN
+        raise ValueError(f"--memory-budget must be at least 64 MB, got {args.memory_budget}")
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
     if args.dask:
         checks.require_distributed()
@@ -97,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
                           n_processes=args.processes, background=args.background, n_cpus=args.cpus,
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
                           max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
-                          workload=args.workload, miss_map=miss_map, dask=args.dask)
+                          workload=args.workload, miss_map=miss_map, dask=args.dask,
+                          memory_budget=int(args.memory_budget * 2**20))
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
