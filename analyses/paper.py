@@ -51,6 +51,7 @@ import pandas as pd
 
 from analyses.cluster import dask_executor
 from analyses.output import check_output_folder
+from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, trace_pages_limited
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
 from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, N_CPUS, STUDY_SIZE,
                                   STUDY_TABLE, PaperResult, check_background, check_process_counts, check_scenes,
@@ -74,7 +75,8 @@ _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tes
 def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None, mappings=DEFAULT_MAPPINGS,
               background: int = DEFAULT_BACKGROUND, cache_dir=None, progress: bool = True, *,
               hierarchy="alpha21164", layout="alpha1997", costs=None, n_cpus: int = N_CPUS,
-              crossover: bool = False, workload: str = "study1997", dask=None) -> PaperResult:
+              crossover: bool = False, workload: str = "study1997", dask=None,
+              memory_budget: int = DEFAULT_MEMORY_BUDGET) -> PaperResult:
     """Calibrate the cost model to the study's times and simulate its runs for every scene.
 
     Parameters
@@ -115,6 +117,10 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         Simulate the runs of step 4 (and the crossover's) on that Dask
         scheduler (:mod:`analyses.cluster`); every worker must read the trace
         cache under the same path. The results are the same as a local run's.
+    memory_budget : int
+        Bytes each scene's trace may take in memory
+        (:func:`analyses.memory_budget.memory_shares`); the results do not
+        depend on it.
 
     Returns
     -------
@@ -136,6 +142,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     counts = check_process_counts(n_processes)
     size = check_size(size)
     background = check_background(background)
+    shares = memory_shares(memory_budget)
     mapping_objects = [get_mapping(m) for m in mappings]
     names = [m.name for m in mapping_objects]
     if not names or len(set(names)) != len(names):
@@ -160,11 +167,13 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
                file=sys.stderr)
     for name in bar:
         bar.set_postfix_str(name)
-        scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress, workload=workload)
+        scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress, workload=workload,
+                                          memory_budget=shares["render_records"])
         loaded[name] = (scene, None, info)
         info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}
-        sequential = study(trace, ["S"], [1], hierarchy=hierarchy, layout=layout, cost=base, machine=machine,
-                           scene=scene, progress=False)
+        with trace_pages_limited(trace, shares):
+            sequential = study(trace, ["S"], [1], hierarchy=hierarchy, layout=layout, cost=base, machine=machine,
+                               scene=scene, progress=False)
         del trace
         run = sequential.runs.iloc[0]
         counters = sequential.processes[list(_COUNTERS)].sum()
@@ -187,15 +196,17 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
                 print(f"simulating {name}", file=sys.stderr)
             folder = Path(info["path"]) / "trace"
             trace = AccessTrace.load(folder, mmap=True)  # the entry of step 1
-            result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
-                           machine=machine, scene=scene, progress=progress, executor=executor, trace_folder=folder)
-            frames.append(result.runs.assign(scene=name))
-            if crossover and verdict_n > 1:
-                from analyses.crossover import crossover_study
+            with trace_pages_limited(trace, shares):
+                result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
+                               machine=machine, scene=scene, progress=progress, executor=executor,
+                               trace_folder=folder, shared_lines_budget=shares["shared_lines"])
+                frames.append(result.runs.assign(scene=name))
+                if crossover and verdict_n > 1:
+                    from analyses.crossover import crossover_study
 
-                crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout, scene=scene,
-                                                 machine=machine, n_processes=verdict_n, executor=executor,
-                                                 trace_folder=folder).assign(scene=name))
+                    crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout,
+                                                     scene=scene, machine=machine, n_processes=verdict_n,
+                                                     executor=executor, trace_folder=folder).assign(scene=name))
             del trace
     runs = pd.concat(frames, ignore_index=True)
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
@@ -210,7 +221,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
         "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE, "workload": workload,
-        "crossover": bool(crossover),
+        "crossover": bool(crossover), "memory_shares": shares,
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
                        verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,

@@ -45,6 +45,7 @@ import numpy as np
 import pandas as pd
 
 from analyses.cluster import dask_executor
+from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, trace_pages_limited
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_curves import miss_ratio_curves
@@ -52,11 +53,7 @@ from analyses.report_html import miss_map_png, report_html
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain, round_number
-from rtcommon.resident import ResidentLimit, resident_file_bytes
 from rtcommon.validate import require_int
-
-#: Default memory budget of a report, in bytes (2 GiB): see :func:`memory_shares`.
-DEFAULT_REPORT_MEMORY = 2 << 30
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
            "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "MISS_MAP_FILES"]
@@ -189,7 +186,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
                  n_processes=None, background: int = 4, n_cpus: int = 8, hierarchy="alpha21164",
                  layout="compact", cost="alpha8400", kd: str | None = None, max_depth: int | None = None,
                  cache_dir=None, out=None, progress: bool = True, workload: str = "modern",
-                 miss_map=None, dask=None, memory_budget: int = DEFAULT_REPORT_MEMORY) -> Report:
+                 miss_map=None, dask=None, memory_budget: int = DEFAULT_MEMORY_BUDGET) -> Report:
     """Render (or load) a scene's trace, simulate the mappings and assemble the report.
 
     Parameters
@@ -233,7 +230,8 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
         the trace cache must be readable by every worker under the same path.
         The report is the same as a local one.
     memory_budget : int
-        Bytes the trace may take in memory, split by :func:`memory_shares`
+        Bytes the trace may take in memory, split by
+        :func:`analyses.memory_budget.memory_shares`
         between a render's records, the runs' shared line addresses and the
         trace's pages resident while it is read; the rest of the report's
         memory does not grow with the trace's length. Results do not depend
@@ -275,31 +273,9 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
                                           progress=progress, workload=workload,
                                           memory_budget=shares["render_records"])
-    # the trace's pages, on top of what the process's other files (libraries) hold now
-    others = resident_file_bytes() or 0
-    with dask_executor(dask) as executor, ResidentLimit([trace.records], others + shares["trace_pages"]):
+    with dask_executor(dask) as executor, trace_pages_limited(trace, shares):
         return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
                          size, kd, progress, miss_map, executor, shares)
-
-
-def memory_shares(memory_budget: int) -> dict:
-    """How a report spends ``memory_budget`` bytes on its trace (int, at least 64 MiB).
-
-    Returns
-    -------
-    dict
-        ``render_records``: records a render holds in RAM before writing
-        them out in chunks (half); ``shared_lines``: line addresses the runs
-        share (half, at most :data:`coherence.pixel_lines.SHARED_LINES_BUDGET`);
-        ``trace_pages``: the trace's pages resident while runs read it (a
-        quarter; :class:`rtcommon.resident.ResidentLimit`). A render comes
-        before the runs, so at most three quarters are in use at once.
-    """
-    from coherence.pixel_lines import SHARED_LINES_BUDGET
-
-    budget = require_int("memory_budget", memory_budget, 64 << 20)
-    return {"render_records": budget // 2, "shared_lines": min(SHARED_LINES_BUDGET, budget // 2),
-            "trace_pages": budget // 4}
 
 
 def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress,

@@ -96,10 +96,10 @@ def test_loading_a_trace_checks_it_without_keeping_it_resident(tmp_path):
 
 
 def test_report_memory_shares():
-    from analyses.report import DEFAULT_REPORT_MEMORY, memory_shares
+    from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares
     from coherence.pixel_lines import SHARED_LINES_BUDGET
 
-    assert memory_shares(DEFAULT_REPORT_MEMORY) == {"render_records": 1 << 30, "shared_lines": SHARED_LINES_BUDGET,
+    assert memory_shares(DEFAULT_MEMORY_BUDGET) == {"render_records": 1 << 30, "shared_lines": SHARED_LINES_BUDGET,
                                                     "trace_pages": 512 * MB}
     assert memory_shares(256 * MB) == {"render_records": 128 * MB, "shared_lines": 128 * MB, "trace_pages": 64 * MB}
     with pytest.raises(ValueError, match="memory_budget"):

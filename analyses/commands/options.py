@@ -204,6 +204,25 @@ def dask_options(what: str = "the runs") -> argparse.ArgumentParser:
     return parent
 
 
+def memory_budget_options() -> argparse.ArgumentParser:
+    """``--memory-budget MB``: what a trace may take in memory (:mod:`analyses.memory_budget`)."""
+    parent = _parent()
+    parent.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
+                        help="memory the trace may take, in MB (default 2048): half for the records a render "
+                             "holds before writing them out, half for line addresses the runs share, a "
+                             "quarter for the trace's pages resident while runs read it, so a trace of any "
+                             "length streams from disk; arrays per pixel come on top. Results do not depend "
+                             "on it")
+    return parent
+
+
+def memory_budget_bytes(args: argparse.Namespace) -> int:
+    """``--memory-budget`` in bytes; refuses less than 64 MB (and NaN)."""
+    if not 64 <= args.memory_budget <= 2.0 ** 40:
+        raise ValueError(f"--memory-budget must be at least 64 MB, got {args.memory_budget}")
+    return int(args.memory_budget * 2**20)
+
+
 def mappings_options(why: str = "") -> argparse.ArgumentParser:
     """``--mappings NAME ...``; left at None, the subcommand uses :data:`coherence.mappings.DEFAULT_MAPPINGS`.
 

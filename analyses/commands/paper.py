@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
-                                       machine_options, mappings_options, size_options, workload_options)
+                                       machine_options, mappings_options, memory_budget_bytes,
+                                       memory_budget_options, size_options, workload_options)
 
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
 
@@ -58,6 +59,7 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("paper", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter,
                                    parents=[size_options(), mappings_options(), machine, cache_options(), dask_options(),
+                                            memory_budget_options(),
                                             workload_options("study1997", "the study's tracer, whose test counts "
                                                              "and memory image the calibration needs")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
@@ -88,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dask:
         require_distributed()
     check_memory("--size", args.size)
+    memory_budget = memory_budget_bytes(args)
     check_cache_dir(args.cache)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
     counts = check_process_counts(args.processes if args.processes else DEFAULT_PROCESSES)
@@ -98,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
     progress = sys.stderr.isatty()
     result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
                        background=args.background, cache_dir=args.cache, progress=progress,
-                       crossover=args.crossover, workload=args.workload, dask=args.dask)
+                       crossover=args.crossover, workload=args.workload, dask=args.dask,
+                       memory_budget=memory_budget)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
           "speedup_user.png", file=sys.stderr)

@@ -4,8 +4,9 @@ from __future__ import annotations
 import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
-                                       machine_options, mappings_options, model_options, scene_options,
-                                       size_options, tree_options, workload_options)
+                                       machine_options, mappings_options, memory_budget_bytes,
+                                       memory_budget_options, model_options, scene_options, size_options,
+                                       tree_options, workload_options)
 
 HELP = "per-scene report: did load balance or cache coherence decide the speed-up, and why?"
 
@@ -60,7 +61,7 @@ def register(subparsers) -> None:
     parents = [scene_options(default="balls"), size_options(),
                tree_options(kd_default=None, kd_why="the workload's: sah for modern, the study's median tree for "
                             "study1997"), workload_options(), mappings_options(), machine, model_options(),
-               cache_options(), dask_options()]
+               cache_options(), dask_options(), memory_budget_options()]
     parser = subparsers.add_parser("report", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter, parents=parents)
     parser.add_argument("--out", metavar="DIR", help="output folder (default report-SCENE)")
@@ -70,12 +71,6 @@ def register(subparsers) -> None:
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
                              "at the largest count without 8: the misses the verdict weighs)")
-    parser.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
-                        help="memory the trace may take, in MB (default 2048): half for the records a render "
-                             "holds before writing them out, half for line addresses the runs share, a "
-                             "quarter for the trace's pages resident while runs read it, so a trace of any "
-                             "length streams from disk; the report's other arrays grow with the image, not "
-                             "the trace. Results do not depend on it")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 
@@ -94,8 +89,7 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--max-depth", args.max_depth, 1, 64)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
-    if not 64 <= args.memory_budget <= 2.0 ** 40:  # also refuses NaN
-        raise ValueError(f"--memory-budget must be at least 64 MB, got {args.memory_budget}")
+    memory_budget = memory_budget_bytes(args)
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
     if args.dask:
         checks.require_distributed()
@@ -106,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
                           hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
                           max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
                           workload=args.workload, miss_map=miss_map, dask=args.dask,
-                          memory_budget=int(args.memory_budget * 2**20))
+                          memory_budget=memory_budget)
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
