@@ -121,6 +121,14 @@ def main():
               f"{ours_rate / rate:.2f}x the time of the read-only non-inclusive run)")
         figures.update({f"{key}_seconds": seconds, f"{key}_maccesses_per_s": rate / 1e6})
 
+    # issue 16's targets, one core: 250 M/s on the stream, 150 M/s on the harsh one, 6x pycachesim on both
+    for label, key, floor in (("stream", "", 250.0), ("harsh stream", "harsh_", 150.0)):
+        rate = figures[f"{key}ours_maccesses_per_s"]
+        ratio = figures.get(f"{key}ratio")
+        met = rate >= floor and (ratio is None or ratio >= 6.0)
+        print(f"target {label}: >= {floor:g} M accesses/s and >= 6x pycachesim: {rate:.0f} M/s, "
+              f"{'ratio not measured' if ratio is None else f'{ratio:.1f}x'}: {'met' if met else 'not met'}")
+
     reuse_seconds, _ = best_of(args.repeats, lambda: reuse_distances(stream, 64))
     reuse_rate = stream.size / reuse_seconds
     print(f"reuse dist.: {reuse_seconds:8.3f} s  {reuse_rate / 1e6:8.1f} M accesses/s (64 B lines)")
