@@ -93,6 +93,9 @@ def test_loading_a_trace_checks_it_without_keeping_it_resident(tmp_path):
     loaded = AccessTrace.load(tmp_path / "trace", mmap=True)
     assert resident_file_bytes() - before < 24 * MB  # 52 MB read, one 16 MB piece held at a time
     np.testing.assert_array_equal(np.asarray(loaded.records), records)
+    assert mapping_of(loaded.counters) is not None  # the per-pixel counters stream from the file too
+    np.testing.assert_array_equal(np.asarray(loaded.counters), trace.counters)
+    assert AccessTrace.load(tmp_path / "trace", mmap=False).counters.flags.writeable  # in memory when asked
 
 
 def test_report_memory_shares():

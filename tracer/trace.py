@@ -42,6 +42,9 @@ from tracer.records import (  # noqa: F401  (re-exported: the format's names)
 CHECKSUM_ALGORITHM = "xxh3_64"
 _ARRAYS = ("pixel_offsets", "records", "counters")
 _CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
+#: Arrays a loaded trace reads through a memory map (mmap=True): the two that grow with it. The records
+#: grow with the trace's length, the counters with the image (200 bytes a pixel).
+_MAPPED = ("records", "counters")
 _META_CHECKSUM = "meta.json.xxh3"  # XXH3-64 of meta.json's bytes
 
 
@@ -62,7 +65,8 @@ class AccessTrace:
         Packed records (see module docstring); may be a read-only memmap.
         ``pixel_offsets`` and ``records`` are stored as read-only views.
     counters : ndarray, shape (P, K) int64
-        Per-pixel counters, columns :data:`COUNTER_NAMES`.
+        Per-pixel counters, columns :data:`COUNTER_NAMES`; a read-only
+        memmap when loaded with ``mmap=True``.
     width, height : int
     metadata : dict
         JSON-serialisable: scene, resolution, tree config and stats, render
@@ -169,7 +173,8 @@ class AccessTrace:
 
     @classmethod
     def load(cls, directory, *, mmap: bool = True) -> "AccessTrace":
-        """Read a trace written by :meth:`save`, checking every byte (records memory-mapped by default).
+        """Read a trace written by :meth:`save`, checking every byte (records and counters memory-mapped by
+        default).
 
         Each array is hashed and compared with the checksum in ``meta.json``;
         the offsets must rise from 0 to the record count, and every record
@@ -199,7 +204,7 @@ class AccessTrace:
         for name in _ARRAYS:
             try:
                 arrays[name] = np.load(directory / f"{name}.npy",
-                                       mmap_mode="r" if (mmap and name == "records") else None,
+                                       mmap_mode="r" if (mmap and name in _MAPPED) else None,
                                        allow_pickle=False)
             except (ValueError, OSError, EOFError) as error:
                 raise TraceIntegrityError(f"trace {str(directory)!r}: {name}.npy is damaged ({error})") from None
@@ -218,11 +223,15 @@ class AccessTrace:
 
 
 def array_checksum(array: np.ndarray) -> str:
-    """XXH3-64 of an array's bytes in C order, as 16 hex digits (streamed in chunks)."""
+    """XXH3-64 of an array's bytes in C order, as 16 hex digits (streamed in chunks; the pages of a
+    memory-mapped array leave the resident set as they are hashed)."""
     hasher = xxhash.xxh3_64()
     flat = array.reshape(-1) if array.flags.c_contiguous else np.ascontiguousarray(array).reshape(-1)
+    mapped = mapping_of(array)
     step = _CHUNK * 4 // max(flat.itemsize, 1)
     for a in range(0, flat.size, step):
+        if mapped is not None:
+            drop_pages(mapped)
         hasher.update(np.ascontiguousarray(flat[a:a + step]))
     return hasher.hexdigest()
 
@@ -266,6 +275,8 @@ def _verify_records(trace: AccessTrace, checksums: dict | None, where: str) -> N
         raise TraceIntegrityError(f"{where}: pixel_offsets must rise from 0 to the record count")
     if np.any(np.asarray(trace.counters) < 0):
         raise TraceIntegrityError(f"{where}: counters must not be negative")
+    if mapping_of(trace.counters) is not None:  # checked: out of the resident set until they are read again
+        drop_pages(mapping_of(trace.counters))
     limits = _index_limits(trace.metadata)
     hasher = xxhash.xxh3_64()
     records = trace.records
