@@ -275,8 +275,9 @@ def _verify_records(trace: AccessTrace, checksums: dict | None, where: str) -> N
         raise TraceIntegrityError(f"{where}: pixel_offsets must rise from 0 to the record count")
     if np.any(np.asarray(trace.counters) < 0):
         raise TraceIntegrityError(f"{where}: counters must not be negative")
-    if mapping_of(trace.counters) is not None:  # checked: out of the resident set until they are read again
-        drop_pages(mapping_of(trace.counters))
+    counters_map = mapping_of(trace.counters)
+    if counters_map is not None:  # checked: out of the resident set until they are read again
+        drop_pages(counters_map)
     limits = _index_limits(trace.metadata)
     hasher = xxhash.xxh3_64()
     records = trace.records
