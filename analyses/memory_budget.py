@@ -38,6 +38,5 @@ def memory_shares(memory_budget: int) -> dict:
 
 def trace_pages_limited(trace, shares: dict) -> ResidentLimit:
     """A context that keeps ``trace``'s resident pages (records and counters) under ``shares["trace_pages"]``
-    bytes, on top of
-    what the process's other files (its libraries) hold when it is made."""
+    bytes, on top of what the process's other files (its libraries) hold when it is made."""
     return ResidentLimit([trace.records, trace.counters], (resident_file_bytes() or 0) + shares["trace_pages"])

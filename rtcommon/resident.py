@@ -17,7 +17,7 @@ import mmap
 import threading
 from pathlib import Path
 
-import numpy as np
+from rtcommon.validate import require_int
 
 _STATUS = Path("/proc/self/status")
 
@@ -81,8 +81,7 @@ class ResidentLimit:
     """
 
     def __init__(self, arrays, max_bytes: int, interval: float = 0.2):
-        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) or max_bytes < 0:
-            raise ValueError(f"max_bytes must be an int >= 0, got {max_bytes!r}")
+        max_bytes = require_int("max_bytes", max_bytes, 0)
         if not interval > 0:
             raise ValueError(f"interval must be > 0 seconds, got {interval!r}")
         maps = []
@@ -90,7 +89,7 @@ class ResidentLimit:
             found = mapping_of(array)
             if found is not None and all(found is not m for m in maps):
                 maps.append(found)
-        self.max_bytes = int(max_bytes)
+        self.max_bytes = max_bytes
         self.interval = float(interval)
         self._maps = maps
         self.active = bool(maps) and hasattr(mmap, "MADV_DONTNEED") and resident_file_bytes() is not None

@@ -217,9 +217,12 @@ def memory_budget_options() -> argparse.ArgumentParser:
 
 
 def memory_budget_bytes(args: argparse.Namespace) -> int:
-    """``--memory-budget`` in bytes; refuses less than 64 MB (and NaN)."""
-    if not 64 <= args.memory_budget <= 2.0 ** 40:
-        raise ValueError(f"--memory-budget must be at least 64 MB, got {args.memory_budget}")
+    """``--memory-budget`` in bytes; refuses less than :data:`analyses.memory_budget.MIN_MEMORY_BUDGET` (and NaN)."""
+    from analyses.memory_budget import MIN_MEMORY_BUDGET
+
+    smallest = MIN_MEMORY_BUDGET >> 20
+    if not smallest <= args.memory_budget <= 2.0 ** 40:
+        raise ValueError(f"--memory-budget must be at least {smallest} MB, got {args.memory_budget}")
     return int(args.memory_budget * 2**20)
 
 
