@@ -59,6 +59,7 @@ from numba import njit, prange
 
 from cachesim.by_access import _simulate_by_access
 from cachesim.by_level import _simulate_by_level
+from cachesim.direct_first import _simulate_direct_first, serves_direct_first
 from cachesim.sets import (ACCESSES, CHUNK, EVICTIONS, EXCLUSIVE, FIFO, HITS, INCLUSIVE, INVALIDATIONS, LRU,
                            MISSES, N_COUNTERS, NON_INCLUSIVE, RANDOM, WRITE_HITS, WRITE_MISSES, WRITES,
                            CacheArrays, CacheGeometry, ChunkBuffers, chunk_buffers)
@@ -107,6 +108,8 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     """
     if geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
+    if serves_direct_first(geometry):
+        return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, record, work)
     return _simulate_by_access(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by,
                                record, work)
 
@@ -132,10 +135,16 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     Read-only streams through a non-inclusive hierarchy run level by level
     (:mod:`cachesim.by_level`, the fast path); everything else walks each
     access down the levels (:mod:`cachesim.by_access`, which documents the
-    write semantics). Both give identical states and counts where both apply.
+    write semantics), with the first two levels looked up at once when the
+    first is direct-mapped (:mod:`cachesim.direct_first`). All give identical
+    states and counts where they apply.
     """
     if writes.shape[0] == 0 and geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
+    if serves_direct_first(geometry):
+        if writes.shape[0] == 0:
+            return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, record, work)
+        return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
     return _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work)
 
 

@@ -1,0 +1,206 @@
+"""The per-access path for a direct-mapped first level over at least one more.
+
+The 21164's D-cache is direct-mapped, and on the study-era traces only a
+third of its accesses hit, in no pattern a branch predictor learns. The
+general walk (:mod:`cachesim.by_access`) branches on that hit and then on the
+second level's, and spent most of its time recovering from the mispredicted
+branches. Here every access looks both levels up at once, and an access
+either serves is finished with selects instead of branches: a first-level
+hit changes nothing, a second-level hit stamps its way (LRU) and fills the
+first level's one way (unless it is a write the first level does not
+allocate). Only the second level's misses walk on down, as in the general
+walk.
+
+The semantics (inclusion, writes, counters, ``served_by``, the clock and the
+stamps it leaves) are exactly those of :mod:`cachesim.by_access`, which tests
+check state for state on seeded random hierarchies and streams. Exclusive
+hierarchies move lines on every hit and keep the general walk.
+"""
+import numpy as np
+from numba import njit
+
+from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, INVALIDATIONS, LRU, MISSES,
+                           WRITE_HITS, WRITE_MISSES, WRITES, _find, _insert, _set_base)
+
+
+@njit(cache=True, inline="always")
+def serves_direct_first(geometry):
+    """Whether :func:`_simulate_direct_first` applies to a hierarchy: at
+    least two levels, not exclusive, a direct-mapped first level and an LRU
+    second, both with a power-of-two number of sets (the 21164's)."""
+    return (geometry.rel_shift.shape[0] >= 2 and geometry.inclusion != EXCLUSIVE and geometry.ways[0] == 1
+            and geometry.policy[1] == LRU and geometry.set_mask[0] >= 0 and geometry.set_mask[1] >= 0)
+
+
+@njit(cache=True)
+def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
+    """:func:`cachesim.by_access._simulate_by_access` for a hierarchy that
+    :func:`serves_direct_first`; same parameters and results, except that a
+    stream of reads only passes ``writes=None`` (not an empty array), which
+    compiles a version without the write checks."""
+    rel_shift = geometry.rel_shift
+    n_sets = geometry.n_sets
+    set_mask = geometry.set_mask
+    ways = geometry.ways
+    policy = geometry.policy
+    offset = geometry.offset
+    seeds = geometry.seeds
+    write_allocate = geometry.write_allocate
+    inclusive = geometry.inclusion == INCLUSIVE
+    tags = state.tags
+    stamps = state.stamps
+    counts = state.counts
+    n_levels = rel_shift.shape[0]
+    lines = work.level_lines
+    shift = np.uint64(geometry.line_shift)
+    # The first two levels' geometry in scalars: every access reads both.
+    mask0 = set_mask[0]
+    allocate0 = write_allocate[0]
+    rel1 = rel_shift[1]
+    mask1 = set_mask[1]
+    ways1 = ways[1]
+    offset1 = offset[1]
+    seed1 = seeds[1]
+    allocate1 = write_allocate[1]
+    # Reads the first two levels served, and the first level's hits among
+    # them; the writes and the misses below are counted apart.
+    served_reads = np.int64(0)
+    first_read_hits = np.int64(0)
+    first_evictions = np.int64(0)
+    first_write_hits = np.int64(0)
+    second_write_hits = np.int64(0)
+    second_misses = np.int64(0)
+    second_evictions = np.int64(0)
+    first_invalidations = np.int64(0)
+    n_writes = np.int64(0)
+    level_hits = work.level_hits
+    level_write_hits = work.level_write_hits
+    invalidations = work.level_invalidations
+    level_hits[:n_levels] = 0
+    level_write_hits[:n_levels] = 0
+    invalidations[:n_levels] = 0
+    for i in range(addresses.shape[0]):
+        line0 = np.int64(addresses[i] >> shift)
+        clock += 1
+        if writes is None:
+            is_write = False
+        else:
+            is_write = writes[i]
+        base0 = line0 & mask0
+        resident = tags[base0]
+        hit0 = resident == line0
+        line1 = line0 >> rel1
+        base1 = offset1 + (line1 & mask1) * ways1
+        slot1 = np.int64(-1)
+        for way in range(base1, base1 + ways1):
+            slot1 = way if tags[way] == line1 else slot1
+        if (hit0 | (slot1 >= 0)) & (not is_write):
+            # A read the first level serves (nothing changes) or the second
+            # (its recency, and the first level's fill), with selects.
+            miss0 = not hit0
+            touched = slot1 if slot1 >= 0 else base1
+            stamps[touched] = clock if miss0 else stamps[touched]
+            tags[base0] = line0
+            first_evictions += np.int64(miss0 & (resident >= 0))
+            first_read_hits += np.int64(hit0)
+            served_reads += 1
+            if record:
+                served_by[i] = np.uint8(miss0)
+            continue
+        if is_write:
+            n_writes += 1
+            if hit0:  # changes nothing in a direct-mapped level
+                first_write_hits += 1
+                if record:
+                    served_by[i] = 0
+                continue
+            if slot1 >= 0:
+                second_write_hits += 1
+                stamps[slot1] = clock  # a write is a use
+                if allocate0:
+                    first_evictions += np.int64(resident >= 0)
+                    tags[base0] = line0
+                if record:
+                    served_by[i] = 1
+                continue
+        # Neither level holds it: walk the levels below the second.
+        second_misses += 1
+        served = n_levels
+        for level in range(2, n_levels):
+            line = line0 >> rel_shift[level]
+            lines[level] = line
+            base = _set_base(line, level, n_sets, set_mask, ways, offset)
+            slot = _find(tags, base, ways[level], line)
+            if slot >= 0:
+                level_hits[level] += 1
+                if is_write:
+                    level_write_hits[level] += 1
+                if policy[level] == LRU:
+                    stamps[slot] = clock
+                served = level
+                break
+        if record:
+            served_by[i] = served
+        # Fill bottom-up, as the general walk does, so that back-invalidations
+        # of lower levels never remove the line just placed above them.
+        for level in range(served - 1, 1, -1):
+            if is_write and not write_allocate[level]:
+                continue
+            base = _set_base(lines[level], level, n_sets, set_mask, ways, offset)
+            if ways[level] == 1:
+                evicted = tags[base]
+                tags[base] = lines[level]
+            else:
+                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], lines[level],
+                                  clock)
+            if evicted >= 0:
+                counts[level, EVICTIONS] += 1
+                if inclusive:
+                    for upper in range(level):
+                        spread = rel_shift[level] - rel_shift[upper]
+                        first = evicted << spread
+                        mask = set_mask[upper]
+                        for sub in range(first, first + (np.int64(1) << spread)):
+                            base = offset[upper] + (sub & mask if mask >= 0 else sub % n_sets[upper]) * ways[upper]
+                            for way in range(base, base + ways[upper]):
+                                if tags[way] == sub:
+                                    tags[way] = -1
+                                    invalidations[upper] += 1
+        if not (is_write and not allocate1):
+            if ways1 == 1:  # no stamp, as the walk's direct-mapped fill
+                evicted = tags[base1]
+                tags[base1] = line1
+            else:
+                evicted = _insert(tags, stamps, seed1, base1, ways1, LRU, line1, clock)
+            if evicted >= 0:
+                second_evictions += 1
+                if inclusive:  # the first level's lines inside the evicted one leave it
+                    first = evicted << rel1
+                    for sub in range(first, first + (np.int64(1) << rel1)):
+                        if tags[sub & mask0] == sub:
+                            tags[sub & mask0] = -1
+                            first_invalidations += 1
+        if allocate0 or not is_write:
+            first_evictions += np.int64(tags[base0] >= 0)
+            tags[base0] = line0
+    level_hits[0] = first_read_hits + first_write_hits
+    level_write_hits[0] = first_write_hits
+    level_hits[1] = addresses.shape[0] - second_misses - level_hits[0]
+    level_write_hits[1] = second_write_hits
+    invalidations[0] += first_invalidations
+    counts[0, EVICTIONS] += first_evictions
+    counts[1, EVICTIONS] += second_evictions
+    # Only misses go down a level: accesses of level l + 1 are the misses of l.
+    entering = np.int64(addresses.shape[0])
+    entering_writes = n_writes
+    for level in range(n_levels):
+        counts[level, ACCESSES] += entering
+        counts[level, HITS] += level_hits[level]
+        counts[level, MISSES] += entering - level_hits[level]
+        counts[level, WRITES] += entering_writes
+        counts[level, WRITE_HITS] += level_write_hits[level]
+        counts[level, WRITE_MISSES] += entering_writes - level_write_hits[level]
+        counts[level, INVALIDATIONS] += invalidations[level]
+        entering -= level_hits[level]
+        entering_writes -= level_write_hits[level]
+    return clock
