@@ -242,11 +242,15 @@ class RecordPlacement(NamedTuple):
         Address and size of every record, kinds one after another.
     kind_first : ndarray of int64, shape (K + 1,)
         Records of kind ``k`` are rows ``kind_first[k]:kind_first[k + 1]``.
+    max_size : int
+        Bytes of the largest record (bounds the lines any record spans:
+        :func:`line_span_bound`).
     """
 
     record_start: np.ndarray
     record_size: np.ndarray
     kind_first: np.ndarray
+    max_size: int
 
 
 @dataclass(frozen=True)
@@ -273,7 +277,8 @@ class PlacedLayout:
     @property
     def placement(self) -> RecordPlacement:
         """The record addresses as one bundle for compiled code (:func:`record_lines`)."""
-        return RecordPlacement(self.record_start, self.record_size, self.kind_first)
+        return RecordPlacement(self.record_start, self.record_size, self.kind_first,
+                               int(self.record_size.max(initial=0)))
 
     @property
     def scene_bytes(self) -> int:
@@ -347,6 +352,11 @@ def _round_up(value: int, align: int) -> int:
     return (value + align - 1) // align * align
 
 
+#: Entries :func:`record_lines_and_writes` writes for every record, spanned
+#: or not; its buffers keep this many spare.
+FILL_AHEAD = 4
+
+
 @njit(cache=True, inline="always")
 def record_line_span(record, record_start, record_size, kind_first, line_shift):
     """First and last line a record's bytes span (the one record-to-line rule).
@@ -369,6 +379,13 @@ def record_line_span(record, record_start, record_size, kind_first, line_shift):
     row = kind_first[record_kind(record)] + record_id(record)
     start = record_start[row]
     return start >> line_shift, (start + record_size[row] - 1) >> line_shift
+
+
+@njit(cache=True, nogil=True, inline="always")
+def line_span_bound(placement, line_shift):
+    """The most lines of ``2**line_shift`` bytes any placed record spans
+    (wherever in a line it starts)."""
+    return ((placement.max_size + (np.int64(1) << line_shift) - 2) >> line_shift) + 1
 
 
 @njit(cache=True, nogil=True)
@@ -416,15 +433,20 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
     n_writes : int
         How many of them are writes.
 
-    The lines are counted first and the buffers grown once, before they are
-    filled: a fill loop that may replace its buffer runs several times slower.
+    The buffers are grown once, before they are filled (a fill loop that
+    may replace its buffer runs several times slower), and keep
+    :data:`FILL_AHEAD` spare entries. The lines are counted first only when
+    the buffers could be too short for ``stop - start`` records of the
+    longest span (:func:`line_span_bound`): a caller that sizes its buffers
+    for that saves the counting pass.
     """
-    needed = _count_lines(records, start, stop, placement, line_shift)
-    if needed > buffer.shape[0]:
-        size = max(needed, 2 * buffer.shape[0])  # exact for an empty buffer, else room to spare
-        buffer = np.empty(size, dtype=np.uint64)
-        if writes.shape[0] > 0:
-            writes = np.empty(size, dtype=np.bool_)
+    if (stop - start) * line_span_bound(placement, line_shift) + FILL_AHEAD > buffer.shape[0]:
+        needed = _count_lines(records, start, stop, placement, line_shift) + FILL_AHEAD
+        if needed > buffer.shape[0]:
+            size = max(needed, 2 * buffer.shape[0])  # exact for an empty buffer, else room to spare
+            buffer = np.empty(size, dtype=np.uint64)
+            if writes.shape[0] > 0:
+                writes = np.empty(size, dtype=np.bool_)
     count, n_writes = _fill_lines(records, start, stop, placement, line_shift, buffer, writes)
     return buffer, writes, count, n_writes
 
@@ -444,7 +466,14 @@ def _count_lines(records, start, stop, placement, line_shift):
 
 @njit(cache=True, nogil=True)
 def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
-    """Fill ``buffer`` (and ``writes``, unless it is empty), which are long enough."""
+    """Fill ``buffer`` (and ``writes``, unless it is empty), which are long
+    enough for the lines and :data:`FILL_AHEAD` more.
+
+    Every record's first FILL_AHEAD entries are written whether it spans
+    them or not (the next record's overwrite the extra ones): records span
+    1 to 4 lines of 32 bytes in no predictable order, and a loop over
+    exactly its span ended in a mispredicted branch at almost every record.
+    """
     record_start = placement.record_start
     record_size = placement.record_size
     kind_first = placement.kind_first
@@ -454,13 +483,19 @@ def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
     for i in range(start, stop):
         first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
         write = record_is_write(records[i])
+        span = last - first + 1
         if write:
-            n_writes += last - first + 1
-        for line in range(first, last + 1):
-            buffer[k] = np.uint64(line << line_shift)
+            n_writes += span
+        for j in range(FILL_AHEAD):
+            buffer[k + j] = np.uint64((first + j) << line_shift)
+        if flag:
+            for j in range(FILL_AHEAD):
+                writes[k + j] = write
+        for j in range(FILL_AHEAD, span):  # the rare longer records
+            buffer[k + j] = np.uint64((first + j) << line_shift)
             if flag:
-                writes[k] = write
-            k += 1
+                writes[k + j] = write
+        k += span
     return k, n_writes
 
 

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from coherence.layout import PlacedLayout, _count_lines, _fill_lines
+from coherence.layout import FILL_AHEAD, PlacedLayout, _count_lines, _fill_lines
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
 SHARED_LINES_BUDGET = 1 << 30
@@ -86,10 +86,13 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     n_lines = int(line_offsets[-1])
     if budget_bytes is not None and n_lines * BYTES_PER_LINE > budget_bytes:
         return None
-    lines = PixelLines(line_offsets, np.empty(n_lines, dtype=np.uint64), np.empty(n_lines, dtype=np.bool_),
-                       np.zeros(pixel_offsets.shape[0] - 1, dtype=np.int64), line_shift)
-    _fill_pixel_lines(records, pixel_offsets, placed.placement, lines)
-    return lines
+    # FILL_AHEAD spare entries: the fill writes that many past each pixel's lines.
+    addresses = np.empty(n_lines + FILL_AHEAD, dtype=np.uint64)
+    writes = np.empty(n_lines + FILL_AHEAD, dtype=np.bool_)
+    pixel_writes = np.zeros(pixel_offsets.shape[0] - 1, dtype=np.int64)
+    _fill_pixel_lines(records, pixel_offsets, placed.placement, line_offsets, line_shift, addresses, writes,
+                      pixel_writes)
+    return PixelLines(line_offsets, addresses[:n_lines], writes[:n_lines], pixel_writes, line_shift)
 
 
 @njit(cache=True, nogil=True)
@@ -102,10 +105,10 @@ def _pixel_line_offsets(records, pixel_offsets, placement, line_shift, line_offs
 
 
 @njit(cache=True, nogil=True)
-def _fill_pixel_lines(records, pixel_offsets, placement, lines):
-    """Fill ``lines`` (sized by :func:`_pixel_line_offsets`) with every pixel's addresses and write flags."""
-    line_offsets = lines.line_offsets
+def _fill_pixel_lines(records, pixel_offsets, placement, line_offsets, line_shift, addresses, writes, pixel_writes):
+    """Fill ``addresses`` and ``writes`` (``line_offsets[-1] + FILL_AHEAD``
+    entries) with every pixel's line accesses, and ``pixel_writes``."""
     for pixel in range(pixel_offsets.shape[0] - 1):
         first = line_offsets[pixel]
-        _, lines.pixel_writes[pixel] = _fill_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement,
-                                                   lines.line_shift, lines.addresses[first:], lines.writes[first:])
+        _, pixel_writes[pixel] = _fill_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1], placement,
+                                             line_shift, addresses[first:], writes[first:])

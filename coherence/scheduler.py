@@ -49,7 +49,7 @@ from numba import njit
 from cachesim import kernels as K
 from cachesim import tlb as T
 from cachesim.fresh import skip_fresh_lines
-from coherence.layout import record_lines_and_writes
+from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
 
 # Columns of the per-process cycle totals the event loop writes.
 COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
@@ -59,6 +59,9 @@ FIRST_CPU, MIGRATIONS = 0, 1
 N_PLACEMENT_COLUMNS = 2
 # A CPU that runs nothing.
 NO_PROCESS = -1
+# Line accesses a run's pixel buffer is made to hold at the start (36 MB with
+# their write flags) before it knows a pixel needs more.
+MAX_PIXEL_LINES = 1 << 22
 
 
 class RunQueues(NamedTuple):
@@ -258,7 +261,14 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     held = np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
     held_count = np.zeros(n_ours, dtype=np.int64)
     next_task = np.zeros(1, dtype=np.int64)
-    buffer = np.empty(max(4096, footprint_lines), dtype=np.uint64)
+    # Room for any pixel's lines, so that record_lines_and_writes need not
+    # count them before it fills the buffer (within a cap: a pixel beyond it
+    # is counted, and the buffer grown, when it comes).
+    most_records = 0
+    for pixel in range(pixel_offsets.shape[0] - 1):
+        most_records = max(most_records, pixel_offsets[pixel + 1] - pixel_offsets[pixel])
+    room = min(most_records * line_span_bound(placement, line_shift) + FILL_AHEAD, MAX_PIXEL_LINES)
+    buffer = np.empty(max(4096, footprint_lines, room), dtype=np.uint64)
     write_flags = np.empty(buffer.shape[0], dtype=np.bool_)
     no_writes = np.zeros(0, dtype=np.bool_)
     work = K.chunk_buffers()

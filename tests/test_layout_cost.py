@@ -176,3 +176,37 @@ def test_record_lines_and_writes_flag_every_line_of_a_written_record():
         one, k = record_lines(np.array([record]), 0, 1, placed.placement, shift, np.empty(8, dtype=np.uint64))
         expected += [bool(write)] * k
     assert flags[:n].tolist() == expected and n_writes == sum(expected)
+
+
+@pytest.mark.parametrize("shift", [3, 5, 6])
+def test_record_lines_equal_a_slow_reference_whether_counted_first_or_not(shift):
+    # Records of 1 to 40+ lines (polygons of many vertices), written and not;
+    # a buffer too short for the bound makes the kernel count first, one long
+    # enough lets it fill straight away. Either way: every line of every
+    # record, in order, each flagged as its record is.
+    from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
+    from tracer.records import pack
+
+    rng = np.random.default_rng(shift)
+    n_vertices = rng.integers(3, 60, 30)
+    placed = get_layout("alpha1997").place({kind: 30 for kind in RecordKind},
+                                           {RecordKind.POLYGON: n_vertices, RecordKind.PATCH: n_vertices},
+                                           textures=[[(6, 5)]])
+    kinds, ids, writes = rng.integers(0, len(RecordKind), 500), rng.integers(0, 30, 500), rng.random(500) < 0.3
+    records = pack(kinds, ids, writes)
+    expected, expected_flags = [], []
+    for kind, index, write in zip(kinds, ids, writes):
+        row = int(placed.kind_first[kind]) + int(index)
+        start, size = int(placed.record_start[row]), int(placed.record_size[row])
+        span = list(range(start >> shift, ((start + size - 1) >> shift) + 1))
+        expected += [line << shift for line in span]
+        expected_flags += [bool(write)] * len(span)
+    bound = line_span_bound(placed.placement, shift)
+    assert bound >= max(len(range(s >> shift, ((s + z - 1) >> shift) + 1))
+                        for s, z in zip(placed.record_start, placed.record_size))
+    for size in (3, records.size * bound + FILL_AHEAD):
+        got, flags, n, n_writes = record_lines_and_writes(records, 0, records.size, placed.placement, shift,
+                                                          np.zeros(size, dtype=np.uint64),
+                                                          np.zeros(size, dtype=np.bool_))
+        assert got[:n].tolist() == expected and flags[:n].tolist() == expected_flags
+        assert n_writes == sum(expected_flags) and got.size >= n + FILL_AHEAD
