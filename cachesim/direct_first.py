@@ -32,12 +32,29 @@ def serves_direct_first(geometry):
             and geometry.policy[1] == LRU and geometry.set_mask[0] >= 0 and geometry.set_mask[1] >= 0)
 
 
-@njit(cache=True)
-def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
+@njit(cache=True, inline="always")
+def simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
     """:func:`cachesim.by_access._simulate_by_access` for a hierarchy that
-    :func:`serves_direct_first`; same parameters and results, except that a
-    stream of reads only passes ``writes=None`` (not an empty array), which
-    compiles a version without the write checks."""
+    :func:`serves_direct_first`: same parameters, same results."""
+    if record:
+        if writes.shape[0] > 0:
+            return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, work)
+        return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, work)
+    if writes.shape[0] > 0:
+        return _simulate_direct_first(addresses, writes, geometry, state, clock, None, work)
+    return _simulate_direct_first(addresses, None, geometry, state, clock, None, work)
+
+
+@njit(cache=True)
+def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, work):
+    """The kernel of :func:`simulate_direct_first`, compiled apart for a
+    stream of reads (``writes`` None) and for one that does not record
+    ``served_by`` (None): numba drops the checks of a None argument.
+
+    Every index is cast to unsigned: numba fixes up a negative signed index
+    (a shift, a mask and an add at every array access), which took a quarter
+    of this loop's time.
+    """
     rel_shift = geometry.rel_shift
     n_sets = geometry.n_sets
     set_mask = geometry.set_mask
@@ -62,9 +79,8 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
     offset1 = offset[1]
     seed1 = seeds[1]
     allocate1 = write_allocate[1]
-    # Reads the first two levels served, and the first level's hits among
-    # them; the writes and the misses below are counted apart.
-    served_reads = np.int64(0)
+    # The first level's read hits and evictions; writes and the second
+    # level's misses are counted apart, and its hits are what is left.
     first_read_hits = np.int64(0)
     first_evictions = np.int64(0)
     first_write_hits = np.int64(0)
@@ -80,39 +96,39 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
     level_write_hits[:n_levels] = 0
     invalidations[:n_levels] = 0
     for i in range(addresses.shape[0]):
-        line0 = np.int64(addresses[i] >> shift)
+        at = np.uint64(i)
+        line0 = np.int64(addresses[at] >> shift)
         clock += 1
         if writes is None:
             is_write = False
         else:
-            is_write = writes[i]
-        base0 = line0 & mask0
+            is_write = writes[at]
+        base0 = np.uint64(line0 & mask0)
         resident = tags[base0]
         hit0 = resident == line0
         line1 = line0 >> rel1
         base1 = offset1 + (line1 & mask1) * ways1
         slot1 = np.int64(-1)
         for way in range(base1, base1 + ways1):
-            slot1 = way if tags[way] == line1 else slot1
+            slot1 = way if tags[np.uint64(way)] == line1 else slot1
         if (hit0 | (slot1 >= 0)) & (not is_write):
             # A read the first level serves (nothing changes) or the second
             # (its recency, and the first level's fill), with selects.
             miss0 = not hit0
-            touched = slot1 if slot1 >= 0 else base1
+            touched = np.uint64(slot1 if slot1 >= 0 else base1)
             stamps[touched] = clock if miss0 else stamps[touched]
             tags[base0] = line0
             first_evictions += np.int64(miss0 & (resident >= 0))
             first_read_hits += np.int64(hit0)
-            served_reads += 1
-            if record:
-                served_by[i] = np.uint8(miss0)
+            if served_by is not None:
+                served_by[at] = np.uint8(miss0)
             continue
         if is_write:
             n_writes += 1
             if hit0:  # changes nothing in a direct-mapped level
                 first_write_hits += 1
-                if record:
-                    served_by[i] = 0
+                if served_by is not None:
+                    served_by[at] = 0
                 continue
             if slot1 >= 0:
                 second_write_hits += 1
@@ -120,8 +136,8 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
                 if allocate0:
                     first_evictions += np.int64(resident >= 0)
                     tags[base0] = line0
-                if record:
-                    served_by[i] = 1
+                if served_by is not None:
+                    served_by[at] = 1
                 continue
         # Neither level holds it: walk the levels below the second.
         second_misses += 1
@@ -139,8 +155,8 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
                     stamps[slot] = clock
                 served = level
                 break
-        if record:
-            served_by[i] = served
+        if served_by is not None:
+            served_by[at] = served
         # Fill bottom-up, as the general walk does, so that back-invalidations
         # of lower levels never remove the line just placed above them.
         for level in range(served - 1, 1, -1):

@@ -6,7 +6,7 @@ import pytest
 from cachesim import CacheLevel, CacheState, Hierarchy, alpha21164, alpha21164_noninclusive, simulate
 from cachesim import kernels as K
 from cachesim.by_access import _simulate_by_access
-from cachesim.direct_first import _simulate_direct_first, serves_direct_first
+from cachesim.direct_first import serves_direct_first, simulate_direct_first
 
 
 def random_hierarchy(rng):
@@ -55,10 +55,8 @@ def run_kernel(kernel, stream, writes, hierarchy, pieces, record):
     bounds = np.linspace(0, stream.size, pieces + 1).astype(int)
     for start, stop in zip(bounds[:-1], bounds[1:]):
         piece = slice(start, stop)  # views: served_by is written through them
-        flags = writes[piece] if writes is not None else None
+        flags = writes[piece] if writes is not None else np.zeros(0, dtype=np.bool_)
         out = served[piece] if record else served
-        if kernel is _simulate_by_access and flags is None:
-            flags = np.zeros(0, dtype=np.bool_)
         clock = kernel(stream[piece], flags, state.geometry, state.arrays, clock, out, record, work)
     return clock, state.tags.copy(), state.stamps.copy(), state.counts.copy(), served
 
@@ -73,7 +71,7 @@ def test_direct_first_equals_the_general_walk_on_seeded_random_hierarchies(seed)
     record = bool(seed % 3)
     pieces = int(rng.integers(1, 5))
     walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
-    direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
+    direct = run_kernel(simulate_direct_first, stream, writes, hierarchy, pieces, record)
     for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
         np.testing.assert_array_equal(a, b, err_msg=f"{name} of {hierarchy}")
 
