@@ -376,7 +376,7 @@ def record_line_span(record, record_start, record_size, kind_first, line_shift):
     first, last : int
         Line numbers (address >> line_shift), ``first <= last``.
     """
-    row = kind_first[record_kind(record)] + record_id(record)
+    row = np.uint64(kind_first[np.uint64(record_kind(record))] + record_id(record))  # unsigned: no wraparound code
     start = record_start[row]
     return start >> line_shift, (start + record_size[row] - 1) >> line_shift
 
@@ -481,20 +481,22 @@ def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
     k = 0
     n_writes = 0
     for i in range(start, stop):
-        first, last = record_line_span(records[i], record_start, record_size, kind_first, line_shift)
-        write = record_is_write(records[i])
+        record = records[np.uint64(i)]
+        first, last = record_line_span(record, record_start, record_size, kind_first, line_shift)
+        write = record_is_write(record)
         span = last - first + 1
         if write:
             n_writes += span
+        at = np.uint64(k)
         for j in range(FILL_AHEAD):
-            buffer[k + j] = np.uint64((first + j) << line_shift)
+            buffer[at + np.uint64(j)] = np.uint64((first + j) << line_shift)
         if flag:
             for j in range(FILL_AHEAD):
-                writes[k + j] = write
+                writes[at + np.uint64(j)] = write
         for j in range(FILL_AHEAD, span):  # the rare longer records
-            buffer[k + j] = np.uint64((first + j) << line_shift)
+            buffer[at + np.uint64(j)] = np.uint64((first + j) << line_shift)
             if flag:
-                writes[k + j] = write
+                writes[at + np.uint64(j)] = write
         k += span
     return k, n_writes
 
