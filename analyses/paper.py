@@ -44,6 +44,7 @@ The study's numbers, the defaults and the checks of the inputs live in
 from __future__ import annotations
 
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -156,29 +157,37 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     machine = Machine(n_cpus=n_cpus, background_load=background)
     base = alpha8400()
 
-    # 1-2: traces, and counters and memory cycles of the sequential S run. One trace at a time: a trace is
-    # memory-mapped and every page a run touched stays resident while it is mapped, so holding all five
-    # (about 4 GB at 512x512) set the peak memory. Only the scene and its render info are kept; step 4
-    # maps the same cache entry again.
-    loaded = {}
-    measurements = []
-    info_out = {}
-    bar = tqdm(scenes, desc="traces and sequential runs", unit="scene", disable=not progress, leave=False,
-               file=sys.stderr)
-    for name in bar:
-        bar.set_postfix_str(name)
-        scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress, workload=workload,
-                                          memory_budget=shares["render_records"])
-        loaded[name] = (scene, None, info)
-        info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}
+    # 1-2: traces, and counters and memory cycles of the sequential S run. A trace is memory-mapped and
+    # every page a run touched stays resident while it is mapped (all five are about 4 GB at 512x512), so
+    # at most two are mapped at once: one scene's run goes on while the next scene's trace is rendered or
+    # loaded and run beside it. Only the scene and its render info are kept; step 4 maps the same cache
+    # entry again.
+    def sequential_run(name, scene, trace):
         with trace_pages_limited(trace, shares):
             sequential = study(trace, ["S"], [1], hierarchy=hierarchy, layout=layout, cost=base, machine=machine,
-                               scene=scene, progress=False)
-        del trace
+                               scene=scene, progress=False, n_jobs=1)
         run = sequential.runs.iloc[0]
         counters = sequential.processes[list(_COUNTERS)].sum()
-        measurements.append({"scene": name, "memory_cycles": float(run["memory_cycles"]),
-                             **{c: int(counters[c]) for c in _COUNTERS}})
+        return {"scene": name, "memory_cycles": float(run["memory_cycles"]),
+                **{c: int(counters[c]) for c in _COUNTERS}}
+
+    loaded = {}
+    info_out = {}
+    runs_of_scenes = []
+    bar = tqdm(scenes, desc="traces and sequential runs", unit="scene", disable=not progress, leave=False,
+               file=sys.stderr)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for name in bar:
+            bar.set_postfix_str(name)
+            scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress,
+                                              workload=workload, memory_budget=shares["render_records"])
+            loaded[name] = (scene, None, info)
+            info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}
+            runs_of_scenes.append(pool.submit(sequential_run, name, scene, trace))
+            del trace
+            if len(runs_of_scenes) >= 2:
+                runs_of_scenes[-2].result()  # its trace unmapped before the next one is mapped
+        measurements = [future.result() for future in runs_of_scenes]
     bar.close()
 
     # 3: calibration to the study's sequential times

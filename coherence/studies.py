@@ -166,11 +166,11 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
             return simulate_run(trace, distribution_of(index), hierarchy, placed, cost, machine, compute=compute,
                                 lines=lines)
 
-        # The first run alone: its kernels compile once, not once per thread that reaches them first.
-        simulated[distinct[0]] = simulate(distinct[0])
-        bar.update(1)
+        # All runs at once, the first included: numba compiles a kernel under
+        # a global lock and looks for the compiled version again once it holds
+        # it, so threads that reach an uncompiled kernel together compile it once.
         with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
-            for index, run in zip(distinct[1:], pool.map(simulate, distinct[1:])):
+            for index, run in zip(distinct, pool.map(simulate, distinct)):
                 simulated[index] = run
                 bar.update(1)
     bar.close()

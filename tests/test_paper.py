@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+import threading
 import weakref
 from pathlib import Path
 
@@ -227,24 +228,28 @@ def test_dispatch_decides_in_report_and_paper():
         paper.scene_verdicts(runs[runs["scene"] == "room"], 16)
 
 
-def test_one_trace_mapped_at_a_time(cache, monkeypatch):
-    """A trace's pages stay resident while it is mapped: reproduce must drop each before mapping the next."""
+def test_at_most_two_traces_mapped_at_once(cache, monkeypatch):
+    """A trace's pages stay resident while it is mapped: reproduce may run one scene's sequential run while
+    it loads the next, but must drop every other trace before mapping another."""
     import coherence
     from analyses import traces
 
     seen = []
+    lock = threading.Lock()
 
     def live(current=None):
         gc.collect()
         return [name for name, ref in seen if ref() is not None and ref() is not current]
 
     def cached_trace(name, *args, **kwargs):
-        assert not live(), f"{name} loaded while {live()} still mapped"
+        with lock:
+            assert len(live()) <= 1, f"{name} loaded while {live()} still mapped"
         return real_cached_trace(name, *args, **kwargs)
 
     def study(trace, *args, **kwargs):
-        assert not live(trace.records), f"{live(trace.records)} still mapped"
-        seen.append((kwargs["scene"].name, weakref.ref(trace.records)))
+        with lock:
+            assert len(live(trace.records)) <= 1, f"{live(trace.records)} still mapped"
+            seen.append((kwargs["scene"].name, weakref.ref(trace.records)))
         return real_study(trace, *args, **kwargs)
 
     real_cached_trace, real_study = traces.cached_trace, coherence.study
