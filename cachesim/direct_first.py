@@ -21,6 +21,7 @@ from numba import njit
 
 from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, INVALIDATIONS, LRU, MISSES,
                            WRITE_HITS, WRITE_MISSES, WRITES, _find, _insert, _set_base)
+from rtcommon.jit import NOT_INLINED
 
 
 @njit(cache=True, inline="always")
@@ -45,7 +46,7 @@ def simulate_direct_first(addresses, writes, geometry, state, clock, served_by, 
     return _simulate_direct_first(addresses, None, geometry, state, clock, None, work)
 
 
-@njit(cache=True)
+@njit(cache=True, **NOT_INLINED)
 def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, work):
     """The kernel of :func:`simulate_direct_first`, compiled apart for a
     stream of reads (``writes`` None) and for one that does not record

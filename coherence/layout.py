@@ -59,6 +59,7 @@ import numpy as np
 from numba import njit
 
 from coherence.texture_layout import TextureLayout
+from rtcommon.jit import NOT_INLINED
 from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
@@ -464,7 +465,7 @@ def _count_lines(records, start, stop, placement, line_shift):
     return needed
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **NOT_INLINED)
 def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
     """Fill ``buffer`` (and ``writes``, unless it is empty), which are long
     enough for the lines and :data:`FILL_AHEAD` more.

@@ -1,0 +1,20 @@
+"""Compilation options the kernels share.
+
+:data:`NOT_INLINED` keeps a hot kernel a function of its own in every caller.
+Numba's ``inline`` option works on its own IR; whether LLVM then inlines a
+compiled callee into its caller depends on whether the callee's IR was at
+hand: it is when the callee was compiled in the same process, not when it was
+loaded from numba's cache. So one cached caller held the callee inlined and
+another did not, and the inlined copy ran slower: inside
+:func:`coherence.scheduler.run_schedule`, whose own state leaves the cache
+simulator's loop too few registers, a balls study-era run took 9.5 s with the
+kernels inlined against 7.8 s with them called (same code, same counts).
+
+Numba has no option that only says "do not inline"; debug information is its
+one switch that marks a function ``noinline`` (``numba.core.lowering``). The
+other effects of ``debug=True`` are turned back off: variable lifetimes are
+not extended, indices are not bounds-checked. The debug information itself
+costs about half a second of compilation per kernel signature.
+"""
+
+NOT_INLINED = {"debug": True, "_dbg_extend_lifetimes": False, "boundscheck": False}
