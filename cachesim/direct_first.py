@@ -37,20 +37,16 @@ def serves_direct_first(geometry):
 def simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
     """:func:`cachesim.by_access._simulate_by_access` for a hierarchy that
     :func:`serves_direct_first`: same parameters, same results."""
-    if record:
-        if writes.shape[0] > 0:
-            return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, work)
-        return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, work)
     if writes.shape[0] > 0:
-        return _simulate_direct_first(addresses, writes, geometry, state, clock, None, work)
-    return _simulate_direct_first(addresses, None, geometry, state, clock, None, work)
+        return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
+    return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, record, work)
 
 
 @njit(cache=True, **NOT_INLINED)
-def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, work):
+def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
     """The kernel of :func:`simulate_direct_first`, compiled apart for a
-    stream of reads (``writes`` None) and for one that does not record
-    ``served_by`` (None): numba drops the checks of a None argument.
+    stream of reads (``writes`` None: numba drops the checks of a None
+    argument).
 
     Every index is cast to unsigned: numba fixes up a negative signed index
     (a shift, a mask and an add at every array access), which took a quarter
@@ -121,14 +117,14 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
             tags[base0] = line0
             first_evictions += np.int64(miss0 & (resident >= 0))
             first_read_hits += np.int64(hit0)
-            if served_by is not None:
+            if record:
                 served_by[at] = np.uint8(miss0)
             continue
         if is_write:
             n_writes += 1
             if hit0:  # changes nothing in a direct-mapped level
                 first_write_hits += 1
-                if served_by is not None:
+                if record:
                     served_by[at] = 0
                 continue
             if slot1 >= 0:
@@ -137,7 +133,7 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
                 if allocate0:
                     first_evictions += np.int64(resident >= 0)
                     tags[base0] = line0
-                if served_by is not None:
+                if record:
                     served_by[at] = 1
                 continue
         # Neither level holds it: walk the levels below the second.
@@ -156,7 +152,7 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
                     stamps[slot] = clock
                 served = level
                 break
-        if served_by is not None:
+        if record:
             served_by[at] = served
         # Fill bottom-up, as the general walk does, so that back-invalidations
         # of lower levels never remove the line just placed above them.
