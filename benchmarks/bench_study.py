@@ -20,24 +20,22 @@ from pathlib import Path
 
 import numpy as np
 
+from analyses.traces import cached_trace
 from cachesim import alpha21164, simulate_many
 from coherence.layout import get_layout
 from coherence.mappings import MAPPINGS, get_mapping
 from coherence.simulation import SCHEDULERS, Machine, simulate_run
 from coherence.studies import place_layout, study
-from tracer.render import render
-from tracer.scenes import load
 from tracer.trace import AccessTrace
 
 
-def cached_trace(size: int, folder: Path):
-    scene = load("balls")
-    path = folder / f"balls-{size}"
-    if not path.is_dir():
-        start = time.perf_counter()
-        render(scene, size=size).trace.save(path)
-        print(f"rendered balls {size}x{size} in {time.perf_counter() - start:.1f} s", file=sys.stderr)
-    return scene, AccessTrace.load(path)
+def balls_trace(size: int, folder: Path):
+    """Balls and its trace, from the project's trace cache in ``folder`` (keyed
+    by the tracer's source, so an older tracer's trace is never reused)."""
+    scene, trace, info = cached_trace("balls", size, cache_dir=folder, progress=False)
+    if not info.get("cached"):
+        print(f"rendered balls {size}x{size} into {folder}", file=sys.stderr)
+    return scene, trace
 
 
 def main():
@@ -46,7 +44,7 @@ def main():
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "coherence-bench")
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
-    scene, trace = cached_trace(args.size, args.cache)
+    scene, trace = balls_trace(args.size, args.cache)
     hierarchy = alpha21164()
     mappings = list(MAPPINGS)
     counts = [1, 2, 4, 8, 16]
