@@ -33,20 +33,10 @@ def serves_direct_first(geometry):
             and geometry.policy[1] == LRU and geometry.set_mask[0] >= 0 and geometry.set_mask[1] >= 0)
 
 
-@njit(cache=True, inline="always")
-def simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
-    """:func:`cachesim.by_access._simulate_by_access` for a hierarchy that
-    :func:`serves_direct_first`: same parameters, same results."""
-    if writes.shape[0] > 0:
-        return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
-    return _simulate_direct_first(addresses, None, geometry, state, clock, served_by, record, work)
-
-
 @njit(cache=True, **NOT_INLINED)
 def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work):
-    """The kernel of :func:`simulate_direct_first`, compiled apart for a
-    stream of reads (``writes`` None: numba drops the checks of a None
-    argument).
+    """:func:`cachesim.by_access._simulate_by_access` for a hierarchy that
+    :func:`serves_direct_first`: same parameters, same results.
 
     Every index is cast to unsigned: numba fixes up a negative signed index
     (a shift, a mask and an add at every array access), which took a quarter
@@ -66,6 +56,7 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
     counts = state.counts
     n_levels = rel_shift.shape[0]
     lines = work.level_lines
+    has_writes = writes.shape[0] > 0
     shift = np.uint64(geometry.line_shift)
     # The first two levels' geometry in scalars: every access reads both.
     mask0 = set_mask[0]
@@ -96,10 +87,7 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
         at = np.uint64(i)
         line0 = np.int64(addresses[at] >> shift)
         clock += 1
-        if writes is None:
-            is_write = False
-        else:
-            is_write = writes[at]
+        is_write = has_writes and writes[at]
         base0 = np.uint64(line0 & mask0)
         resident = tags[base0]
         hit0 = resident == line0

@@ -59,7 +59,7 @@ from numba import njit, prange
 
 from cachesim.by_access import _simulate_by_access
 from cachesim.by_level import _simulate_by_level
-from cachesim.direct_first import serves_direct_first, simulate_direct_first
+from cachesim.direct_first import _simulate_direct_first, serves_direct_first
 from cachesim.sets import (ACCESSES, CHUNK, EVICTIONS, EXCLUSIVE, FIFO, HITS, INCLUSIVE, INVALIDATIONS, LRU,
                            MISSES, N_COUNTERS, NON_INCLUSIVE, RANDOM, WRITE_HITS, WRITE_MISSES, WRITES,
                            CacheArrays, CacheGeometry, ChunkBuffers, chunk_buffers)
@@ -109,7 +109,7 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     if geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):
-        return simulate_direct_first(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by,
+        return _simulate_direct_first(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by,
                                      record, work)
     return _simulate_by_access(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by,
                                record, work)
@@ -143,7 +143,7 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     if writes.shape[0] == 0 and geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):
-        return simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
+        return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
     return _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work)
 
 

@@ -6,7 +6,7 @@ import pytest
 from cachesim import CacheLevel, CacheState, Hierarchy, alpha21164, alpha21164_noninclusive, simulate
 from cachesim import kernels as K
 from cachesim.by_access import _simulate_by_access
-from cachesim.direct_first import serves_direct_first, simulate_direct_first
+from cachesim.direct_first import _simulate_direct_first, serves_direct_first
 
 
 def random_hierarchy(rng):
@@ -71,7 +71,7 @@ def test_direct_first_equals_the_general_walk_on_seeded_random_hierarchies(seed)
     record = bool(seed % 3)
     pieces = int(rng.integers(1, 5))
     walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
-    direct = run_kernel(simulate_direct_first, stream, writes, hierarchy, pieces, record)
+    direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
     for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
         np.testing.assert_array_equal(a, b, err_msg=f"{name} of {hierarchy}")
 
