@@ -4,12 +4,13 @@ The 21164's D-cache is direct-mapped, and on the study-era traces only a
 third of its accesses hit, in no pattern a branch predictor learns. The
 general walk (:mod:`cachesim.by_access`) branches on that hit and then on the
 second level's, and spent most of its time recovering from the mispredicted
-branches. Here every access looks both levels up at once, and an access
+branches. Here every access looks both levels up at once, and a read
 either serves is finished with selects instead of branches: a first-level
 hit changes nothing, a second-level hit stamps its way (LRU) and fills the
-first level's one way (unless it is a write the first level does not
-allocate). Only the second level's misses walk on down, as in the general
-walk.
+first level's one way. Writes (a few in a thousand on the study-era traces)
+take branches, and only the second level's misses walk on down, as in the
+general walk. The kernel stays a function of its own in its callers
+(:data:`rtcommon.jit.NOT_INLINED`).
 
 The semantics (inclusion, writes, counters, ``served_by``, the clock and the
 stamps it leaves) are exactly those of :mod:`cachesim.by_access`, which tests
