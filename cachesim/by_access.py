@@ -19,8 +19,7 @@ extra whether the line was written or not.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import (ACCESSES, EVICTIONS, EXCLUSIVE, HITS, INCLUSIVE, INVALIDATIONS, LRU, MISSES,
-                           WRITE_HITS, WRITE_MISSES, WRITES, _find, _insert, _set_base)
+from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _back_invalidate, _find, _insert, _set_base
 
 
 @njit(cache=True)
@@ -141,33 +140,9 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
             if evicted >= 0:
                 counts[level, EVICTIONS] += 1
                 if inclusion == INCLUSIVE and level > 0:
-                    # Back-invalidation, inline: remove every line of the
-                    # levels above that lies in the evicted one.
-                    for upper in range(level):
-                        spread = rel_shift[level] - rel_shift[upper]
-                        first = evicted << spread
-                        mask = set_mask[upper]
-                        for sub in range(first, first + (np.int64(1) << spread)):
-                            base = offset[upper] + (sub & mask if mask >= 0 else sub % n_sets[upper]) * ways[upper]
-                            for way in range(base, base + ways[upper]):
-                                if tags[way] == sub:
-                                    tags[way] = -1
-                                    invalidations[upper] += 1
+                    _back_invalidate(tags, evicted, level, rel_shift, set_mask, n_sets, ways, offset, invalidations)
         previous = line0 if (allocate0 or not is_write) else np.int64(-1)
-    # Only misses go down a level: accesses of level l + 1 are the misses of l,
-    # for reads and writes alike.
     level_hits[0] = first_hits
     level_write_hits[0] = first_write_hits
-    entering = np.int64(addresses.shape[0])
-    entering_writes = n_writes
-    for level in range(n_levels):
-        counts[level, ACCESSES] += entering
-        counts[level, HITS] += level_hits[level]
-        counts[level, MISSES] += entering - level_hits[level]
-        counts[level, WRITES] += entering_writes
-        counts[level, WRITE_HITS] += level_write_hits[level]
-        counts[level, WRITE_MISSES] += entering_writes - level_write_hits[level]
-        counts[level, INVALIDATIONS] += invalidations[level]
-        entering -= level_hits[level]
-        entering_writes -= level_write_hits[level]
+    _add_counts(counts, addresses.shape[0], n_writes, level_hits, level_write_hits, invalidations)
     return clock

@@ -186,3 +186,38 @@ def _insert(tags, stamps, seed, base, n_ways, policy, line, clock):
     tags[victim] = line
     stamps[victim] = clock
     return evicted
+
+
+@njit(cache=True, inline="always")
+def _back_invalidate(tags, evicted, level, rel_shift, set_mask, n_sets, ways, offset, invalidations):
+    """Inclusion: remove every line of the levels above ``level`` that lies in
+    its ``evicted`` line, counting them in ``invalidations`` per level."""
+    for upper in range(level):
+        spread = rel_shift[level] - rel_shift[upper]
+        first = evicted << spread
+        mask = set_mask[upper]
+        for sub in range(first, first + (np.int64(1) << spread)):
+            base = offset[upper] + (sub & mask if mask >= 0 else sub % n_sets[upper]) * ways[upper]
+            for way in range(base, base + ways[upper]):
+                if tags[way] == sub:
+                    tags[way] = -1
+                    invalidations[upper] += 1
+
+
+@njit(cache=True, inline="always")
+def _add_counts(counts, n_accesses, n_writes, level_hits, level_write_hits, invalidations):
+    """Add one call's per-level hits, write hits and invalidations to
+    ``counts``: only misses go down a level, so the accesses of level
+    ``l + 1`` are the misses of ``l``, for reads and writes alike."""
+    entering = np.int64(n_accesses)
+    entering_writes = np.int64(n_writes)
+    for level in range(counts.shape[0]):
+        counts[level, ACCESSES] += entering
+        counts[level, HITS] += level_hits[level]
+        counts[level, MISSES] += entering - level_hits[level]
+        counts[level, WRITES] += entering_writes
+        counts[level, WRITE_HITS] += level_write_hits[level]
+        counts[level, WRITE_MISSES] += entering_writes - level_write_hits[level]
+        counts[level, INVALIDATIONS] += invalidations[level]
+        entering -= level_hits[level]
+        entering_writes -= level_write_hits[level]
