@@ -143,7 +143,10 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
                 if served_by is not None:
                     served_by[at] = 1
                 continue
-        # Neither level holds it: walk the levels below the second.
+        # Neither level holds it: walk the levels below the second. This walk
+        # and the fill below repeat by_access's on purpose: as shared helpers
+        # they read the geometry bundle per access, and reference counting
+        # took both kernels from 85 and 180 M/s to 7 and 72.
         second_misses += 1
         served = n_levels
         for level in range(2, n_levels):
