@@ -50,6 +50,7 @@ from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_curves import miss_ratio_curves
 from analyses.report_html import miss_map_png, report_html
+from analyses.warmup import simulation_warm_up
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain, round_number
@@ -270,9 +271,12 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     if out is not None:
         prepare_output_folder(out)
 
-    scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
-                                          progress=progress, workload=workload,
-                                          memory_budget=shares["render_records"])
+    # a first run compiles the simulation's kernels in a second process while this one renders
+    with simulation_warm_up(hierarchy, layout, cost, machine, mapping_objects, enabled=dask is None) as warm:
+        scene_obj, trace, info = cached_trace(scene, size, cache_dir=cache_dir, kd=kd, max_depth=max_depth,
+                                              progress=progress, workload=workload,
+                                              memory_budget=shares["render_records"])
+        warm.wait(progress=progress)
     with dask_executor(dask) as executor, trace_pages_limited(trace, shares):
         return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
                          size, kd, progress, miss_map, executor, shares)
