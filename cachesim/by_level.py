@@ -52,11 +52,22 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     elif level_policy != RANDOM:
         # LRU and FIFO: one pass over the set finds the line and the victim
         # (the first empty way, else the oldest stamp) without early exits,
-        # which the host's branch predictor handles far better.
+        # which the host's branch predictor handles far better. A repeat of
+        # the line just looked up hits the way it left (nothing else touches
+        # this level meanwhile) and skips the set: a quarter of the second
+        # level's accesses when its lines are twice the first's, and a
+        # quarter faster on the benchmark stream, whose back-to-back halves
+        # of one line would otherwise wait on each other's stores.
+        previous = np.int64(-1)
+        previous_slot = np.uint64(0)
         for j in range(n_in):
             at = np.uint64(j)
             line = lines[at]
             clock = clocks[at]
+            if line == previous:
+                if lru:
+                    stamps[previous_slot] = clock
+                continue
             base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
             hit = -1
             victim = base
@@ -78,6 +89,8 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
             lines[np.uint64(n_out)] = line >> shift
             clocks[np.uint64(n_out)] = clock
             n_out += miss
+            previous = line
+            previous_slot = target
             if record and miss:
                 served_by[clock - first_clock] = level + 1
     else:
