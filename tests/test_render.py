@@ -12,7 +12,7 @@ from tracer.camera import camera_rays
 from tracer.closest import closest_hit
 from tracer.render import render, save_png
 from tracer.records import FORMAT_VERSION, INDEX_MASK
-from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, pack, unpack
+from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, TraceWriter, pack, unpack
 
 
 @pytest.fixture(scope="module")
@@ -159,8 +159,26 @@ def test_chunked_trace_equals_in_memory_trace(tmp_path, mixed):
     assert np.array_equal(chunked.trace.pixel_offsets, full.pixel_offsets)
     assert np.array_equal(AccessTrace.load(tmp_path / "c").counters, full.counters)
     assert chunked.trace.totals() == full.totals()
+    assert np.array_equal(chunked.counters, full.counters)  # filled in the trace's file, not in memory
     with pytest.raises(ValueError, match="memory_budget"):
         render(scene, tree, size=12, memory_budget=budget)
+
+
+def test_counters_filled_in_their_file_survive_dropped_pages(tmp_path):
+    # the writer's counters are a map of counters.npy; rows written, released (flushed, pages dropped)
+    # and written again must all be in the published trace, with the right checksum
+    rng = np.random.default_rng(5)
+    expected = rng.integers(0, 1000, (3000, len(COUNTER_NAMES)))
+    with TraceWriter(tmp_path / "t") as writer:
+        counters = writer.counters_array(*expected.shape)
+        for rows in np.array_split(np.arange(3000), 7):
+            counters[rows] = expected[rows]
+            writer.release_counter_pages()
+        del counters
+        writer.append(np.zeros(3000, np.uint32))
+        trace = writer.finish(np.arange(3001, dtype=np.int64), None, 60, 50, {})
+    assert np.array_equal(trace.counters, expected)
+    assert np.array_equal(AccessTrace.load(tmp_path / "t").counters, expected)  # checksums verified on load
 
 
 def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):

@@ -51,7 +51,7 @@ from tracer.scene import ElementKind, Scene
 from tracer.shading import shading_of, texture_colour
 from tracer.texture import MipChains, TextureFilter
 from rtcommon.versions import package_versions
-from tracer.trace import AccessTrace, TraceWriter
+from tracer.trace import AccessTrace, TraceWriter, column_sums
 from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
 from tracer.workload import Workload, get_workload
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
@@ -106,7 +106,7 @@ class RenderResult:
 
     def totals(self) -> dict:
         """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
-        sums = self.counters.sum(axis=0)
+        sums = column_sums(self.counters)
         out = {name: int(v) for name, v in zip(COUNTER_NAMES, sums)}
         out["rays"] = (out["primary_rays"] + out["shadow_rays"]
                        + out["reflection_rays"] + out["refraction_rays"])
@@ -526,8 +526,11 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     sx = width + 1 if corner_rays else width
     sy = height + 1 if corner_rays else height
     n_pix = sx * sy
-    out = SampleOutputs(np.zeros((n_pix, 3)), np.zeros((n_pix, N_COUNTERS), np.int64), np.zeros(n_pix, np.int64))
-    image, counters, counts = out
+    image = np.zeros((n_pix, 3))
+    counts = np.zeros(n_pix, np.int64)
+    # a trace written to disk fills its counters in their file instead
+    counters = None if log and trace_path is not None else np.zeros((n_pix, N_COUNTERS), np.int64)
+    out = SampleOutputs(image, counters, counts)
     offsets = np.zeros(n_pix + 1, np.int64)
     # the render kernel's arguments between the work items and the outputs
     kernel_inputs = (cam, RenderParams(n_pix, hither, eps, depth, not workload.shadow_nearest,
@@ -578,13 +581,17 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
             trace = AccessTrace(offsets, records.finish(), counters, sx, sy, meta)
         else:
             with TraceWriter(trace_path) as writer:
-                _log_samples(kernel_inputs, out, memory_budget,
-                             lambda pieces: [writer.append(piece) for piece in pieces])
+                # the counters are part of the trace: filled in their file, batch by batch
+                def sink(pieces):
+                    for piece in pieces:
+                        writer.append(piece)
+                    writer.release_counter_pages()
+
+                _log_samples(kernel_inputs, SampleOutputs(image, writer.counters_array(n_pix, N_COUNTERS), counts),
+                             memory_budget, sink)
                 np.cumsum(counts, out=offsets[1:])
-                if 4 * int(offsets[-1]) <= memory_budget:
-                    trace = writer.finish(offsets, counters, sx, sy, meta, mmap=False)
-                else:
-                    trace = writer.finish(offsets, counters, sx, sy, meta)
+                trace = writer.finish(offsets, None, sx, sy, meta, mmap=4 * int(offsets[-1]) > memory_budget)
+            counters = trace.counters
         timings["trace"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,

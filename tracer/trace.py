@@ -119,7 +119,7 @@ class AccessTrace:
 
     def totals(self) -> dict:
         """Sum of every counter over all pixels, plus ``records``."""
-        sums = self.counters.sum(axis=0)
+        sums = column_sums(self.counters)
         out = {name: int(v) for name, v in zip(COUNTER_NAMES, sums)}
         out["records"] = self.n_records
         return out
@@ -234,6 +234,19 @@ def array_checksum(array: np.ndarray) -> str:
             drop_pages(mapped)
         hasher.update(np.ascontiguousarray(flat[a:a + step]))
     return hasher.hexdigest()
+
+
+def column_sums(counters: np.ndarray) -> np.ndarray:
+    """Sum of each column of a (P, K) counter array, read in row chunks (the pages of a memory-mapped
+    array leave the resident set as they are summed). Returns shape (K,) int64."""
+    mapped = mapping_of(counters)
+    sums = np.zeros(counters.shape[1], np.int64)
+    step = max(1, _CHUNK // max(counters.shape[1], 1))
+    for a in range(0, counters.shape[0], step):
+        if mapped is not None:
+            drop_pages(mapped)
+        sums += counters[a:a + step].sum(axis=0, dtype=np.int64)
+    return sums
 
 
 def verify_trace(trace: AccessTrace, checksums: dict | None = None, *, where: str = "trace") -> None:
@@ -397,6 +410,7 @@ class TraceWriter:
         self._hasher = xxhash.xxh3_64()
         self._file = open(self.tmp / "records.npy", "wb")
         self._file.write(_npy_header(0))  # rewritten with the final length
+        self._counters = None
 
     def __enter__(self):
         return self
@@ -413,13 +427,35 @@ class TraceWriter:
         self._hasher.update(records)
         self.n_records += len(records)
 
+    def counters_array(self, n_pixels: int, n_counters: int) -> np.ndarray:
+        """A zeroed (``n_pixels``, ``n_counters``) int64 array mapped from the trace's ``counters.npy``.
+
+        The render fills it in place and :meth:`release_counter_pages` lets
+        the filled pages go, so a large image's counters (0.8 GB at 2048²)
+        never sit in memory whole; pass the same array to :meth:`finish`.
+        """
+        self._counters = np.lib.format.open_memmap(self.tmp / "counters.npy", mode="w+", dtype=np.int64,
+                                                   shape=(n_pixels, n_counters))
+        return self._counters
+
+    def release_counter_pages(self) -> None:
+        """Write the counters filled so far to the file and drop their pages from memory."""
+        if self._counters is not None:
+            self._counters.flush()
+            drop_pages(mapping_of(self._counters))
+
     def abort(self) -> None:
         if not self._file.closed:
             self._file.close()
+        self._counters = None
         shutil.rmtree(self.tmp, ignore_errors=True)
 
     def finish(self, pixel_offsets, counters, width, height, metadata, *, mmap: bool = True) -> AccessTrace:
-        """Write the remaining files, publish, and return the trace (memory-mapped by default)."""
+        """Write the remaining files, publish, and return the trace (memory-mapped by default).
+
+        ``counters`` None: the array of :meth:`counters_array`, filled in
+        place (drop other references to it first).
+        """
         n = self.n_records
         if int(pixel_offsets[-1]) != n:
             raise ValueError(f"pixel_offsets end at {int(pixel_offsets[-1])} but {n} records were written")
@@ -427,11 +463,17 @@ class TraceWriter:
         self._file.write(_npy_header(n))
         self._file.close()
         pixel_offsets = np.ascontiguousarray(pixel_offsets, dtype=np.int64)
-        counters = np.ascontiguousarray(counters, dtype=np.int64)
         np.save(self.tmp / "pixel_offsets.npy", pixel_offsets)
-        np.save(self.tmp / "counters.npy", counters)
+        if counters is None:  # filled in place (counters_array): already in its file
+            counters = self._counters
+            self.release_counter_pages()
+        else:
+            counters = np.ascontiguousarray(counters, dtype=np.int64)
+            np.save(self.tmp / "counters.npy", counters)
         checksums = {"pixel_offsets": array_checksum(pixel_offsets), "records": self._hasher.hexdigest(),
                      "counters": array_checksum(counters)}
+        del counters
+        self._counters = None  # the map closes before the folder is renamed
         _write_meta(self.tmp, width, height, n, metadata, checksums)
         _publish(self.tmp, self.directory)
         return AccessTrace.load(self.directory, mmap=mmap)
