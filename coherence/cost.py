@@ -18,6 +18,11 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 import pandas as pd
 
+from rtcommon.resident import drop_pages, mapping_of
+
+#: rows of counters :meth:`CostModel.compute_cycles` converts at a time (6.5 MB of float64 for 25 counters)
+COMPUTE_ROWS = 1 << 15
+
 # Cost fields and the trace counters each one multiplies.
 OPERATIONS = {
     "ray": ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays"),
@@ -109,8 +114,22 @@ class CostModel:
         return weights
 
     def compute_cycles(self, counters, counter_names) -> np.ndarray:
-        """Compute cycles per row of ``counters`` (int, (P, K)) -> float64 (P,)."""
-        return np.asarray(counters, dtype=np.float64) @ self.weights(counter_names)
+        """Compute cycles per row of ``counters`` (int, (P, K)) -> float64 (P,).
+
+        Rows are converted in chunks of :data:`COMPUTE_ROWS`: a trace's
+        memory-mapped counters (0.8 GB at 2048²) are never copied whole, and
+        their pages leave the resident set as they are read.
+        """
+        counters = np.asarray(counters)
+        weights = self.weights(counter_names)
+        cycles = np.empty(counters.shape[0])
+        mapped = mapping_of(counters)
+        for start in range(0, counters.shape[0], COMPUTE_ROWS):
+            if mapped is not None:
+                drop_pages(mapped)
+            rows = slice(start, start + COMPUTE_ROWS)
+            cycles[rows] = np.asarray(counters[rows], dtype=np.float64) @ weights
+        return cycles
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -33,6 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from cachesim import CacheState, Hierarchy
 from cachesim import kernels as K
@@ -380,9 +381,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         "tasks": np.bincount(task_owner, minlength=n_processes).astype(np.int64),
         "pixels": np.bincount(pixel_owner, minlength=n_processes).astype(np.int64),
     }
+    by_process = _counters_by_process(counters, pixel_owner, n_processes)
     for column, name in enumerate(counter_names):
-        frame[name] = np.bincount(pixel_owner, weights=counters[:, column],
-                                  minlength=n_processes).round().astype(np.int64)
+        frame[name] = by_process[:, column]
     for index, level in enumerate(hierarchy.levels):
         frame[f"{level.name}_accesses"] = counts[:, index, K.ACCESSES]
         frame[f"{level.name}_hits"] = counts[:, index, K.HITS]
@@ -402,6 +403,33 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     processes = pd.DataFrame(frame)
     return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()),
                out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None)
+
+
+@njit(cache=True, nogil=True)
+def _counters_by_process(counters, pixel_owner, n_processes):
+    """Sum the trace's counter rows of each process's pixels.
+
+    One pass over the rows, without the interpreter lock: a memory-mapped
+    trace's counters are read once, in order (a column at a time would read
+    every page once per counter).
+
+    Parameters
+    ----------
+    counters : ndarray of int64, shape (P, K)
+    pixel_owner : ndarray of int64, shape (P,)
+        The process (0..n_processes-1) that traced each pixel.
+    n_processes : int
+
+    Returns
+    -------
+    ndarray of int64, shape (n_processes, K)
+    """
+    sums = np.zeros((n_processes, counters.shape[1]), np.int64)
+    for pixel in range(counters.shape[0]):
+        owner = pixel_owner[pixel]
+        for column in range(counters.shape[1]):
+            sums[owner, column] += counters[pixel, column]
+    return sums
 
 
 def _background(machine: Machine, line_shift: int, state: CacheState, tlbs: CpuTlbs) -> BackgroundLoad:

@@ -95,6 +95,20 @@ def test_record_counts_from_trace_records():
     assert counts[RecordKind.MATERIAL] == 1 and counts[RecordKind.LIGHT] == 0
 
 
+def test_compute_cycles_in_chunks_equal_one_product(tmp_path, monkeypatch):
+    # a memory-mapped trace's counters go through in chunks of rows; the cycles are those of one product
+    import coherence.cost as cost_module
+
+    monkeypatch.setattr(cost_module, "COMPUTE_ROWS", 97)
+    rng = np.random.default_rng(3)
+    counters = rng.integers(0, 5000, (1000, len(COUNTER_NAMES)))
+    np.save(tmp_path / "counters.npy", counters)
+    mapped = np.load(tmp_path / "counters.npy", mmap_mode="r")
+    for model in (alpha8400(), modern()):
+        expected = counters.astype(np.float64) @ model.weights(COUNTER_NAMES)
+        assert np.array_equal(model.compute_cycles(mapped, COUNTER_NAMES), expected)
+
+
 def test_cost_weights_and_compute_cycles():
     model = CostModel(ray=10, node_visit=2, test_sphere=7, shading=100)
     counters = np.zeros((2, len(COUNTER_NAMES)), dtype=np.int64)

@@ -213,3 +213,17 @@ def test_dynamic_blocks_fewer_than_processes_warn():
                            Machine(n_cpus=4))
     assert run.processes["pixels"].tolist() == [64, 0, 0]
     assert run.processes["user_cycles"][1:].tolist() == [0.0, 0.0]
+
+
+def test_counters_by_process_equal_a_sum_per_owner():
+    from coherence.simulation import _counters_by_process
+
+    # by hand: pixels 0 and 2 are process 1's, pixel 1 process 0's
+    counters = np.array([[1, 2], [10, 20], [100, 200]], dtype=np.int64)
+    assert _counters_by_process(counters, np.array([1, 0, 1]), 3).tolist() == [[10, 20], [101, 202], [0, 0]]
+    rng = np.random.default_rng(8)
+    for n_processes in (1, 3, 16):
+        counters = rng.integers(0, 1 << 40, (500, 7))
+        owner = rng.integers(0, n_processes, 500)
+        expected = [[int(counters[owner == p, c].sum()) for c in range(7)] for p in range(n_processes)]
+        assert _counters_by_process(counters, owner, n_processes).tolist() == expected
