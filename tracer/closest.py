@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from rtcommon.jit import NO_REFCOUNTS
 from tracer.geometry import Ray, prepare_geometry
 from tracer.kdtree import KdTree
 from tracer.scene import Scene
@@ -34,7 +35,7 @@ class HitArrays(NamedTuple):
     node_visits: np.ndarray  #: (R,) int64 (kd-tree query only)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _batch_ray(rays, r):
     o, d = rays.origins, rays.directions
     return Ray(o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
@@ -47,12 +48,16 @@ RAY_CHUNK = 256
 @njit(cache=True, error_model="numpy")
 def _closest_chunk(rays, first, stop, tree, geo, out):
     # rays first..stop-1 with one counter array and one stack between them
+    _closest_rays(rays, first, stop, tree, geo, out, RecordLog(np.empty(0, np.uint32), 0),
+                  np.zeros(N_COUNTERS, np.int64), new_stack())
+
+
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
+def _closest_rays(rays, first, stop, tree, geo, out, no_log, cnt, stack):
+    # the loop over the rays, the traversal inlined, without reference counting (rtcommon.jit.NO_REFCOUNTS)
     out_t = out.t
     out_element = out.element
     out_nodes = out.node_visits
-    no_log = RecordLog(np.empty(0, np.uint32), 0)
-    cnt = np.zeros(N_COUNTERS, np.int64)
-    stack = new_stack()
     for r in range(first, stop):
         before = cnt[Counter.NODE_VISITS]
         t, e, _ = traverse(tree, geo, _batch_ray(rays, r), rays.tmin[r], rays.tmax[r], False,

@@ -46,10 +46,11 @@ from tracer.geometry import Ray, element_normal, prepare_geometry
 from tracer.kdtree import KdTree, KdTreeConfig
 from tracer.records import COUNTER_NAMES, N_COUNTERS, Counter, RecordKind, make_record, make_write_record
 from tracer.render_types import (N_RAY_COLUMNS, LightColumn, MaterialColumn, RayColumn, RayType, RenderParams,
-                                 SampleOutputs, SampleScratch, WorkItems)
+                                 SampleOutputs, SampleRange, SampleScratch, WorkItems)
 from tracer.scene import ElementKind, Scene
 from tracer.shading import shading_of, texture_colour
 from tracer.texture import MipChains, TextureFilter
+from rtcommon.jit import NO_REFCOUNTS
 from rtcommon.versions import package_versions
 from tracer.trace import AccessTrace, TraceWriter, column_sums
 from tracer.traverse import RecordLog, new_stack, traverse, tree_arrays
@@ -170,7 +171,7 @@ def _push_ray(rays, n, ray, weight, depth, typ, cone):
     return n + 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _trace_sample(primary, params, tree, geo, shading, log, pos, scratch):
     # Whitted ray tree of one primary ray, depth first with an explicit
     # stack (scratch.rays, columns RayColumn); pushing refraction before
@@ -337,9 +338,17 @@ def _trace_chunk(p0, p1, log, pos, cam, params, tree, geo, shading, out):
     # propagation merged ``first = pos`` with the updated ``pos``.)
     scratch = SampleScratch(np.zeros(out.counters.shape[1], np.int64), new_stack(),
                             np.empty((2 * params.max_depth + 2, N_RAY_COLUMNS)))
+    return _trace_samples(SampleRange(p0, p1), log, pos, cam, params, tree, geo, shading, out, scratch)
+
+
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
+def _trace_samples(samples, log, pos, cam, params, tree, geo, shading, out, scratch):
+    # the loop over the samples of _trace_chunk, with _trace_sample and its traversals inlined and
+    # without reference counting: a call per sample or per ray that passed the bundles of arrays cost
+    # more than most rays' traversal (rtcommon.jit.NO_REFCOUNTS)
     cnt = scratch.counters
     sx = np.int64(cam.samples_x)
-    for p in range(p0, p1):
+    for p in range(samples.first, samples.stop):
         i = p % sx
         j = p // sx
         u = (i - cam.cx) * cam.pitch
@@ -357,7 +366,8 @@ def _trace_chunk(p0, p1, log, pos, cam, params, tree, geo, shading, out):
         out.image[p, 0] = r
         out.image[p, 1] = g
         out.image[p, 2] = b
-        out.counters[p, :] = cnt
+        for column in range(cnt.shape[0]):  # a slice assignment would allocate (it checks for overlap)
+            out.counters[p, column] = cnt[column]
         out.counts[p] = pos - first
     return pos
 

@@ -119,6 +119,13 @@ class WorkItems(NamedTuple):
     used: np.ndarray      #: (K,) int64 output
 
 
+class SampleRange(NamedTuple):
+    """The samples ``first .. stop - 1`` of one work item, traced one after another."""
+
+    first: int
+    stop: int
+
+
 class SampleScratch(NamedTuple):
     """Per-thread scratch of :func:`_trace_sample` (allocated once per work item)."""
 
