@@ -20,9 +20,10 @@ import numpy as np
 from numba import njit
 
 from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _back_invalidate, _find, _insert, _set_base
+from rtcommon.jit import NO_REFCOUNTS
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work):
     """Run ``addresses`` (uint64, (N,)) through one state, one access at a time.
 

@@ -9,9 +9,10 @@ import numpy as np
 from numba import njit
 
 from cachesim.sets import ACCESSES, EVICTIONS, HITS, LRU, MISSES, RANDOM, _find, _insert
+from rtcommon.jit import NO_REFCOUNTS
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, record, first_clock):
     """Run ``lines[:n_in]`` (with their access clocks) through one level.
 
@@ -117,7 +118,7 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     return n_out
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def _simulate_by_level(addresses, geometry, state, clock, served_by, record, work):
     """Non-inclusive hierarchy: each chunk runs through level 0, its misses
     through level 1, and so on. Clocks are the global access clock, so stamps

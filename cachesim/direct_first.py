@@ -22,7 +22,7 @@ from numba import njit
 
 from cachesim.sets import (EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _back_invalidate, _find, _insert,
                            _set_base)
-from rtcommon.jit import NOT_INLINED
+from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 
 
 @njit(cache=True, inline="always")
@@ -47,7 +47,7 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
     return _direct_first_kernel(addresses, None, geometry, state, clock, None, work)
 
 
-@njit(cache=True, **NOT_INLINED)
+@njit(cache=True, **NOT_INLINED, **NO_REFCOUNTS)
 def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work):
     """The kernel of :func:`_simulate_direct_first`, compiled apart for a
     stream of reads (``writes`` None) and for one that does not record

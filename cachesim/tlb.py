@@ -32,6 +32,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from rtcommon.jit import NO_REFCOUNTS
+
 # Replacement policies (TlbGeometry.policy).
 NLU, TLB_LRU, TLB_FIFO = 0, 1, 2
 # Columns of TlbArrays.cursor.
@@ -104,7 +106,7 @@ def empty_tlbs(n_tlbs: int, entries: int) -> TlbArrays:
                      cursor, np.zeros((n_tlbs, N_TLB_COUNTERS), dtype=np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def tlb_lookup(addresses, geometry, tlb):
     """Look up the page of every address in one TLB, in order.
 
