@@ -25,6 +25,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from rtcommon.jit import NO_REFCOUNTS
 from tracer.polygons import CONVEX, hit_convex, hit_polygon, polygon_even_odd_axes  # noqa: F401 (re-exported)
 from tracer.scene import ElementKind, Scene
 
@@ -284,7 +285,7 @@ def element_clip_shapes(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarra
 # compiled intersection routines
 # --------------------------------------------------------------------------
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def hit_sphere(center, radius, i, ray, tmin, tmax):
     """Nearest ``t`` in ``(tmin, tmax)`` of ``ray`` and sphere ``i`` (``center`` (S, 3), ``radius`` (S,)).
 
@@ -311,7 +312,7 @@ def hit_sphere(center, radius, i, ray, tmin, tmax):
     return INF, 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def hit_triangle(tri, i, ray, tmin, tmax):
     """Moller-Trumbore test of ``ray`` and triangle ``i`` of ``tri`` (T, 3, 3) = v0, e1, e2."""
     ox, oy, oz, dx, dy, dz = ray
@@ -340,7 +341,7 @@ def hit_triangle(tri, i, ray, tmin, tmax):
     return INF
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def hit_cone(geo, i, ray, tmin, tmax):
     """Test ``ray`` and the lateral surface of truncated cone ``i`` of ``geo`` (no caps).
 
@@ -416,7 +417,7 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
     return hit_cone(geo, idx, ray, tmin, tmax)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def _patch_normal(offsets, vertices, vnormals, plane, i, hx, hy, hz):
     # Fan-triangulate from vertex 0 and interpolate the normals of the fan
     # triangle holding the point (barycentric in the plane).
@@ -456,7 +457,7 @@ def _patch_normal(offsets, vertices, vnormals, plane, i, hx, hy, hz):
     return bx / ln, by / ln, bz / ln
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def element_normal(kind, idx, geo, hx, hy, hz):
     """Unit shading normal (one-sided, see module notes) at hit point ``h``."""
     if kind == ElementKind.SPHERE:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from rtcommon.jit import NO_REFCOUNTS
+
 INF = np.inf
 #: ``Geometry.polygon_even_odd_axis`` of a convex polygon: its edges' half-planes decide a hit.
 CONVEX = -1
@@ -70,7 +72,7 @@ def _plane_distance(offsets, vertices, normal, i, ray, tmin, tmax):
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
     """Test ``ray`` and convex planar polygon ``i`` (CSR ``offsets``/``vertices``, plane ``normal`` (P, 3))."""
     t = _plane_distance(offsets, vertices, normal, i, ray, tmin, tmax)
@@ -96,7 +98,7 @@ def hit_convex(offsets, vertices, normal, i, ray, tmin, tmax):
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def hit_polygon(offsets, vertices, normal, even_odd_axis, i, ray, tmin, tmax):
     """Test ``ray`` and planar polygon ``i``, convex or not (see :func:`polygon_even_odd_axes`).
 

@@ -16,6 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
+from rtcommon.jit import NO_REFCOUNTS
 from tracer.render_types import N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, Shading
 from tracer.scene import Scene
 from tracer.texture import TextureFilter, filtered_lookup, mip_chains
@@ -66,7 +67,7 @@ def _texturing(scene: Scene, element_material: np.ndarray, n_materials: int, tex
             *mip_chains(scene), int(TextureFilter(texture_filter)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", **NO_REFCOUNTS)
 def texture_colour(shading, material, kind, element, geo, hit, footprint, log, pos, cnt):
     """The texture colour of ``material`` at ``hit`` of ``element`` (of ``kind``), and the next record position.
 

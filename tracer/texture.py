@@ -30,6 +30,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from rtcommon.jit import NO_REFCOUNTS
 from tracer.records import Counter, RecordKind, make_record
 
 #: the most texels a trace can name (27-bit record indices)
@@ -169,7 +170,7 @@ def _wrap(value):
     return value - math.floor(value)
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def _nearest(chains, level, u, v, log, pos, cnt):
     width = chains.level_width[level]
     height = chains.level_height[level]
@@ -178,7 +179,7 @@ def _nearest(chains, level, u, v, log, pos, cnt):
     return _read_texel(chains, level, x, y, log, pos, cnt)
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def _bilinear(chains, level, u, v, log, pos, cnt):
     # the 2 x 2 texels around (u, v), weighted by distance to their centres
     width = chains.level_width[level]
@@ -205,7 +206,7 @@ def _bilinear(chains, level, u, v, log, pos, cnt):
             w00 * b00 + w10 * b10 + w01 * b01 + w11 * b11, pos)
 
 
-@njit(cache=True)
+@njit(cache=True, **NO_REFCOUNTS)
 def filtered_lookup(chains, texture, u, v, detail, filter_mode, log, pos, cnt):
     """Colour of ``texture`` at (u, v), filtered at level of detail ``detail``.
 
