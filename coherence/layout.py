@@ -59,7 +59,7 @@ import numpy as np
 from numba import njit
 
 from coherence.texture_layout import TextureLayout
-from rtcommon.jit import NOT_INLINED
+from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
@@ -465,7 +465,7 @@ def _count_lines(records, start, stop, placement, line_shift):
     return needed
 
 
-@njit(cache=True, nogil=True, **NOT_INLINED)
+@njit(cache=True, nogil=True, **NOT_INLINED, **NO_REFCOUNTS)
 def _fill_lines(records, start, stop, placement, line_shift, buffer, writes):
     """Fill ``buffer`` (and ``writes``, unless it is empty), which are long
     enough for the lines and :data:`FILL_AHEAD` more.

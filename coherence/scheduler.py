@@ -50,6 +50,7 @@ from cachesim import kernels as K
 from cachesim import tlb as T
 from cachesim.fresh import skip_fresh_lines
 from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
+from rtcommon.jit import NO_REFCOUNTS
 
 # Columns of the per-process cycle totals the event loop writes.
 COMPUTE_CYCLES, MEMORY_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES = 0, 1, 2, 3
@@ -391,7 +392,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
         cpu_clock[cpu] = clock
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
 def _has_pixels(schedule, first, stop):
     """Whether static own tasks ``own_tasks[first:stop]`` hold any pixel."""
     for k in range(first, stop):
@@ -432,7 +433,7 @@ def _lowest_clock_cpu(cpu_clock, active):
     return cpu
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
 def _next_task(process, schedule, own_next, held, held_count, next_task, task_owner):
     """The next non-empty task of ``process`` (-1: none left) and the cycles it waited.
 
