@@ -432,7 +432,8 @@ class TraceWriter:
 
         The render fills it in place and :meth:`release_counter_pages` lets
         the filled pages go, so a large image's counters (0.8 GB at 2048²)
-        never sit in memory whole; pass the same array to :meth:`finish`.
+        never sit in memory whole; :meth:`finish` then takes ``counters``
+        None.
         """
         self._counters = np.lib.format.open_memmap(self.tmp / "counters.npy", mode="w+", dtype=np.int64,
                                                    shape=(n_pixels, n_counters))
@@ -465,6 +466,8 @@ class TraceWriter:
         pixel_offsets = np.ascontiguousarray(pixel_offsets, dtype=np.int64)
         np.save(self.tmp / "pixel_offsets.npy", pixel_offsets)
         if counters is None:  # filled in place (counters_array): already in its file
+            if self._counters is None:
+                raise ValueError("finish: counters is None, but counters_array was never called")
             counters = self._counters
             self.release_counter_pages()
         else:

@@ -50,25 +50,17 @@ class RecordLog(NamedTuple):
 
 
 class TraversalStack(NamedTuple):
-    """Scratch of :func:`traverse`: nodes still to visit and their ray intervals, and the ray by axis."""
+    """Scratch of :func:`traverse`: nodes still to visit and their ray intervals."""
 
     node: np.ndarray  #: (STACK_DEPTH,) int64
     t0: np.ndarray    #: (STACK_DEPTH,) float64
     t1: np.ndarray    #: (STACK_DEPTH,) float64
-    #: (3 * RAY_AXIS_ROWS,) float64: the ray's origin, direction and reciprocal direction by
-    #: axis, entry ``3 * row + axis`` for row ORIGIN, DIRECTION or RECIPROCAL
-    by_axis: np.ndarray
-
-
-#: rows of :attr:`TraversalStack.by_axis`
-ORIGIN, DIRECTION, RECIPROCAL, RAY_AXIS_ROWS = 0, 1, 2, 3
 
 
 @njit(cache=True)
 def new_stack():
     """An empty :class:`TraversalStack` (allocate once per thread, not per ray)."""
-    return TraversalStack(np.empty(STACK_DEPTH, np.int64), np.empty(STACK_DEPTH), np.empty(STACK_DEPTH),
-                          np.empty(3 * RAY_AXIS_ROWS))
+    return TraversalStack(np.empty(STACK_DEPTH, np.int64), np.empty(STACK_DEPTH), np.empty(STACK_DEPTH))
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -112,7 +104,7 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
     ekind = geo.element_kind
     eidx = geo.element_index
     rec, limit = log
-    st_node, st_t0, st_t1, by_axis = stack
+    st_node, st_t0, st_t1 = stack
     ox, oy, oz, dx, dy, dz = ray
     best_t = tmax
     best_e = -1
@@ -120,26 +112,19 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
     # ray misses the box
     t0 = tmin
     t1 = tmax
-    # The ray by axis in an array: a tuple indexed by a run-time axis compiles
-    # to a branch per axis, and a node's axis is hard to predict.
-    by_axis[3 * ORIGIN] = ox
-    by_axis[3 * ORIGIN + 1] = oy
-    by_axis[3 * ORIGIN + 2] = oz
-    by_axis[3 * DIRECTION] = dx
-    by_axis[3 * DIRECTION + 1] = dy
-    by_axis[3 * DIRECTION + 2] = dz
-    by_axis[3 * RECIPROCAL] = 1.0 / dx if dx != 0.0 else np.inf
-    by_axis[3 * RECIPROCAL + 1] = 1.0 / dy if dy != 0.0 else np.inf
-    by_axis[3 * RECIPROCAL + 2] = 1.0 / dz if dz != 0.0 else np.inf
+    o3 = (ox, oy, oz)
+    d3 = (dx, dy, dz)
+    inv = (1.0 / dx if dx != 0.0 else np.inf,
+           1.0 / dy if dy != 0.0 else np.inf,
+           1.0 / dz if dz != 0.0 else np.inf)
     miss = False
     for a in range(3):
-        oa = by_axis[3 * ORIGIN + a]
-        if by_axis[3 * DIRECTION + a] == 0.0:
-            if oa < blo[a] or oa > bhi[a]:
+        if d3[a] == 0.0:
+            if o3[a] < blo[a] or o3[a] > bhi[a]:
                 miss = True
         else:
-            ta = (blo[a] - oa) * by_axis[3 * RECIPROCAL + a]
-            tb = (bhi[a] - oa) * by_axis[3 * RECIPROCAL + a]
+            ta = (blo[a] - o3[a]) * inv[a]
+            tb = (bhi[a] - o3[a]) * inv[a]
             if ta > tb:
                 ta, tb = tb, ta
             t0 = max(t0, ta)
@@ -162,8 +147,8 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
         if not is_leaf(nodes, node):
             axis = node_axis(nodes, node)
             split = split_position(splits, node)
-            oa = by_axis[3 * ORIGIN + axis]
-            da = by_axis[3 * DIRECTION + axis]
+            oa = o3[axis]
+            da = d3[axis]
             below_first = oa < split or (oa == split and da <= 0.0)
             if below_first:
                 first = below_child(node)
@@ -172,7 +157,7 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
                 first = above_child(nodes, node)
                 second = below_child(node)
             if da != 0.0:
-                tp = (split - oa) * by_axis[3 * RECIPROCAL + axis]
+                tp = (split - oa) * inv[axis]
             else:
                 tp = np.inf
             if tp > t1 or tp <= 0.0:
