@@ -64,7 +64,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     by_kind = pd.concat(frames, ignore_index=True)
     texel = by_kind[by_kind["kind"] == "texel"].set_index(["layout", "mapping", "level"])
     every = by_kind.groupby(["layout", "mapping", "level"], sort=False)[["misses"]].sum()
-    table = texel[["accesses", "misses"]].join(every, rsuffix="_all").reset_index()
+    table = texel[["accesses", "misses"]].join(every.rename(columns={"misses": "misses_all"})).reset_index()
     layouts = table.assign(texel_hit_rate=1.0 - table["misses"] / table["accesses"])
     layouts = layouts[layouts["layout"].isin(LAYOUTS)][["layout", "mapping", "level", "texel_hit_rate"]]
     share = table[table["layout"] == base].rename(columns={"accesses": "texel_reads", "misses": "texel_misses"})
