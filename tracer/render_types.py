@@ -22,7 +22,7 @@ class RayType(enum.IntEnum):
 
 
 class RayColumn(enum.IntEnum):
-    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`_trace_sample`."""
+    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`tracer.whitted._trace_sample`."""
 
     ORIGIN = 0     # x; y and z follow
     DIRECTION = 3  # x, unit; y and z follow
@@ -105,7 +105,7 @@ class SampleOutputs(NamedTuple):
 
 
 class WorkItems(NamedTuple):
-    """Parallel work items of :func:`_render_kernel`: ``CHUNK`` samples each.
+    """Parallel work items of :func:`tracer.whitted.render_kernel`: ``CHUNK`` samples each.
 
     Item ``k`` covers samples ``start[k] .. start[k] + CHUNK`` (fewer at the
     end) and logs them into ``records[base[k] : base[k] + capacity[k]]``;
@@ -127,7 +127,7 @@ class SampleRange(NamedTuple):
 
 
 class SampleScratch(NamedTuple):
-    """Per-thread scratch of :func:`_trace_sample` (allocated once per work item)."""
+    """Per-thread scratch of :func:`tracer.whitted._trace_sample` (allocated once per work item)."""
 
     counters: np.ndarray  #: (N_COUNTERS,) int64 of the sample being traced
     stack: TraversalStack
