@@ -19,7 +19,8 @@ extra whether the line was written or not.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _back_invalidate, _find, _insert, _set_base
+from cachesim.sets import (EVICTIONS, EXCLUSIVE, LRU, _add_counts, _fill_levels, _find, _insert, _serving_level,
+                           _set_base)
 from rtcommon.jit import NO_REFCOUNTS
 
 
@@ -95,22 +96,7 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
             previous = line0
             continue
         lines[0] = line0
-        served = n_levels
-        for level in range(1, n_levels):
-            line = line0 >> rel_shift[level]
-            lines[level] = line
-            base = _set_base(line, level, n_sets, set_mask, ways, offset)
-            slot = _find(tags, base, ways[level], line)
-            if slot >= 0:
-                level_hits[level] += 1
-                if is_write:
-                    level_write_hits[level] += 1
-                if policy[level] == LRU:
-                    stamps[slot] = clock
-                served = level
-                if inclusion == EXCLUSIVE:
-                    tags[slot] = -1  # the line moves up to the first level
-                break
+        served = _serving_level(line0, 1, geometry, state, clock, is_write, work)
         if record:
             served_by[i] = served
         if inclusion == EXCLUSIVE:
@@ -125,23 +111,7 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
                 counts[level, EVICTIONS] += 1
             previous = line0
             continue
-        # Fill bottom-up so that back-invalidations of lower levels never
-        # remove the line just placed above them.
-        for level in range(served - 1, -1, -1):
-            if is_write and not write_allocate[level]:
-                continue
-            base = _set_base(lines[level], level, n_sets, set_mask, ways, offset)
-            if ways[level] == 1:
-                # Direct-mapped: no choice and no order to keep (no stamp).
-                evicted = tags[base]
-                tags[base] = lines[level]
-            else:
-                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], lines[level],
-                                  clock)
-            if evicted >= 0:
-                counts[level, EVICTIONS] += 1
-                if inclusion == INCLUSIVE and level > 0:
-                    _back_invalidate(tags, evicted, level, rel_shift, set_mask, n_sets, ways, offset, invalidations)
+        _fill_levels(served, 0, geometry, state, clock, is_write, work)
         previous = line0 if (allocate0 or not is_write) else np.int64(-1)
     level_hits[0] = first_hits
     level_write_hits[0] = first_write_hits

@@ -20,8 +20,7 @@ hierarchies move lines on every hit and keep the general walk.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import (EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _back_invalidate, _find, _insert,
-                           _set_base)
+from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _fill_levels, _insert, _serving_level
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 
 
@@ -60,10 +59,8 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     of this loop's time.
     """
     rel_shift = geometry.rel_shift
-    n_sets = geometry.n_sets
     set_mask = geometry.set_mask
     ways = geometry.ways
-    policy = geometry.policy
     offset = geometry.offset
     seeds = geometry.seeds
     write_allocate = geometry.write_allocate
@@ -72,7 +69,6 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     stamps = state.stamps
     counts = state.counts
     n_levels = rel_shift.shape[0]
-    lines = work.level_lines
     shift = np.uint64(geometry.line_shift)
     # The first two levels' geometry in scalars: every access reads both.
     mask0 = set_mask[0]
@@ -143,43 +139,12 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
                 if served_by is not None:
                     served_by[at] = 1
                 continue
-        # Neither level holds it: walk the levels below the second. This walk
-        # and the fill below repeat by_access's on purpose: as shared helpers
-        # they read the geometry bundle per access, and reference counting
-        # took both kernels from 85 and 180 M/s to 7 and 72.
+        # Neither level holds it: walk the levels below the second, as the general walk does.
         second_misses += 1
-        served = n_levels
-        for level in range(2, n_levels):
-            line = line0 >> rel_shift[level]
-            lines[level] = line
-            base = _set_base(line, level, n_sets, set_mask, ways, offset)
-            slot = _find(tags, base, ways[level], line)
-            if slot >= 0:
-                level_hits[level] += 1
-                if is_write:
-                    level_write_hits[level] += 1
-                if policy[level] == LRU:
-                    stamps[slot] = clock
-                served = level
-                break
+        served = _serving_level(line0, 2, geometry, state, clock, is_write, work)
         if served_by is not None:
             served_by[at] = served
-        # Fill bottom-up, as the general walk does, so that back-invalidations
-        # of lower levels never remove the line just placed above them.
-        for level in range(served - 1, 1, -1):
-            if is_write and not write_allocate[level]:
-                continue
-            base = _set_base(lines[level], level, n_sets, set_mask, ways, offset)
-            if ways[level] == 1:
-                evicted = tags[base]
-                tags[base] = lines[level]
-            else:
-                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], lines[level],
-                                  clock)
-            if evicted >= 0:
-                counts[level, EVICTIONS] += 1
-                if inclusive:
-                    _back_invalidate(tags, evicted, level, rel_shift, set_mask, n_sets, ways, offset, invalidations)
+        _fill_levels(served, 2, geometry, state, clock, is_write, work)
         if not (is_write and not allocate1):
             if ways1 == 1:  # no stamp, as the walk's direct-mapped fill
                 evicted = tags[base1]
