@@ -13,6 +13,104 @@ from rtcommon.jit import NO_REFCOUNTS
 
 
 @njit(cache=True, inline="always")
+def _search_ways(tags, stamps, base, n_ways, line):
+    """The way of set ``base`` holding ``line`` (or -1), and the victim: the
+    first empty way, else the one with the oldest stamp."""
+    hit = np.int64(-1)
+    victim = base
+    oldest = np.int64(9223372036854775807)
+    for slot in range(base, base + n_ways):
+        held = tags[np.uint64(slot)]
+        hit = slot if held == line else hit
+        age = stamps[np.uint64(slot)] if held >= 0 else np.int64(-1)
+        if age < oldest:
+            oldest = age
+            victim = slot
+    return hit, victim
+
+
+@njit(cache=True, inline="always")
+def _search_three_ways(tags, stamps, base, line):
+    """:func:`_search_ways` for three ways (the 21164's S-cache), unrolled and
+    free of branches: each choice is a mask (all ones or zero) from a sign
+    shift. An empty way's age is -1 (its tag's sign), and ties go to the
+    lower way, as in :func:`_search_ways`."""
+    first = np.uint64(base)
+    held0 = tags[first]
+    held1 = tags[first + np.uint64(1)]
+    held2 = tags[first + np.uint64(2)]
+    age0 = stamps[first] | (held0 >> 63)
+    age1 = stamps[first + np.uint64(1)] | (held1 >> 63)
+    age2 = stamps[first + np.uint64(2)] | (held2 >> 63)
+    younger0 = (age1 - age0) >> 63  # all ones when way 1 is older than way 0
+    oldest01 = age0 ^ ((age0 ^ age1) & younger0)
+    victim = younger0 & 1
+    older2 = (age2 - oldest01) >> 63
+    victim = victim ^ ((victim ^ 2) & older2)
+    found1 = np.int64(held1 == line)
+    found2 = np.int64(held2 == line)
+    found = np.int64(held0 == line) | found1 | found2
+    hit = (base + found1 + 2 * found2) | (found - 1)
+    return hit, base + victim
+
+
+@njit(cache=True, inline="always")
+def _ordered_pass(lines, clocks, n_in, level, shift, geometry, state, three_ways):
+    """The loop of :func:`_level_pass` for LRU and FIFO levels; returns the
+    misses (compacted as there) and the evictions.
+
+    One pass over the set finds the line and the victim (the first empty
+    way, else the oldest stamp) without early exits, which the host's branch
+    predictor handles far better. A repeat of the line just looked up (a
+    quarter of the second level's accesses when its lines are twice the
+    first's) hits the way it left, since nothing else touches this level
+    meanwhile. It takes no branch, which would mispredict on a quarter of
+    the accesses: its search goes to the level's first set, whose result is
+    discarded, rather than to its own, whose loads would wait on the stores
+    just made. ``three_ways`` (a constant at each call, for a three-way level
+    whose sets are a power of two) selects the unrolled search; each copy of
+    the loop then has few enough live values to keep them in registers.
+    Together with marking ``served_by`` after the loop, these took
+    bench_cachesim's stream from 30 to 26 ms (the 21164's S-cache pass from
+    16 to 12 ms).
+    """
+    tags = state.tags
+    stamps = state.stamps
+    n_ways = 3 if three_ways else geometry.ways[level]
+    mask = geometry.set_mask[level]
+    sets = geometry.n_sets[level]
+    base0 = geometry.offset[level]
+    lru = geometry.policy[level] == LRU
+    n_out = 0
+    evictions = 0
+    previous = np.int64(-1)
+    previous_slot = np.int64(0)
+    for j in range(n_in):
+        at = np.uint64(j)
+        line = lines[at]
+        clock = clocks[at]
+        repeat = -np.int64(line == previous)
+        if three_ways:
+            base = (base0 + (line & mask) * 3) & ~repeat | (base0 & repeat)
+            hit, victim = _search_three_ways(tags, stamps, base, line)
+        else:
+            base = (base0 + (line & mask if mask >= 0 else line % sets) * n_ways) & ~repeat | (base0 & repeat)
+            hit, victim = _search_ways(tags, stamps, base, n_ways, line)
+        hit = hit ^ ((hit ^ previous_slot) & repeat)
+        miss = hit < 0
+        target = np.uint64(victim if miss else hit)
+        evictions += miss & (tags[target] >= 0)
+        tags[target] = line
+        stamps[target] = clock if (lru or miss) else stamps[target]
+        lines[np.uint64(n_out)] = line >> shift
+        clocks[np.uint64(n_out)] = clock
+        n_out += miss
+        previous = line
+        previous_slot = np.int64(target)
+    return n_out, evictions
+
+
+@njit(cache=True, inline="always")
 def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, record, first_clock):
     """Run ``lines[:n_in]`` (with their access clocks) through one level.
 
@@ -51,52 +149,12 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
             lines[np.uint64(n_out)] = line >> shift
             clocks[np.uint64(n_out)] = clocks[at]
             n_out += miss
-            if record and miss:
-                served_by[clocks[at] - first_clock] = level + 1
     elif level_policy != RANDOM:
-        # LRU and FIFO: one pass over the set finds the line and the victim
-        # (the first empty way, else the oldest stamp) without early exits,
-        # which the host's branch predictor handles far better. A repeat of
-        # the line just looked up hits the way it left (nothing else touches
-        # this level meanwhile) and skips the set: a quarter of the second
-        # level's accesses when its lines are twice the first's, and a
-        # quarter faster on the benchmark stream, whose back-to-back halves
-        # of one line would otherwise wait on each other's stores.
-        previous = np.int64(-1)
-        previous_slot = np.uint64(0)
-        for j in range(n_in):
-            at = np.uint64(j)
-            line = lines[at]
-            clock = clocks[at]
-            if line == previous:
-                if lru:
-                    stamps[previous_slot] = clock
-                continue
-            base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
-            hit = -1
-            victim = base
-            oldest = np.int64(9223372036854775807)
-            for slot in range(base, base + n_ways):
-                held = tags[np.uint64(slot)]
-                hit = slot if held == line else hit
-                age = stamps[np.uint64(slot)] if held >= 0 else np.int64(-1)
-                if age < oldest:
-                    oldest = age
-                    victim = slot
-            # Hit or miss, write the same way: the hit way keeps its line
-            # (and, under FIFO, its stamp); the victim takes the new line.
-            miss = hit < 0
-            target = np.uint64(victim if miss else hit)
-            evictions += miss & (tags[target] >= 0)
-            tags[target] = line
-            stamps[target] = clock if (miss or lru) else stamps[target]
-            lines[np.uint64(n_out)] = line >> shift
-            clocks[np.uint64(n_out)] = clock
-            n_out += miss
-            previous = line
-            previous_slot = target
-            if record and miss:
-                served_by[clock - first_clock] = level + 1
+        # LRU and FIFO (see _ordered_pass).
+        if n_ways == 3 and mask >= 0:
+            n_out, evictions = _ordered_pass(lines, clocks, n_in, level, shift, geometry, state, True)
+        else:
+            n_out, evictions = _ordered_pass(lines, clocks, n_in, level, shift, geometry, state, False)
     else:
         for j in range(n_in):
             line = lines[j]
@@ -111,8 +169,11 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
             lines[n_out] = line >> shift
             clocks[n_out] = clocks[j]
             n_out += 1
-            if record:
-                served_by[clocks[j] - first_clock] = level + 1
+    if record:
+        # The misses, compacted in order, go on to the next level; marking
+        # them here keeps the loops above short of live values.
+        for k in range(n_out):
+            served_by[clocks[k] - first_clock] = level + 1
     counts = state.counts
     counts[level, ACCESSES] += n_in
     counts[level, HITS] += n_in - n_out

@@ -276,6 +276,29 @@ def test_bad_addresses_are_rejected(bad, message):
         simulate(bad, alpha21164())
 
 
+def test_unrolled_three_way_search_equals_the_loop():
+    # The level-by-level path searches a three-way set with branch-free
+    # masks; it must pick the same hit and victim as the loop (first empty
+    # way, else the oldest stamp, ties to the lower way) on sets with empty
+    # ways, tied stamps and the line absent or present.
+    from cachesim.by_level import _search_three_ways, _search_ways
+
+    rng = np.random.default_rng(8)
+    for _ in range(3000):
+        tags = rng.integers(-1, 4, 9).astype(np.int64)
+        stamps = rng.integers(0, 3, 9).astype(np.int64)
+        base = int(rng.integers(0, 3)) * 3
+        line = np.int64(rng.integers(0, 4))
+        held = list(tags[base:base + 3])
+        if held.count(line) > 1:  # a set never holds a line twice
+            continue
+        expected_hit = base + held.index(line) if line in held else -1
+        ages = [stamps[base + way] if held[way] >= 0 else -1 for way in range(3)]
+        expected_victim = base + ages.index(min(ages))
+        assert _search_ways(tags, stamps, base, 3, line) == (expected_hit, expected_victim)
+        assert _search_three_ways(tags, stamps, base, line) == (expected_hit, expected_victim)
+
+
 @pytest.mark.parametrize("policies", [("lru", "lru", "lru"), ("fifo", "random", "lru"), ("random", "fifo", "fifo")])
 def test_level_by_level_path_equals_access_by_access_path(policies):
     # Non-inclusive hierarchies run level by level in chunks; the general path
@@ -306,9 +329,14 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
             clock = kernel(stream, state.geometry, state.arrays, 5, served_by, True, work)
         else:
             clock = kernel(stream, no_writes, state.geometry, state.arrays, 5, served_by, True, work)
-        outputs.append((clock, state.tags.copy(), state.counts.copy(), served_by))
-    (clock_a, tags_a, counts_a, served_a), (clock_b, tags_b, counts_b, served_b) = outputs
+        outputs.append((clock, state.tags.copy(), state.stamps.copy(), state.counts.copy(), served_by))
+    (clock_a, tags_a, stamps_a, counts_a, served_a), (clock_b, tags_b, stamps_b, counts_b, served_b) = outputs
     assert clock_a == clock_b == 5 + stream.size
     np.testing.assert_array_equal(tags_a, tags_b)
+    # Stamps order the ways of a set; a direct-mapped level has none to order
+    # and the level-by-level path leaves its stamps alone.
+    associative = np.concatenate([np.arange(start, start + ways * sets) for start, ways, sets, in zip(
+        state.geometry.offset, state.geometry.ways, state.geometry.n_sets) if ways > 1])
+    np.testing.assert_array_equal(stamps_a[associative], stamps_b[associative])
     np.testing.assert_array_equal(counts_a, counts_b)
     np.testing.assert_array_equal(served_a, served_b)
