@@ -8,8 +8,7 @@ import numpy as np
 from rtcommon.validate import require_int
 
 from .curves import CURVES, curve_order, hilbert_order, morton_keys
-from .distribution import Distribution
-from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _static
+from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _dynamic, _static
 
 __all__ = ["CurveSegments", "CurveTiles"]
 
@@ -100,9 +99,6 @@ class CurveTiles(Mapping):
         offsets = np.zeros(ntx * nty + 1, dtype=np.int64)
         np.cumsum(np.bincount(tile_rank, minlength=ntx * nty), out=offsets[1:])
         if self.dynamic:
-            return Distribution(
-                self.name, width, height, n, offsets, pixels, None,
-                dispatch_cycles=float(self.dispatch_cycles), take_ahead=int(self.take_ahead),
-            )
+            return _dynamic(self, width, height, n, offsets, pixels)
         process = np.arange(ntx * nty, dtype=np.int64) % n
         return _static(self.name, width, height, n, offsets, pixels, process)

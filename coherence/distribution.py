@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 
 from rtcommon.validate import require_int, require_number
 
@@ -38,7 +39,13 @@ def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
     if arr.ndim != ndim:
         raise ValueError(f"{owner}: {name} must be {ndim}-dimensional, got shape {arr.shape}")
     # A private, read-only, contiguous int64 copy: a validated distribution
-    # must not change under its users (several simulations share one).
+    # must not change under its users (several simulations share one). The
+    # mappings hand over arrays that are already so and that nothing else
+    # holds (see coherence.mapping_base), taken as they are: a copy of each
+    # costs 8 bytes a pixel at the height of a run's memory.
+    if (arr.dtype == np.int64 and arr.flags.c_contiguous and not arr.flags.writeable and arr.base is None
+            and arr.flags.owndata):
+        return arr
     out = np.array(arr, dtype=np.int64, order="C", copy=True)
     out.flags.writeable = False
     return out
@@ -47,6 +54,31 @@ def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
 def _pixel_text(pixel: int, width: int) -> str:
     y, x = divmod(int(pixel), width)
     return f"pixel {pixel} (x={x}, y={y})"
+
+
+@njit(cache=True)
+def _coverage(pixels, n_pixels):
+    """Missing and repeated pixels of ``pixels`` (all in ``[0, n_pixels)``):
+    (number missing, first missing, number repeated, first repeated, its
+    count), with -1 for an absent first. Counts saturate at 255 in one byte
+    a pixel, not a bincount's eight."""
+    seen = np.zeros(n_pixels, dtype=np.uint8)
+    for pixel in pixels:
+        if seen[pixel] < 255:
+            seen[pixel] += 1
+    n_missing = 0
+    first_missing = -1
+    n_repeated = 0
+    first_repeated = -1
+    for pixel in range(n_pixels):
+        if seen[pixel] == 0:
+            first_missing = pixel if n_missing == 0 else first_missing
+            n_missing += 1
+        elif seen[pixel] > 1:
+            first_repeated = pixel if n_repeated == 0 else first_repeated
+            n_repeated += 1
+    repeats = np.int64(seen[first_repeated]) if first_repeated >= 0 else 0
+    return n_missing, first_missing, n_repeated, first_repeated, repeats
 
 
 def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> None:
@@ -58,17 +90,16 @@ def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> 
             f"{owner}: {bad.size} pixel indices outside [0, {n_pixels}) for a "
             f"{width}x{height} image (first: {int(bad[0])})"
         )
-    counts = np.bincount(pixels, minlength=n_pixels)
-    missing = np.flatnonzero(counts == 0)
-    duplicated = np.flatnonzero(counts > 1)
-    if missing.size or duplicated.size:
+    n_missing, first_missing, n_repeated, first_repeated, repeats = _coverage(pixels, n_pixels)
+    if n_missing or n_repeated:
         parts = []
-        if missing.size:
-            parts.append(f"{missing.size} pixels missing (first: {_pixel_text(missing[0], width)})")
-        if duplicated.size:
+        if n_missing:
+            parts.append(f"{n_missing} pixels missing (first: {_pixel_text(first_missing, width)})")
+        if n_repeated:
+            times = f"{repeats} times" if repeats < 255 else "255 times or more"
             parts.append(
-                f"{duplicated.size} pixels assigned more than once "
-                f"(first: {_pixel_text(duplicated[0], width)}, {int(counts[duplicated[0]])} times)"
+                f"{n_repeated} pixels assigned more than once "
+                f"(first: {_pixel_text(first_repeated, width)}, {times})"
             )
         raise ValueError(
             f"{owner}: every pixel of the {width}x{height} image must be in exactly one task; "

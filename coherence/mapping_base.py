@@ -9,6 +9,8 @@ among ``n_processes``. The built-in recipes live in
 """
 from __future__ import annotations
 
+import numpy as np
+
 from rtcommon.validate import require_int, require_number
 
 from .distribution import Distribution
@@ -92,7 +94,23 @@ class Mapping:
 
 
 def _static(name, width, height, n, offsets, pixels, process) -> Distribution:
-    return Distribution(name, width, height, n, offsets, pixels, process)
+    return Distribution(name, width, height, n, *_handed_over(offsets, pixels, process))
+
+
+def _dynamic(mapping, width, height, n, offsets, pixels) -> Distribution:
+    """The dynamic distribution of ``mapping`` (its dispatch cycles and take-ahead)."""
+    return Distribution(mapping.name, width, height, n, *_handed_over(offsets, pixels), None,
+                        dispatch_cycles=float(mapping.dispatch_cycles), take_ahead=int(mapping.take_ahead))
+
+
+def _handed_over(*arrays):
+    """A mapping's freshly built arrays, made read-only so that the
+    :class:`Distribution` takes them without a copy (nothing else holds
+    them); an array that is a view or of another type is left to be copied."""
+    for array in arrays:
+        if isinstance(array, np.ndarray) and array.base is None and array.flags.owndata:
+            array.flags.writeable = False
+    return arrays
 
 
 def _check_dynamic(owner: str, dispatch_cycles, take_ahead) -> None:

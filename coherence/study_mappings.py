@@ -10,8 +10,8 @@ from numba import njit
 
 from rtcommon.validate import require_int
 
-from .distribution import Distribution, _csr_from_labels
-from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _static
+from .distribution import _csr_from_labels
+from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _dynamic, _static
 
 __all__ = ["Strip", "Pixel", "Row", "Block", "DynamicBlock"]
 
@@ -244,7 +244,4 @@ class DynamicBlock(Mapping):
         ys, xs = np.divmod(np.arange(width * height, dtype=np.int64), width)
         labels = (ys // b) * nbx + xs // b
         offsets, pixels = _csr_from_labels(labels, nbx * nby)
-        return Distribution(
-            self.name, width, height, n, offsets, pixels, None,
-            dispatch_cycles=float(self.dispatch_cycles), take_ahead=int(self.take_ahead),
-        )
+        return _dynamic(self, width, height, n, offsets, pixels)

@@ -274,6 +274,47 @@ def test_custom_from_pixel_lists_keeps_their_order():
     np.testing.assert_array_equal(d.process_pixels(1), [4, 2, 0])
 
 
+def test_coverage_kernel_matches_bincount():
+    # The check of a distribution's pixels counts in one byte a pixel; its
+    # figures must be a bincount's on seeded random arrays (with gaps and
+    # repeats), and a count of 255 or more is reported as such.
+    from coherence.distribution import _coverage
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        n_pixels = int(rng.integers(1, 60))
+        pixels = rng.integers(0, n_pixels, int(rng.integers(0, 2 * n_pixels))).astype(np.int64)
+        counts = np.bincount(pixels, minlength=n_pixels)
+        missing, repeated = np.flatnonzero(counts == 0), np.flatnonzero(counts > 1)
+        expected = (missing.size, int(missing[0]) if missing.size else -1, repeated.size,
+                    int(repeated[0]) if repeated.size else -1, int(counts[repeated[0]]) if repeated.size else 0)
+        assert _coverage(pixels, n_pixels) == expected
+    assert _coverage(np.zeros(300, dtype=np.int64), 2) == (1, 1, 1, 0, 255)
+    with pytest.raises(ValueError, match="1 pixels assigned more than once .*255 times or more"):
+        CustomMapping("many", lambda w, h, n: [np.r_[np.zeros(300, dtype=np.int64), 1]]).build(2, 1, 1)
+
+
+def test_mappings_hand_their_arrays_over_frozen():
+    # A mapping's fresh arrays go into its distribution read-only and without
+    # a copy, and its coverage check counts in bytes: building P, R, B or DB
+    # takes at most 33 bytes a pixel at its height (40-56 with a copy of each
+    # array and a bincount). An array a caller still holds is copied.
+    import tracemalloc
+
+    for name, most in (("S", 9.5), ("P", 17.5), ("R", 17.5), ("B", 17.5), ("DB", 33.5)):
+        mapping = get_mapping(name)
+        mapping.build(16, 16, 8)  # compiled outside the measure
+        tracemalloc.start()
+        d = mapping.build(256, 256, 8)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak <= most * 256 * 256, (name, peak / 256 ** 2)
+        assert not d.task_pixels.flags.writeable
+    mine = np.arange(4, dtype=np.int64)
+    d = Distribution("mine", 2, 2, 1, [0, 4], mine, [0])
+    mine[0] = 3
+    assert d.task_pixels[0] == 0 and mine.flags.writeable
+
 def test_custom_errors_name_what_is_wrong():
     with pytest.raises(ValueError, match=r"1 pixels missing \(first: pixel 3 \(x=1, y=1\)\)"):
         CustomMapping("m", lambda w, h, n: [np.array([0, 1]), np.array([2])]).build(2, 2, 2)
