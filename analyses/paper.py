@@ -43,6 +43,7 @@ The study's numbers, the defaults and the checks of the inputs live in
 """
 from __future__ import annotations
 
+import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -52,7 +53,7 @@ import pandas as pd
 
 from analyses.cluster import dask_executor
 from analyses.output import check_output_folder
-from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, trace_pages_limited
+from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, runs_at_once, trace_pages_limited
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
 from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, N_CPUS, STUDY_SIZE,
                                   STUDY_TABLE, PaperResult, check_background, check_process_counts, check_scenes,
@@ -119,7 +120,8 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         scheduler (:mod:`analyses.cluster`); every worker must read the trace
         cache under the same path. The results are the same as a local run's.
     memory_budget : int
-        Bytes each scene's trace may take in memory
+        Bytes the whole process may take: what it and its runs need per
+        pixel is set aside and the rest goes to the traces
         (:func:`analyses.memory_budget.memory_shares`); the results do not
         depend on it.
 
@@ -143,7 +145,9 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     counts = check_process_counts(n_processes)
     size = check_size(size)
     background = check_background(background)
-    shares = memory_shares(memory_budget)
+    # step 1 runs two scenes at once, step 4 one run per CPU; the same with --dask: same outputs
+    n_jobs = runs_at_once(memory_budget, size * size, max(2, os.cpu_count() or 1))
+    shares = memory_shares(memory_budget, size * size, max(2, n_jobs))
     mapping_objects = [get_mapping(m) for m in mappings]
     names = [m.name for m in mapping_objects]
     if not names or len(set(names)) != len(names):
@@ -207,7 +211,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
             trace = AccessTrace.load(folder, mmap=True)  # the entry of step 1
             with trace_pages_limited(trace, shares):
                 result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
-                               machine=machine, scene=scene, progress=progress, executor=executor,
+                               machine=machine, scene=scene, progress=progress, executor=executor, n_jobs=n_jobs,
                                trace_folder=folder, shared_lines_budget=shares["shared_lines"])
                 frames.append(result.runs.assign(scene=name))
                 if crossover and verdict_n > 1:
@@ -230,7 +234,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
         "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE, "workload": workload,
-        "crossover": bool(crossover), "memory_shares": shares,
+        "crossover": bool(crossover), "memory_shares": shares, "runs_at_once": n_jobs,
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
                        verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,

@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from analyses.cluster import dask_executor
-from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, trace_pages_limited
+from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, runs_at_once, trace_pages_limited
 from analyses.output import check_output_folder, prepare_output_folder
 from analyses.paper_study import check_process_counts
 from analyses.report_curves import miss_ratio_curves
@@ -231,12 +231,12 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
         the trace cache must be readable by every worker under the same path.
         The report is the same as a local one.
     memory_budget : int
-        Bytes the trace may take in memory, split by
-        :func:`analyses.memory_budget.memory_shares`
-        between a render's records, the runs' shared line addresses and the
-        trace's pages resident while it is read; the rest of the report's
-        memory does not grow with the trace's length. Results do not depend
-        on it.
+        Bytes the whole process may take. What the process and its runs
+        need per pixel is set aside and the rest is split by
+        :func:`analyses.memory_budget.memory_shares` between a render's
+        records, the runs' shared line addresses and the trace's pages
+        resident while it is read, so the trace's length does not matter.
+        Results do not depend on it.
 
     Returns
     -------
@@ -259,7 +259,9 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must be distinct, got {names}")
     counts = _process_counts(max_processes, n_processes)
-    shares = memory_shares(memory_budget)
+    size = require_int("size", size, 1)
+    n_jobs = runs_at_once(memory_budget, size * size, os.cpu_count() or 1)  # the same with --dask: same outputs
+    shares = memory_shares(memory_budget, size * size, n_jobs)
     miss_map = parse_miss_map(miss_map)
     hierarchy = get_hierarchy(hierarchy)
     layout = get_layout(layout)
@@ -279,11 +281,11 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
         warm.wait(progress=progress)
     with dask_executor(dask) as executor, trace_pages_limited(trace, shares):
         return _assemble(scene_obj, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine,
-                         size, kd, progress, miss_map, executor, shares)
+                         size, kd, progress, miss_map, executor, shares, n_jobs)
 
 
 def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, cost, machine, size, kd, progress,
-              miss_map_choice, executor, shares):
+              miss_map_choice, executor, shares, n_jobs):
     from coherence.missmap import miss_map
     from coherence.studies import place_layout, study
     from tracer.trace import COUNTER_NAMES
@@ -293,7 +295,7 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
     names = [m.name for m in mapping_objects]
     placed = place_layout(layout, trace, scene)
     result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=cost,
-                   machine=machine, scene=scene, progress=progress, executor=executor,
+                   machine=machine, scene=scene, progress=progress, executor=executor, n_jobs=n_jobs,
                    trace_folder=Path(info["path"]) / "trace", shared_lines_budget=shares["shared_lines"])
     runs = result.runs
     processes = result.processes
@@ -341,7 +343,7 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
         "mappings": names, "n_processes": counts, "verdict_n_processes": verdict_n,
         "background_load": int(machine.background_load), "n_cpus": int(machine.n_cpus),
         "machine": result.parameters["machine"], "hierarchy": hierarchy.to_dict(), "layout": layout.name,
-        "cost": cost.to_dict(), "trace_key": info["key"], "memory_shares": shares,
+        "cost": cost.to_dict(), "trace_key": info["key"], "memory_shares": shares, "runs_at_once": n_jobs,
         "miss_map": {"mapping": misses.mapping, "n_processes": misses.n_processes, "chosen_by": chosen_by},
     }
     if texture is not None:

@@ -14,7 +14,11 @@ identical to the cold run's. The peer is the render alone (``coherence
 render``, warm numba, no trace cache), measured in the same session: the
 report's cost beyond rendering the scene once. Ends with one JSON line.
 
-    python benchmarks/bench_report.py [--scene balls] [--size 512] [--skip-cold]
+With ``--memory-budget MB`` every report gets that budget, and each peak is
+printed beside it (the budget is the whole process's: 2048 at 2048x2048
+takes about 20 min with ``--skip-cold --repeats 1``).
+
+    python benchmarks/bench_report.py [--scene balls] [--size 512] [--skip-cold] [--memory-budget MB]
 """
 import argparse
 import json
@@ -47,6 +51,7 @@ def main():
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--skip-cold", action="store_true", help="leave out the run with an empty numba cache")
+    parser.add_argument("--memory-budget", type=float, metavar="MB", help="the reports' --memory-budget")
     args = parser.parse_args()
 
     figures = {"scene": args.scene, "size": args.size, "cpus": os.cpu_count()}
@@ -54,11 +59,12 @@ def main():
         scratch = Path(scratch)
         env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
         common = [args.scene, "--size", str(args.size)]
+        budget = [] if args.memory_budget is None else ["--memory-budget", str(args.memory_budget)]
 
         def report(label, cache, numba_cache=None):
             out = scratch / f"out-{label}"
             run_env = dict(env, NUMBA_CACHE_DIR=str(numba_cache)) if numba_cache else env
-            seconds, peak = run(["report", *common, "--out", str(out), "--cache", str(cache)],
+            seconds, peak = run(["report", *common, *budget, "--out", str(out), "--cache", str(cache)],
                                 run_env)
             print(f"{label:6s}: {seconds:7.1f} s  peak {peak / 2**30:5.2f} GiB", flush=True)
             return seconds, peak, (out / "results.csv").read_bytes()
@@ -93,6 +99,11 @@ def main():
                 met = seconds <= limit and peak <= gigabytes * 1e9
                 print(f"target {label}: <= {limit:g} s and <= {gigabytes:g} GB peak: {seconds:.1f} s, "
                       f"{peak / 1e9:.2f} GB: {'met' if met else 'NOT met'}")
+        if args.memory_budget is not None:
+            figures["memory_budget_mib"] = args.memory_budget
+            for label, (_, peak, _) in results.items():
+                print(f"budget {label}: peak <= --memory-budget {args.memory_budget:g} MB: {peak / 2**20:.0f} MB: "
+                      f"{'met' if peak <= args.memory_budget * 2**20 else 'NOT met'}")
     print(json.dumps(figures))
 
 

@@ -10,7 +10,7 @@ import pytest
 
 import tracer.render
 from analyses import traces
-from analyses.report import RESULT_COLUMNS, SECTIONS
+from analyses.report import RESULT_COLUMNS, SECTIONS, build_report
 from analyses.verdict import format_percent, verdict
 from analyses.cli import main
 
@@ -216,8 +216,8 @@ def test_trace_key_follows_file_content(tmp_path):
     (["report", "balls", "--miss-map", "P8"], "--miss-map must be MAPPING:N, a mapping and a process count such as P:8"),
     (["report", "balls", "--miss-map", "XX:8"], "--miss-map: unknown mapping 'XX'"),
     (["report", "balls", "--miss-map", "P:0"], "--miss-map process count must be >= 1, got 0"),
-    (["report", "balls", "--memory-budget", "10"], "--memory-budget must be at least 64 MB, got 10.0"),
-    (["report", "balls", "--memory-budget", "nan"], "--memory-budget must be at least 64 MB, got nan"),
+    (["report", "balls", "--memory-budget", "10"], "--memory-budget must be at least 704 MB, got 10.0"),
+    (["report", "balls", "--memory-budget", "nan"], "--memory-budget must be at least 704 MB, got nan"),
 ])
 def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tracer.render, "render", _no_render)
@@ -226,6 +226,14 @@ def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch,
     assert "coherence report: error:" in error and message in error
     assert not (tmp_path / "out").exists()
 
+
+def test_budget_too_small_for_the_image_fails_before_rendering(tmp_path, monkeypatch):
+    # The budget is the process's; at 4096^2 the runs alone need more than 1000 MB.
+    monkeypatch.setattr(tracer.render, "render", _no_render)
+    with pytest.raises(ValueError, match="memory_budget of 1000 MB is too small.*give at least"):
+        build_report("balls", 4096, memory_budget=1000 << 20, out=tmp_path / "out", cache_dir=tmp_path / "c",
+                     progress=False)
+    assert not (tmp_path / "out").exists()
 
 def test_output_path_that_is_a_file(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tracer.render, "render", _no_render)

@@ -1,5 +1,6 @@
 """Resident pages of memory-mapped traces: dropped on demand, the data unchanged, and the report's budget."""
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -99,11 +100,72 @@ def test_loading_a_trace_checks_it_without_keeping_it_resident(tmp_path):
 
 
 def test_report_memory_shares():
+    # The budget is the process's: 640 MB for the process and 96 bytes a
+    # pixel for each run at once are set aside, and the rest is split.
     from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares
-    from coherence.pixel_lines import SHARED_LINES_BUDGET
 
-    assert memory_shares(DEFAULT_MEMORY_BUDGET) == {"render_records": 1 << 30, "shared_lines": SHARED_LINES_BUDGET,
-                                                    "trace_pages": 512 * MB}
-    assert memory_shares(256 * MB) == {"render_records": 128 * MB, "shared_lines": 128 * MB, "trace_pages": 64 * MB}
+    assert memory_shares(DEFAULT_MEMORY_BUDGET) == {"render_records": 704 * MB, "shared_lines": 704 * MB,
+                                                    "trace_pages": 352 * MB}
+    # 2 runs x 512^2 pixels x 96 bytes = 48 MB: 1360 MB are left
+    assert memory_shares(DEFAULT_MEMORY_BUDGET, 512 * 512, 2) == {"render_records": 680 * MB,
+                                                                  "shared_lines": 680 * MB, "trace_pages": 340 * MB}
+    assert memory_shares(704 * MB) == {"render_records": 32 * MB, "shared_lines": 32 * MB, "trace_pages": 16 * MB}
     with pytest.raises(ValueError, match="memory_budget"):
         memory_shares(MB)
+    # 2048^2 pixels, 2 runs: 640 + 768 MB set aside, and 64 MB for the trace at least
+    with pytest.raises(ValueError, match="give at least 1472 MB"):
+        memory_shares(1300 * MB, 2048 * 2048, 2)
+    assert memory_shares(1472 * MB, 2048 * 2048, 2)["trace_pages"] == 16 * MB
+
+
+def test_runs_at_once_fit_the_budget():
+    # One run per CPU while each leaves the trace its 64 MB: 2048 - 640 - 64 =
+    # 1344 MB hold 56 runs of 512^2 pixels (24 MB each) and 2 of 2048^2 (384 MB).
+    from analyses.memory_budget import runs_at_once
+
+    assert runs_at_once(2048 * MB, 512 * 512, 64) == 56
+    assert runs_at_once(2048 * MB, 512 * 512, 2) == 2
+    assert runs_at_once(1536 * MB, 2048 * 2048, 8) == 2
+    assert runs_at_once(1200 * MB, 2048 * 2048, 2) == 1
+    assert runs_at_once(700 * MB, 2048 * 2048, 2) == 1  # memory_shares says it does not fit
+    assert runs_at_once(700 * MB, 0, 3) == 3
+
+def _synthetic_trace(folder, size):
+    from tracer.records import RecordKind, pack
+    from tracer.trace import COUNTER_NAMES, AccessTrace
+
+    rng = np.random.default_rng(size)
+    kinds = np.array([RecordKind.KD_NODE, RecordKind.SPHERE, RecordKind.MATERIAL], dtype=np.int64)
+    n_pixels = size * size
+    records = pack(rng.choice(kinds, n_pixels), rng.integers(0, 40, n_pixels), np.zeros(n_pixels, dtype=bool))
+    counters = rng.integers(0, 50, (n_pixels, len(COUNTER_NAMES))).astype(np.int64)
+    trace = AccessTrace(np.arange(n_pixels + 1, dtype=np.int64), records, counters, size, size,
+                        {"record_counts": {"kd_node": 40, "sphere": 40, "material": 40}})
+    return AccessTrace.load(trace.save(Path(folder) / "trace"), mmap=True)
+
+
+@pytest.mark.jit_only
+def test_a_run_takes_at_most_its_bytes_per_pixel(tmp_path):
+    # RUN_BYTES_PER_PIXEL is what memory_shares sets aside for each run at
+    # once; measured here as the growth of a one-job study's traced peak
+    # (numpy's arrays included) between two image sizes, so that fixed
+    # costs (caches per CPU) cancel, over every default mapping.
+    import tracemalloc
+
+    from analyses.memory_budget import RUN_BYTES_PER_PIXEL
+    from coherence.mappings import DEFAULT_MAPPINGS
+    from coherence.studies import study
+
+    peaks = {}
+    for size in (128, 384):
+        trace = _synthetic_trace(tmp_path / str(size), size)
+        study(trace, ["S"], [2], progress=False, n_jobs=1)  # compiled outside the measure
+        for mapping in DEFAULT_MAPPINGS:
+            tracemalloc.start()
+            study(trace, [mapping], [8], progress=False, n_jobs=1)
+            peaks[mapping, size] = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+        del trace
+    for mapping in DEFAULT_MAPPINGS:
+        per_pixel = (peaks[mapping, 384] - peaks[mapping, 128]) / (384 ** 2 - 128 ** 2)
+        assert 8 < per_pixel <= RUN_BYTES_PER_PIXEL, (mapping, per_pixel)

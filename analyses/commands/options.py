@@ -205,14 +205,14 @@ def dask_options(what: str = "the runs") -> argparse.ArgumentParser:
 
 
 def memory_budget_options() -> argparse.ArgumentParser:
-    """``--memory-budget MB``: what a trace may take in memory (:mod:`analyses.memory_budget`)."""
+    """``--memory-budget MB``: what the process may take in memory (:mod:`analyses.memory_budget`)."""
     parent = _parent()
     parent.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
-                        help="memory the trace may take, in MB (default 2048): half for the records a render "
-                             "holds before writing them out, half for line addresses the runs share, a "
-                             "quarter for the trace's pages resident while runs read it, so a trace of any "
-                             "length streams from disk; arrays per pixel come on top. Results do not depend "
-                             "on it")
+                        help="memory the whole process may take, in MB (default 2048). About 640 MB for the "
+                             "process and 96 bytes a pixel for each run at once are set aside; of the rest, half "
+                             "holds the records a render keeps before writing them out, half the line addresses "
+                             "the runs share and a quarter the trace's pages resident while runs read it, so a "
+                             "trace of any length streams from disk. Results do not depend on it")
     return parent
 
 
