@@ -57,10 +57,14 @@ def _stable(value, work: str):
 
     ``meta_checksum`` hashes the trace metadata, which holds the command line
     and so the scratch folder; the arrays' own checksums stay in.
+    ``memory_shares`` and ``runs_at_once`` follow the machine's CPU count
+    (:func:`analyses.memory_budget.runs_at_once`), and results do not depend
+    on them.
     """
     if isinstance(value, dict):
         return {k: (v.rsplit("-", 1)[0] if k == "trace_key" else _stable(v, work)) for k, v in value.items()
-                if k not in ("versions", "timings", "meta_checksum") and not k.endswith("seconds")}
+                if k not in ("versions", "timings", "meta_checksum", "memory_shares", "runs_at_once")
+                and not k.endswith("seconds")}
     if isinstance(value, list):
         return [_stable(v, work) for v in value]
     if isinstance(value, str):
