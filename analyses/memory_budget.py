@@ -69,7 +69,7 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
     budget = require_int("memory_budget", memory_budget, 0)
     if budget - reserved < MIN_TRACE_BYTES:
         raise ValueError(
-            f"memory_budget of {budget / 2**20:.0f} MB is too small: the process takes about "
+            f"memory_budget (--memory-budget) of {budget / 2**20:.0f} MB is too small: the process takes about "
             f"{PROCESS_BYTES >> 20} MB and {n_jobs} run{'s' if n_jobs != 1 else ''} at once over {n_pixels:,} "
             f"pixels about {n_jobs * n_pixels * RUN_BYTES_PER_PIXEL / 2**20:.0f} MB, and the trace needs at least "
             f"{MIN_TRACE_BYTES >> 20} MB; give at least {-(-(reserved + MIN_TRACE_BYTES) >> 20)} MB")
@@ -87,6 +87,7 @@ def runs_at_once(memory_budget: int, n_pixels: int, n_cpus: int) -> int:
     spare = require_int("memory_budget", memory_budget, 0) - PROCESS_BYTES - MIN_TRACE_BYTES
     fit = spare // (n_pixels * RUN_BYTES_PER_PIXEL) if n_pixels else n_cpus
     return int(max(1, min(n_cpus, fit)))
+
 
 def trace_pages_limited(trace, shares: dict) -> ResidentLimit:
     """A context that keeps ``trace``'s resident pages (records and counters) under ``shares["trace_pages"]``

@@ -145,8 +145,8 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     counts = check_process_counts(n_processes)
     size = check_size(size)
     background = check_background(background)
-    # step 1 runs two scenes at once, step 4 one run per CPU; the same with --dask: same outputs
-    n_jobs = runs_at_once(memory_budget, size * size, max(2, os.cpu_count() or 1))
+    # step 4 runs one run per CPU, step 1 two scenes at once; the same with --dask: same outputs
+    n_jobs = runs_at_once(memory_budget, size * size, os.cpu_count() or 1)
     shares = memory_shares(memory_budget, size * size, max(2, n_jobs))
     mapping_objects = [get_mapping(m) for m in mappings]
     names = [m.name for m in mapping_objects]

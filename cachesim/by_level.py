@@ -34,7 +34,8 @@ def _search_three_ways(tags, stamps, base, line):
     """:func:`_search_ways` for three ways (the 21164's S-cache), unrolled and
     free of branches: each choice is a mask (all ones or zero) from a sign
     shift. An empty way's age is -1 (its tag's sign), and ties go to the
-    lower way, as in :func:`_search_ways`."""
+    lower way, as in :func:`_search_ways`. The comparisons subtract ages:
+    stamps are access clocks, far from the 2**63 apart that would wrap."""
     first = np.uint64(base)
     held0 = tags[first]
     held1 = tags[first + np.uint64(1)]

@@ -15,6 +15,7 @@ The validation helpers here are shared with :mod:`coherence.mappings`.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -24,6 +25,21 @@ from numba import njit
 from rtcommon.validate import require_int, require_number
 
 __all__ = ["Distribution"]
+
+# Arrays a mapping has just built and holds nowhere else, by id: a
+# Distribution takes them without a copy (see _hand_over).
+_HANDED_OVER: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
+def _hand_over(*arrays):
+    """Mark a mapping's freshly built arrays (held nowhere else) for a
+    :class:`Distribution` to take without a copy; returns them. An array that
+    is not a C-contiguous int64 array owning its memory is left to be copied."""
+    for array in arrays:
+        if (isinstance(array, np.ndarray) and array.dtype == np.int64 and array.flags.c_contiguous
+                and array.flags.owndata):
+            _HANDED_OVER[id(array)] = array
+    return arrays
 
 # --------------------------------------------------------------------------
 # validation helpers
@@ -39,12 +55,12 @@ def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
     if arr.ndim != ndim:
         raise ValueError(f"{owner}: {name} must be {ndim}-dimensional, got shape {arr.shape}")
     # A private, read-only, contiguous int64 copy: a validated distribution
-    # must not change under its users (several simulations share one). The
-    # mappings hand over arrays that are already so and that nothing else
-    # holds (see coherence.mapping_base), taken as they are: a copy of each
-    # costs 8 bytes a pixel at the height of a run's memory.
-    if (arr.dtype == np.int64 and arr.flags.c_contiguous and not arr.flags.writeable and arr.base is None
-            and arr.flags.owndata):
+    # must not change under its users (several simulations share one). An
+    # array a mapping has just built and handed over (_hand_over) is private
+    # already and is taken as it is: a copy costs 8 bytes a pixel at the
+    # height of a run's memory.
+    if _HANDED_OVER.pop(id(arr), None) is arr:
+        arr.flags.writeable = False
         return arr
     out = np.array(arr, dtype=np.int64, order="C", copy=True)
     out.flags.writeable = False
@@ -197,7 +213,8 @@ class Distribution:
     Notes
     -----
     The arrays are validated on construction and stored as private read-only
-    contiguous int64 copies, so one distribution can be shared safely.
+    contiguous int64 copies (a mapping's own fresh arrays are taken without
+    a copy), so one distribution can be shared safely.
     """
 
     name: str

@@ -9,11 +9,9 @@ among ``n_processes``. The built-in recipes live in
 """
 from __future__ import annotations
 
-import numpy as np
-
 from rtcommon.validate import require_int, require_number
 
-from .distribution import Distribution
+from .distribution import Distribution, _hand_over
 
 #: Cycles one dynamic hand-out costs by default. An assumption, not a figure
 #: from the study: a request/reply round trip to the master through shared
@@ -94,23 +92,13 @@ class Mapping:
 
 
 def _static(name, width, height, n, offsets, pixels, process) -> Distribution:
-    return Distribution(name, width, height, n, *_handed_over(offsets, pixels, process))
+    return Distribution(name, width, height, n, *_hand_over(offsets, pixels, process))
 
 
 def _dynamic(mapping, width, height, n, offsets, pixels) -> Distribution:
     """The dynamic distribution of ``mapping`` (its dispatch cycles and take-ahead)."""
-    return Distribution(mapping.name, width, height, n, *_handed_over(offsets, pixels), None,
+    return Distribution(mapping.name, width, height, n, *_hand_over(offsets, pixels), None,
                         dispatch_cycles=float(mapping.dispatch_cycles), take_ahead=int(mapping.take_ahead))
-
-
-def _handed_over(*arrays):
-    """A mapping's freshly built arrays, made read-only so that the
-    :class:`Distribution` takes them without a copy (nothing else holds
-    them); an array that is a view or of another type is left to be copied."""
-    for array in arrays:
-        if isinstance(array, np.ndarray) and array.base is None and array.flags.owndata:
-            array.flags.writeable = False
-    return arrays
 
 
 def _check_dynamic(owner: str, dispatch_cycles, take_ahead) -> None:

@@ -298,7 +298,7 @@ def test_mappings_hand_their_arrays_over_frozen():
     # A mapping's fresh arrays go into its distribution read-only and without
     # a copy, and its coverage check counts in bytes: building P, R, B or DB
     # takes at most 33 bytes a pixel at its height (40-56 with a copy of each
-    # array and a bincount). An array a caller still holds is copied.
+    # array and a bincount). A caller's array, read-only or not, is copied.
     import tracemalloc
 
     for name, most in (("S", 9.5), ("P", 17.5), ("R", 17.5), ("B", 17.5), ("DB", 33.5)):
@@ -311,9 +311,14 @@ def test_mappings_hand_their_arrays_over_frozen():
         assert peak <= most * 256 * 256, (name, peak / 256 ** 2)
         assert not d.task_pixels.flags.writeable
     mine = np.arange(4, dtype=np.int64)
-    d = Distribution("mine", 2, 2, 1, [0, 4], mine, [0])
-    mine[0] = 3
-    assert d.task_pixels[0] == 0 and mine.flags.writeable
+    frozen = np.arange(4, dtype=np.int64)
+    frozen.flags.writeable = False  # read-only, but its owner may write again
+    for theirs in (mine, frozen):
+        d = Distribution("theirs", 2, 2, 1, [0, 4], theirs, [0])
+        theirs.flags.writeable = True
+        theirs[0] = 3
+        assert d.task_pixels[0] == 0
+
 
 def test_custom_errors_name_what_is_wrong():
     with pytest.raises(ValueError, match=r"1 pixels missing \(first: pixel 3 \(x=1, y=1\)\)"):

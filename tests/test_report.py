@@ -230,10 +230,11 @@ def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch,
 def test_budget_too_small_for_the_image_fails_before_rendering(tmp_path, monkeypatch):
     # The budget is the process's; at 4096^2 the runs alone need more than 1000 MB.
     monkeypatch.setattr(tracer.render, "render", _no_render)
-    with pytest.raises(ValueError, match="memory_budget of 1000 MB is too small.*give at least"):
+    with pytest.raises(ValueError, match=r"memory_budget \(--memory-budget\) of 1000 MB is too small.*give at least"):
         build_report("balls", 4096, memory_budget=1000 << 20, out=tmp_path / "out", cache_dir=tmp_path / "c",
                      progress=False)
     assert not (tmp_path / "out").exists()
+
 
 def test_output_path_that_is_a_file(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tracer.render, "render", _no_render)

@@ -130,6 +130,7 @@ def test_runs_at_once_fit_the_budget():
     assert runs_at_once(700 * MB, 2048 * 2048, 2) == 1  # memory_shares says it does not fit
     assert runs_at_once(700 * MB, 0, 3) == 3
 
+
 def _synthetic_trace(folder, size):
     from tracer.records import RecordKind, pack
     from tracer.trace import COUNTER_NAMES, AccessTrace
