@@ -50,10 +50,11 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
         Of what is left after :data:`PROCESS_BYTES` and ``n_jobs *
         n_pixels * RUN_BYTES_PER_PIXEL``: ``render_records``, records a
         render holds in RAM before writing them out in chunks (half);
-        ``shared_lines``, line addresses a study's runs share (half, at most
-        :data:`coherence.pixel_lines.SHARED_LINES_BUDGET`); ``trace_pages``,
-        the trace's pages resident while runs read it (a quarter). A render
-        comes before the runs, so at most three quarters are in use at once.
+        ``shared_lines``, line addresses a study's runs share (three
+        quarters, at most :data:`coherence.pixel_lines.SHARED_LINES_BUDGET`);
+        ``trace_pages``, the trace's pages resident while runs read them (a
+        quarter). A render comes before the runs, and the runs use the
+        last two together.
 
     Raises
     ------
@@ -74,7 +75,7 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
             f"pixels about {n_jobs * n_pixels * RUN_BYTES_PER_PIXEL / 2**20:.0f} MB, and the trace needs at least "
             f"{MIN_TRACE_BYTES >> 20} MB; give at least {-(-(reserved + MIN_TRACE_BYTES) >> 20)} MB")
     available = budget - reserved
-    return {"render_records": available // 2, "shared_lines": min(SHARED_LINES_BUDGET, available // 2),
+    return {"render_records": available // 2, "shared_lines": min(SHARED_LINES_BUDGET, available - available // 4),
             "trace_pages": available // 4}
 
 

@@ -104,12 +104,13 @@ def test_report_memory_shares():
     # pixel for each run at once are set aside, and the rest is split.
     from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares
 
-    assert memory_shares(DEFAULT_MEMORY_BUDGET) == {"render_records": 704 * MB, "shared_lines": 704 * MB,
+    # 1408 MB left: half for a render's records, then 3/4 for lines (at most 1 GiB) and 1/4 for pages
+    assert memory_shares(DEFAULT_MEMORY_BUDGET) == {"render_records": 704 * MB, "shared_lines": 1024 * MB,
                                                     "trace_pages": 352 * MB}
     # 2 runs x 512^2 pixels x 96 bytes = 48 MB: 1360 MB are left
     assert memory_shares(DEFAULT_MEMORY_BUDGET, 512 * 512, 2) == {"render_records": 680 * MB,
-                                                                  "shared_lines": 680 * MB, "trace_pages": 340 * MB}
-    assert memory_shares(704 * MB) == {"render_records": 32 * MB, "shared_lines": 32 * MB, "trace_pages": 16 * MB}
+                                                                  "shared_lines": 1020 * MB, "trace_pages": 340 * MB}
+    assert memory_shares(704 * MB) == {"render_records": 32 * MB, "shared_lines": 48 * MB, "trace_pages": 16 * MB}
     with pytest.raises(ValueError, match="memory_budget"):
         memory_shares(MB)
     # 2048^2 pixels, 2 runs: 640 + 768 MB set aside, and 64 MB for the trace at least

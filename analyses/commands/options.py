@@ -210,9 +210,10 @@ def memory_budget_options() -> argparse.ArgumentParser:
     parent.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
                         help="memory the whole process may take, in MB (default 2048). About 640 MB for the "
                              "process and 96 bytes a pixel for each run at once are set aside; of the rest, half "
-                             "holds the records a render keeps before writing them out, half the line addresses "
-                             "the runs share and a quarter the trace's pages resident while runs read it, so a "
-                             "trace of any length streams from disk. Results do not depend on it")
+                             "holds the records a render keeps before writing them out, and then three quarters "
+                             "(at most 1 GiB) the line addresses the runs share and a quarter the trace's pages "
+                             "resident while runs read it, so a trace of any length streams from disk. Results "
+                             "do not depend on it")
     return parent
 
 
