@@ -137,7 +137,18 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     lru = level_policy == LRU
     n_out = 0
     evictions = 0
-    if n_ways == 1:
+    if n_ways == 1 and level == geometry.rel_shift.shape[0] - 1 and not record:
+        # The last level, direct-mapped: its misses go to memory and nothing
+        # reads them, so they are only counted.
+        for j in range(n_in):
+            line = lines[np.uint64(j)]
+            slot = np.uint64(base0 + (line & mask if mask >= 0 else line % sets))
+            held = tags[slot]
+            miss = held != line
+            evictions += miss & (held >= 0)
+            tags[slot] = line
+            n_out += miss
+    elif n_ways == 1:
         # Direct-mapped: one compare, no ordering to keep.
         for j in range(n_in):
             at = np.uint64(j)

@@ -333,6 +333,11 @@ def test_level_by_level_path_equals_access_by_access_path(policies):
     (clock_a, tags_a, stamps_a, counts_a, served_a), (clock_b, tags_b, stamps_b, counts_b, served_b) = outputs
     assert clock_a == clock_b == 5 + stream.size
     np.testing.assert_array_equal(tags_a, tags_b)
+    # Without served_by, a direct-mapped last level only counts its misses.
+    unrecorded = CacheState(hierarchy)
+    _simulate_by_level(stream, unrecorded.geometry, unrecorded.arrays, 5, np.zeros(0, dtype=np.uint8), False, work)
+    np.testing.assert_array_equal(unrecorded.tags, tags_b)
+    np.testing.assert_array_equal(unrecorded.counts, counts_b)
     # Stamps order the ways of a set; a direct-mapped level has none to order
     # and the level-by-level path leaves its stamps alone.
     associative = np.concatenate([np.arange(start, start + ways * sets) for start, ways, sets, in zip(
