@@ -134,7 +134,6 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     base0 = geometry.offset[level]
     level_policy = geometry.policy[level]
     seed = geometry.seeds[level]
-    lru = level_policy == LRU
     n_out = 0
     evictions = 0
     if n_ways == 1 and level == geometry.rel_shift.shape[0] - 1 and not record:
@@ -171,10 +170,7 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
         for j in range(n_in):
             line = lines[j]
             base = base0 + (line & mask if mask >= 0 else line % sets) * n_ways
-            slot = _find(tags, base, n_ways, line)
-            if slot >= 0:
-                if lru:
-                    stamps[slot] = clocks[j]
+            if _find(tags, base, n_ways, line) >= 0:  # random replacement keeps no recency
                 continue
             if _insert(tags, stamps, seed, base, n_ways, level_policy, line, clocks[j]) >= 0:
                 evictions += 1
