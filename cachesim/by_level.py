@@ -112,6 +112,32 @@ def _ordered_pass(lines, clocks, n_in, level, shift, geometry, state, three_ways
 
 
 @njit(cache=True, inline="always")
+def _direct_pass(lines, clocks, n_in, level, shift, geometry, state, compact):
+    """The loop of :func:`_level_pass` for a direct-mapped level: one compare,
+    no ordering to keep; returns the misses and the evictions. The misses are
+    compacted as there only when ``compact`` (a constant at each call)."""
+    tags = state.tags
+    mask = geometry.set_mask[level]
+    sets = geometry.n_sets[level]
+    base0 = geometry.offset[level]
+    n_out = 0
+    evictions = 0
+    for j in range(n_in):
+        at = np.uint64(j)
+        line = lines[at]
+        slot = np.uint64(base0 + (line & mask if mask >= 0 else line % sets))
+        held = tags[slot]
+        miss = held != line
+        evictions += miss & (held >= 0)
+        tags[slot] = line
+        if compact:
+            lines[np.uint64(n_out)] = line >> shift
+            clocks[np.uint64(n_out)] = clocks[at]
+        n_out += miss
+    return n_out, evictions
+
+
+@njit(cache=True, inline="always")
 def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, record, first_clock):
     """Run ``lines[:n_in]`` (with their access clocks) through one level.
 
@@ -136,30 +162,13 @@ def _level_pass(lines, clocks, n_in, level, shift, geometry, state, served_by, r
     seed = geometry.seeds[level]
     n_out = 0
     evictions = 0
-    if n_ways == 1 and level == geometry.rel_shift.shape[0] - 1 and not record:
-        # The last level, direct-mapped: its misses go to memory and nothing
-        # reads them, so they are only counted.
-        for j in range(n_in):
-            line = lines[np.uint64(j)]
-            slot = np.uint64(base0 + (line & mask if mask >= 0 else line % sets))
-            held = tags[slot]
-            miss = held != line
-            evictions += miss & (held >= 0)
-            tags[slot] = line
-            n_out += miss
-    elif n_ways == 1:
-        # Direct-mapped: one compare, no ordering to keep.
-        for j in range(n_in):
-            at = np.uint64(j)
-            line = lines[at]
-            slot = np.uint64(base0 + (line & mask if mask >= 0 else line % sets))
-            held = tags[slot]
-            miss = held != line
-            evictions += miss & (held >= 0)
-            tags[slot] = line
-            lines[np.uint64(n_out)] = line >> shift
-            clocks[np.uint64(n_out)] = clocks[at]
-            n_out += miss
+    if n_ways == 1:
+        # Direct-mapped (see _direct_pass). The last level's misses go to
+        # memory, and without served_by nothing reads them: only counted.
+        if level == geometry.rel_shift.shape[0] - 1 and not record:
+            n_out, evictions = _direct_pass(lines, clocks, n_in, level, shift, geometry, state, False)
+        else:
+            n_out, evictions = _direct_pass(lines, clocks, n_in, level, shift, geometry, state, True)
     elif level_policy != RANDOM:
         # LRU and FIFO (see _ordered_pass).
         if n_ways == 3 and mask >= 0:
