@@ -424,3 +424,28 @@ def test_a_trace_that_will_not_fit_on_disk_is_refused_before_rendering(tmp_path,
         traces.cached_trace("tetra", 64, cache_dir=tmp_path, progress=False)
     assert not list((tmp_path / "traces").iterdir())
     output.check_free_space("small", tmp_path, 5_000)  # what fits passes
+
+
+# ------------------------------------------------------------- messages that fit the cause
+def _scenes_help(capsys) -> str:
+    from analyses.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["paper", "--help"])
+    text = capsys.readouterr().out
+    return " ".join(text.split("--scenes SCENE [SCENE ...]")[-1].split("\n  --", 1)[0].split())
+
+
+def test_paper_help_lists_only_the_scenes_paper_accepts(capsys):
+    """Every scene ``paper --help`` names for --scenes is accepted, and all the study's are named.
+
+    Fails if the --scenes help says ``%(scenes)s`` (every named scene, textured ones too) again.
+    """
+    import re
+
+    from analyses.paper_study import check_scenes
+    from tracer.scenes import NAMED_SCENES, PAPER_SCENES
+
+    listed = [word for word in re.findall(r"[a-z][a-z-]*", _scenes_help(capsys)) if word in NAMED_SCENES]
+    assert sorted(listed) == sorted(PAPER_SCENES)
+    assert check_scenes(listed) == listed

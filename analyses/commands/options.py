@@ -69,6 +69,7 @@ class RegistryNames(Sequence):
 
 
 SCENES = RegistryNames("tracer.scenes", "NAMED_SCENES")
+PAPER_SCENES = RegistryNames("tracer.scenes", "PAPER_SCENES")
 MAPPINGS = RegistryNames("coherence.mappings", "MAPPINGS")
 DEFAULT_MAPPINGS = RegistryNames("coherence.mappings", "DEFAULT_MAPPINGS")
 HIERARCHIES = RegistryNames("cachesim.config", "PRESETS")
@@ -85,12 +86,12 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     """Keeps the epilog's layout and lets help texts name registries.
 
     Besides argparse's own ``%(default)s`` and ``%(choices)s``, a help text
-    may say ``%(scenes)s``, ``%(mappings)s``, ``%(default_mappings)s``,
+    may say ``%(scenes)s``, ``%(paper_scenes)s``, ``%(mappings)s``, ``%(default_mappings)s``,
     ``%(hierarchies)s`` or ``%(paper_processes)s``: the registry's names,
     looked up when the help is printed.
     """
 
-    _REGISTRIES = {"scenes": SCENES, "mappings": MAPPINGS, "default_mappings": DEFAULT_MAPPINGS,
+    _REGISTRIES = {"scenes": SCENES, "paper_scenes": PAPER_SCENES, "mappings": MAPPINGS, "default_mappings": DEFAULT_MAPPINGS,
                    "hierarchies": HIERARCHIES, "paper_processes": PAPER_PROCESSES}
 
     def _expand_help(self, action):

@@ -64,7 +64,7 @@ def register(subparsers) -> None:
                                                              "and memory image the calibration needs")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
     parser.add_argument("--scenes", nargs="+", metavar="SCENE",
-                        help="study scenes (default: all of %(scenes)s)")
+                        help="the study's scenes, any of %(paper_scenes)s (default: all of them)")
     parser.add_argument("--json", action="store_true", help="print paper.json to stdout instead of the verdicts")
     parser.add_argument("--crossover", action="store_true",
                         help="also find, per scene at 8 processes, how much bigger the records (x1..x64) and "
