@@ -130,6 +130,22 @@ class CacheLevel:
 class Hierarchy:
     """A private cache hierarchy of one CPU.
 
+    Two rules decide results where simulators differ (more in
+    ``docs/cache_rules.md``):
+
+    - **Fills run from the lowest level up.** After a miss, the levels that
+      missed are filled from the one nearest memory to the first level. In
+      an inclusive hierarchy a lower level's eviction thus back-invalidates
+      the levels above before they take the new line, so an upper level
+      whose set lost a line to back-invalidation fills that empty way
+      instead of evicting its own least recent line.
+    - **A write goes down as a write.** A write that misses a level goes on
+      to the next as a write (counted in ``write_accesses`` there), also
+      below a level that allocates on writes; a level with
+      ``write_allocate=False`` is then left unchanged by it. Dinero IV
+      instead has a write-allocating level fetch the line from the level
+      below with a read, which that level would count as a read and fill.
+
     Parameters
     ----------
     levels : tuple of CacheLevel
