@@ -16,6 +16,7 @@ from analyses.output import check_output_folder
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
+from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
@@ -109,8 +110,7 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
     residuals = cal["residuals"][["scene", "study_seconds", "target_seconds", "fitted_seconds", "relative_error",
                                   "left_out_seconds", "left_out_error", "memory_share"]]
     decomposition = result.runs[result.runs["n_processes"] == p["verdict_n_processes"]][
-        ["scene", "mapping", "speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
-         "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss"]]
+        ["scene", "mapping", *DECOMPOSITION_COLUMNS]]
     return render_page("paper.html.j2", p=p, calibration=cal, verdicts=list(result.verdicts["text"]),
                        study_table=STUDY_TABLE, scenes_table=result.table.drop(columns=["study_geometry"]),
                        fitted_table=fitted, model_table=model, residuals_table=residuals,

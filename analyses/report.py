@@ -52,6 +52,7 @@ from analyses.report_curves import miss_ratio_curves
 from analyses.report_html import miss_map_png, report_html
 from analyses.warmup import simulation_warm_up
 from coherence.mappings import DEFAULT_MAPPINGS
+from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain, round_number
 from rtcommon.validate import require_int
@@ -460,10 +461,6 @@ def _rows_table(rows) -> pd.DataFrame:
     return table
 
 
-_HEADLINE_COLUMNS = ("speedup_user", "speedup_real", "efficiency", "load_balance",
-                     "coherence_factor", "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
-
-
 def _clean(value):
     return plain(value, _SIGNIFICANT, integral_as_int=True)
 
@@ -475,7 +472,7 @@ def _summary(parameters, scene_summary, tree, runs, verdict, verdict_n, top_n, n
     headline = {}
     for n in sorted({verdict_n, top_n}):
         at_n = runs[runs["n_processes"] == n].set_index("mapping")
-        headline[str(n)] = {name: {column: at_n.loc[name, column] for column in _HEADLINE_COLUMNS}
+        headline[str(n)] = {name: {column: at_n.loc[name, column] for column in DECOMPOSITION_COLUMNS}
                             for name in names}
     return _clean({
         "report": "coherence report",

@@ -47,13 +47,12 @@ import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
 from coherence.mappings import DEFAULT_MAPPINGS
+from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.validate import require_int
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
           "n_processes", "n_cpus", "background", "line_size")
-METRICS = ("speedup_user", "speedup_real", "efficiency", "load_balance", "coherence_factor",
-           "dispatch_factor", "imbalance_loss", "coherence_loss", "dispatch_loss")
 _UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
 
 
@@ -230,7 +229,7 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
                        machine=machine, scene=scene, progress=False, n_jobs=1)
     runs = result.runs[result.runs["n_processes"] == n_processes]
     level_columns = [c for c in runs.columns if c.endswith(("_hit_rate", "_misses_per_ray"))]
-    table = runs[["mapping", "n_processes", *METRICS, *level_columns]].copy()
+    table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *level_columns]].copy()
     if trace.metadata.get("textures"):
         texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)
                                 for mapping in table["mapping"]], index=table.index)

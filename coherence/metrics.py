@@ -25,6 +25,14 @@ import pandas as pd
 
 RAY_COUNTERS = ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays")
 
+#: The factors whose product is the efficiency, in that order.
+EFFICIENCY_FACTORS = ("load_balance", "coherence_factor", "dispatch_factor")
+#: ``1 - factor`` for each of :data:`EFFICIENCY_FACTORS`: what imbalance, coherence and hand-outs cost.
+LOSS_COLUMNS = ("imbalance_loss", "coherence_loss", "dispatch_loss")
+#: The columns of the efficiency decomposition that :func:`add_speedups` adds
+#: and the report, the paper and what-if studies show, in the order they show them.
+DECOMPOSITION_COLUMNS = ("speedup_user", "speedup_real", "efficiency", *EFFICIENCY_FACTORS, *LOSS_COLUMNS)
+
 
 def run_summary(processes: pd.DataFrame, level_names, clock_hz: float, real_cycles: float) -> dict:
     """Per-run figures that need no one-process reference (one dict row)."""

@@ -4,6 +4,7 @@ import pytest
 
 from coherence.distribution import Distribution
 from coherence.mappings import Mapping
+from coherence.metrics import DECOMPOSITION_COLUMNS, EFFICIENCY_FACTORS, LOSS_COLUMNS
 from coherence.simulation import Machine
 from coherence.studies import study
 from trace_factory import SMALL, random_trace
@@ -89,6 +90,24 @@ def test_factors_multiply_to_efficiency(result):
     assert (db["dispatch_share"] > 0).all()
     one = runs[runs["n_processes"] == 1].set_index("mapping")
     assert one.loc["DB", "speedup_user_vs_best"] < 1
+
+
+def test_decomposition_columns_name_the_factors(result):
+    """The one list of decomposition columns names what the runs carry: its
+    factors multiply to the efficiency and each loss is one minus its factor;
+    ``coherence simulate --help`` spells the same product. Fails if
+    ``"coherence_factor"`` is dropped from ``EFFICIENCY_FACTORS``."""
+    from analyses.commands.simulate import EPILOG
+
+    _, outcome = result
+    runs = outcome.runs
+    assert set(DECOMPOSITION_COLUMNS) <= set(runs.columns)
+    product = np.prod([runs[column].to_numpy() for column in EFFICIENCY_FACTORS], axis=0)
+    np.testing.assert_allclose(product, runs["efficiency"], rtol=1e-12)
+    assert (runs["coherence_factor"] != 1).any() and (runs["load_balance"] != 1).any()
+    for factor, loss in zip(EFFICIENCY_FACTORS, LOSS_COLUMNS, strict=True):
+        np.testing.assert_allclose(runs[loss], 1 - runs[factor], rtol=0, atol=1e-15)
+    assert "efficiency = speedup / n = " + " x ".join(EFFICIENCY_FACTORS) in " ".join(EPILOG.split())
 
 
 def test_per_process_sums_equal_trace_totals(result):

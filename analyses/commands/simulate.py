@@ -28,9 +28,6 @@ examples:
   coherence simulate balls128 --background 4 --background-footprint 262144 --hierarchy alpha21164-dtb
 """
 
-COLUMNS = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", "load_balance",
-           "coherence_factor", "dispatch_factor"]
-
 
 def register(subparsers) -> None:
     """Add the ``simulate`` subcommand to ``subparsers``."""
@@ -69,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
     from cachesim import get_hierarchy
     from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
+    from coherence.metrics import EFFICIENCY_FACTORS
     from coherence.provenance import provenance, write_csv_atomic
     from coherence.simulation import Machine
     from coherence.studies import study
@@ -113,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({**meta, "runs": runs}, indent=2))
         return 0
     levels = hierarchy.level_names
-    columns = COLUMNS + [f"{name}_hit_rate" for name in levels] + [f"{levels[-1]}_misses_per_ray"]
+    columns = ["mapping", "n_processes", "speedup_user", "speedup_real", "efficiency", *EFFICIENCY_FACTORS,
+               *(f"{name}_hit_rate" for name in levels), f"{levels[-1]}_misses_per_ray"]
     print(f"{args.trace}: {trace.width}x{trace.height} pixels, {trace.n_records:,} records; "
           f"{hierarchy.name or 'hierarchy'} caches, {args.layout} layout, {args.cost} costs, "
           f"{machine.n_cpus} CPUs")
