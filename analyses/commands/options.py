@@ -82,17 +82,37 @@ SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
 
+class StudyTimes:
+    """The study's sequential S times in words (``"Balls 345.8 s, ..."``), read from :mod:`tracer.study` when printed."""
+
+    def __str__(self) -> str:
+        from tracer.study import STUDY_SCENES
+
+        return ", ".join(f"{scene.name.capitalize()} {scene.sequential_seconds} s" for scene in STUDY_SCENES.values())
+
+
+STUDY_TIMES = StudyTimes()
+
+
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     """Keeps the epilog's layout and lets help texts name registries.
 
     Besides argparse's own ``%(default)s`` and ``%(choices)s``, a help text
     may say ``%(scenes)s``, ``%(paper_scenes)s``, ``%(mappings)s``, ``%(default_mappings)s``,
     ``%(hierarchies)s`` or ``%(paper_processes)s``: the registry's names,
-    looked up when the help is printed.
+    looked up when the help is printed. A description or epilog may say the
+    same, and ``%(study_times)s`` (the study's sequential S times, from
+    :mod:`tracer.study`).
     """
 
     _REGISTRIES = {"scenes": SCENES, "paper_scenes": PAPER_SCENES, "mappings": MAPPINGS, "default_mappings": DEFAULT_MAPPINGS,
-                   "hierarchies": HIERARCHIES, "paper_processes": PAPER_PROCESSES}
+                   "hierarchies": HIERARCHIES, "paper_processes": PAPER_PROCESSES, "study_times": STUDY_TIMES}
+
+    def _format_text(self, text):
+        for key, names in self._REGISTRIES.items():
+            if f"%({key})s" in text:
+                text = text.replace(f"%({key})s", str(names))
+        return super()._format_text(text)
 
     def _expand_help(self, action):
         help_text = self._get_help_string(action)

@@ -10,7 +10,7 @@ from analyses.commands.options import (HelpFormatter, cache_options, chosen_mapp
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
 
 EPILOG = """\
-For each scene (default all five: balls tetra shell room fluid) the trace is
+For each scene (default all five: %(paper_scenes)s) the trace is
 rendered once and cached (see 'coherence report --help' for the cache) with
 the study-era workload: a spatial-median BSP with one rule for every scene,
 the study's kind of shadow rays, and the tracer's own per-ray data, laid out
@@ -18,7 +18,7 @@ as a 1990s C tracer's structs (alpha1997 layout, docs/memory_image.md). One
 sequential run with the strip mapping S gives the operation counters and the
 simulated memory cycles; three costs are then fitted, each within 5-5000
 cycles, by least squares of relative errors to the study's sequential S times
-(Balls 345.8 s, Tetra 28.8 s, Shell 403.0 s, Room 365.7 s, Fluid 97.5 s at
+(%(study_times)s at
 512x512; scaled by pixel count at other sizes): cycles per intersection test,
 per ray and per kd-node visit; every other operation is tied to the test cost
 by its routine's floating-point operation count, except that a sphere test
