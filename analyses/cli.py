@@ -1,6 +1,6 @@
 """The ``coherence`` command line: a thin front end over the Python API.
 
-It sits in :mod:`analyses`, the top layer (DESIGN.md §4): it imports
+It sits in :mod:`analyses`, the top layer (docs/design.md, "Layers"): it imports
 tracer, cachesim, coherence and analyses, and nothing imports it. Run it as
 ``coherence ...`` (the installed script) or ``python -m analyses ...``.
 

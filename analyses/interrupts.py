@@ -1,7 +1,7 @@
 """Ctrl-C for the command line: one line, exit by SIGINT, and never inside numba's callbacks.
 
 :class:`InterruptsOutsideNumba` holds an interrupt while numba or llvmlite
-code is on the Python stack (raising it there crashed the process, issue 13);
+code is on the Python stack (raising it there crashed the process: a segfault);
 :func:`exit_by_sigint` ends the process the way an interrupted Unix tool does.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ class InterruptsOutsideNumba:
     ctypes callback). A KeyboardInterrupt raised in there is not unwound
     the way Python code expects: the tuple a kernel returns keeps a NULL
     item in place of the array whose boxing failed, and unpacking it
-    crashes (rc -11, issue 13); in a ctypes callback it is printed and
+    crashes (rc -11); in a ctypes callback it is printed and
     lost, and the half-compiled function then fails with a RuntimeError.
     So while a numba or llvmlite frame is on the stack the interrupt is
     held, and delivered again every few milliseconds until it lands in

@@ -1,6 +1,6 @@
 """Figures of the coherence report: each takes a table (or an image) and an axes.
 
-The functions draw and compute nothing (DESIGN.md §5): every value they show
+The functions draw and compute nothing (docs/design.md, "Conventions"): every value they show
 is a column of the DataFrame they receive, built by :mod:`analyses.report`.
 Each returns the axes it drew on, creating a figure when ``ax`` is None.
 Mappings keep one colour across figures: the n-th mapping in the table's

@@ -2,7 +2,7 @@
 
 Rendering with access logging is the one step of an analysis that depends on
 the scene's geometry; every mapping, process count and cache configuration
-afterwards is a replay of the stored trace (DESIGN.md §4). The cache keys a
+afterwards is a replay of the stored trace (docs/design.md, "Layers"). The cache keys a
 trace by everything that decides its content:
 
 - the scene: its name for a built-in scene (``balls`` ...), or the SHA-256 of

@@ -327,8 +327,8 @@ def alpha21164() -> Hierarchy:
       write-back and write-allocate;
     - L3, the B-cache: 4 MB direct-mapped, 64-byte lines, a superset of both.
 
-    Sources: DESIGN.md section 3 and issue 12, which cite the AlphaServer
-    8200/8400 technical manual for the three caches; the D-cache facts (a
+    Sources: the AlphaServer 8200/8400 technical manual for the three
+    caches (docs/design.md, "The simulated machine"); the D-cache facts (a
     write-through, read-allocate, direct-mapped cache of 32-byte blocks, kept
     a subset of the S-cache) also read in Digital's manual EK-SWRA2-IG,
     chapter 4 "Memory Subsystem", section 4.1.2. The B-cache being a

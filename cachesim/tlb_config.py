@@ -81,8 +81,8 @@ DTB_MISS_CYCLES = (DTB_HANDLER_ISSUE_CYCLES + DTB_HANDLER_STALL_CYCLES + DTB_TRA
 def alpha21164_dtb() -> Tlb:
     """The 21164's data TLB (DTB): 64 entries, fully associative, 8 KB pages, not-last-used.
 
-    Facts from DESIGN.md section 3 and the Alpha 21164PC hardware reference
-    manual, whose DTB is the 21164's (section 2.1.4.1 and the DTB_TAG /
+    Facts from the Alpha 21164 hardware reference manual and the 21164PC's,
+    whose DTB is the 21164's (section 2.1.4.1 and the DTB_TAG /
     DTB_PTE register descriptions, 5.2.3-5.2.4): 64 entries,
     fully associative, 8 KB pages, filled by PALcode, entry chosen by a
     not-last-used algorithm in hardware with a fill pointer that each fill

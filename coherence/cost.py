@@ -8,8 +8,8 @@ latency. Latencies belong to the :class:`cachesim.Hierarchy`, so a what-if on
 latency changes one place.
 
 ``CostModel.calibrate`` fits the per-operation cycles by non-negative least
-squares to measured times, as the study's sequential times (DESIGN.md §2)
-can be fitted with traces of the five scenes.
+squares to measured times, as the study's sequential times
+(:data:`tracer.study.STUDY_SCENES`) can be fitted with traces of the five scenes.
 """
 from __future__ import annotations
 
@@ -203,7 +203,8 @@ def alpha8400() -> CostModel:
 
     Cycle counts are first guesses scaled to the study's slow tracer (about
     500 cycles per intersection test all told); refit them with
-    :meth:`CostModel.calibrate` against DESIGN.md §2's sequential times.
+    :meth:`CostModel.calibrate` against the study's sequential times
+    (:data:`tracer.study.STUDY_SCENES`).
     A test that takes a square root pays the 21164's software root on top
     (:data:`SQUARE_ROOT_CYCLES_21164`).
     """

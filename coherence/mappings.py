@@ -6,9 +6,10 @@ A :class:`Mapping` is a recipe (frozen, validated parameters); its
 among ``n_processes`` (tasks of ordered pixels, assigned statically or handed
 out dynamically; see :mod:`coherence.distribution`).
 
-Built-in mappings (DESIGN.md §2): :class:`Strip` "S", :class:`Pixel` "P",
-:class:`Row` "R", :class:`Block` "B", :class:`DynamicBlock` "DB", plus
-space-filling-curve orders (:class:`CurveSegments`, :class:`CurveTiles`) and
+Built-in mappings: the study's five (docs/design.md, "The study's
+experiment"), :class:`Strip` "S", :class:`Pixel` "P", :class:`Row` "R",
+:class:`Block` "B" and :class:`DynamicBlock` "DB", plus space-filling-curve
+orders (:class:`CurveSegments`, :class:`CurveTiles`) and
 users' own (:class:`CustomMapping`, :func:`from_owner_image`). :data:`MAPPINGS`
 holds a default instance of each built-in by name; :func:`get_mapping` looks
 one up.

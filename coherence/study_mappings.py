@@ -1,4 +1,4 @@
-"""The study's five mappings (DESIGN.md §2): strips, pixels, rows, blocks and dynamic blocks."""
+"""The study's five mappings (docs/design.md, "The study's experiment"): strips, pixels, rows, blocks and dynamic blocks."""
 from __future__ import annotations
 
 import math

@@ -29,9 +29,9 @@ FORMAT_VERSION = 3  # 2: counter ROOT_TESTS added; 3: texture kinds and counters
 
 # The budget of the 16 record kinds (4 bits), planned once for every workload:
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
-#   9-12  in use: the study-era tracer's own data (issue 12): ray-stack entry, hit
+#   9-12  in use: the study-era tracer's own data (workload study1997): ray-stack entry, hit
 #         record, shading temporaries, frame-buffer pixel;
-#   13-14 in use: textures (issue 15): texel (a global texel number across every
+#   13-14 in use: textures (tracer.texture): texel (a global texel number across every
 #         texture and mip level, 27 bits = 128 M texels) and texture header;
 #   15    spare.
 # A kind is added to RecordKind when its writer lands, with its counter.

@@ -14,7 +14,7 @@ exactly; the fixed structure is built first and a filler that can take any
 count (floor tiles in the room, water-surface particles in the fluid) makes
 up the rest.
 
-Their materials and Fluid's camera distance were re-tuned once (issue 12),
+Their materials and Fluid's camera distance were re-tuned once,
 so that the study-era tracer (``tracer.workload``, ``study1997``) makes
 about the study's number of intersection tests on them, as it does on the
 SPD scenes with no tuning at all: element, light and depth counts did not

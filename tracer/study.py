@@ -1,6 +1,6 @@
 """The study's five scenes: names, the one alias, and its scene table.
 
-Havran & Žára's table (DESIGN.md §2), verbatim, is the single home of these
+Havran & Žára's table, verbatim, is the single home of these
 facts: the scene loader takes names, depths and element counts from here, the
 stand-ins their element targets, and the paper reproduction its comparison
 table and fitting targets (the sequential Strip times).

@@ -27,7 +27,7 @@ from "ray-object intersection tests" in his later methodology) tests nothing
 against the ray. Bounding-box tests are not counted either: a BSP has no
 boxes to test, and the study does not mention any. The one hint the other
 way, tetra's 7.6 M equalling Haines's count of *box* tests with a
-Goldsmith-Salmon hierarchy (DESIGN.md §6), concerns a different
+Goldsmith-Salmon hierarchy (Eric Haines's SPD notes), concerns a different
 acceleration structure and is taken as a coincidence. This definition is
 also what every other part of the project (the cost model, the paper's
 comparison table) calls an intersection test.
