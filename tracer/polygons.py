@@ -31,6 +31,11 @@ def polygon_even_odd_axes(offsets: np.ndarray, vertices: np.ndarray, normals: np
     polygon. Others are tested by the even-odd rule in the plane of the two
     axes left after dropping the normal's largest component.
 
+    The test pairs every edge with every vertex (time O(n^2) for an n-gon,
+    stopping at the first vertex outside) but keeps no table of the pairs:
+    memory is O(1) beyond the inputs, so a 10,000-vertex polygon costs no
+    more memory than a square.
+
     Parameters
     ----------
     offsets : ndarray of int64, shape (P + 1,)
@@ -42,19 +47,62 @@ def polygon_even_odd_axes(offsets: np.ndarray, vertices: np.ndarray, normals: np
     -------
     ndarray of int64, shape (P,)
     """
-    counts = np.diff(offsets)
-    axes = np.full(counts.size, CONVEX, dtype=np.int64)
-    for count in np.unique(counts[counts > 3]):
-        which = np.flatnonzero(counts == count)
-        for chunk in np.array_split(which, max(1, which.size * int(count) ** 2 // 4_000_000)):
-            corners = vertices[offsets[chunk][:, None] + np.arange(count)]           # (m, c, 3)
-            edges = np.roll(corners, -1, axis=1) - corners                           # (m, c, 3)
-            relative = corners[:, None, :, :] - corners[:, :, None, :]              # (m, edge, vertex, 3)
-            side = np.einsum("mevk,mk->mev", np.cross(edges[:, :, None, :], relative), normals[chunk])
-            extent = np.max(np.ptp(corners, axis=1), axis=1)
-            concave = np.any(side < -CONVEXITY_TOLERANCE * extent[:, None, None] ** 2, axis=(1, 2))
-            axes[chunk[concave]] = np.argmax(np.abs(normals[chunk[concave]]), axis=1)
+    offsets = np.ascontiguousarray(offsets, dtype=np.int64)
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    normals = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
+    if offsets.ndim != 1 or offsets.size != normals.shape[0] + 1:
+        raise ValueError(f"polygon offsets must have one entry per normal plus one, got {offsets.size} "
+                         f"offsets for {normals.shape[0]} normals")
+    if offsets.size and (offsets[0] < 0 or offsets[-1] > vertices.shape[0] or np.any(np.diff(offsets) < 0)):
+        raise ValueError(f"polygon offsets must rise within the {vertices.shape[0]} vertices")
+    axes = np.full(normals.shape[0], CONVEX, dtype=np.int64)
+    _even_odd_axes(offsets, vertices, normals, CONVEXITY_TOLERANCE, axes)
     return axes
+
+
+@njit(cache=True, error_model="numpy")
+def _even_odd_axes(offsets, vertices, normals, tolerance, axes):
+    # Polygons of more than 3 vertices: each edge against each vertex, the
+    # side of the vertex as (edge x (vertex - edge start)) . normal, in the
+    # order of that product's components; the first vertex further outside
+    # than tolerance * extent^2 makes the polygon concave.
+    for i in range(normals.shape[0]):
+        a = offsets[i]
+        b = offsets[i + 1]
+        if b - a <= 3:
+            continue
+        extent = 0.0
+        for k in range(3):
+            low = vertices[a, k]
+            high = vertices[a, k]
+            for j in range(a + 1, b):
+                low = min(low, vertices[j, k])
+                high = max(high, vertices[j, k])
+            extent = max(extent, high - low)
+        limit = tolerance * (extent * extent)
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        concave = False
+        for e in range(a, b):
+            following = e + 1 if e + 1 < b else a
+            ex = vertices[following, 0] - vertices[e, 0]
+            ey = vertices[following, 1] - vertices[e, 1]
+            ez = vertices[following, 2] - vertices[e, 2]
+            for v in range(a, b):
+                rx = vertices[v, 0] - vertices[e, 0]
+                ry = vertices[v, 1] - vertices[e, 1]
+                rz = vertices[v, 2] - vertices[e, 2]
+                side = (ey * rz - ez * ry) * nx + (ez * rx - ex * rz) * ny + (ex * ry - ey * rx) * nz
+                if side < -limit:
+                    concave = True
+                    break
+            if concave:
+                break
+        if concave:
+            drop = 0
+            for k in (1, 2):
+                if abs(normals[i, k]) > abs(normals[i, drop]):
+                    drop = k
+            axes[i] = drop
 
 
 @njit(cache=True, error_model="numpy", inline="always")
