@@ -244,6 +244,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     scene = load(scene_name_or_path, max_depth=max_depth)
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload)
     entry = root / "traces" / key
+    remove_stale_temporaries(entry.parent)  # on a hit too: a killed run's leftovers go at the next run
     info = _read_entry(entry)
     if info is not None:
         try:
@@ -256,8 +257,11 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
             info = None
     if info is None:
         folder = _writable_traces_folder(root)
-        remove_stale_temporaries(folder)
         entry = folder / key
+        if entry.is_symlink() or entry.exists() and not entry.is_dir():
+            warnings.warn(f"damaged trace cache entry {key}: a file, not a folder; "
+                          "evicting it and rendering again", stacklevel=2)
+            _remove(entry)
         _render_entry(scene, size, kd, explicit_kd, workload, key, entry, progress, memory_budget)
         info = _read_entry(entry)
         if info is None:
@@ -269,6 +273,17 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     info["path"] = str(entry)
     info["png"] = str(entry / "image.png")
     return scene, trace, info
+
+
+def _remove(path: Path) -> None:
+    """Delete a cache entry's path, whether a folder, a file or a link (what is already gone is fine)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            pass
 
 
 def _check_image(entry: Path, info: dict) -> None:
@@ -335,7 +350,7 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
             os.replace(tmp, entry)
         except OSError:
             if _read_entry(entry) is None:  # not a concurrent writer's complete entry: replace it
-                shutil.rmtree(entry, ignore_errors=True)
+                _remove(entry)
                 os.replace(tmp, entry)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -43,7 +43,22 @@ def _process_alive(pid: int) -> bool:
         return False
     except (PermissionError, OverflowError):  # someone else's live process, or nonsense: keep
         return True
-    return True
+    return not _zombie(pid)
+
+
+def _zombie(pid: int) -> bool:
+    """Whether ``pid`` has died and only waits to be reaped (Linux ``/proc``; False where unknown).
+
+    A run killed by SIGKILL stays a zombie until its parent collects it, and
+    ``kill(pid, 0)`` still succeeds on it: an immediate rerun would otherwise
+    take its temporaries for a live run's.
+    """
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            fields = stat.read().rsplit(b")", 1)[-1].split()
+    except OSError:
+        return False
+    return bool(fields) and fields[0] in (b"Z", b"X")
 
 
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:

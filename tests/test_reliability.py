@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -184,6 +185,49 @@ def test_stale_temporaries_of_dead_processes_are_removed_live_ones_kept(tmp_path
         (folder / "records.npy").write_bytes(b"x" * 10)
     assert remove_stale_temporaries(tmp_path) == [dead]
     assert live.is_dir() and other_host.is_dir() and not dead.exists()
+
+
+def test_temporaries_of_a_killed_run_not_yet_reaped_are_removed(tmp_path):
+    """A run killed by SIGKILL is a zombie until its parent reaps it; an immediate rerun must still take
+    its temporaries for a dead run's. Fails if ``_process_alive`` ends in ``return True`` (no zombie test)."""
+    import signal
+    import time
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        child.send_signal(signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:  # dead, and not reaped: no wait() yet
+            if Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[-1].split()[0] == "Z":
+                break
+            time.sleep(0.01)
+        left = tmp_path / f"{temp_prefix('entry').rsplit('~', 2)[0]}~{child.pid}~abc.tmp"
+        left.mkdir()
+        assert remove_stale_temporaries(tmp_path) == [left]
+    finally:
+        child.wait()
+
+
+def test_a_cache_hit_removes_a_dead_runs_temporaries(tmp_path):
+    """Fails if ``cached_trace`` clears stale temporaries only when it renders (its call before the entry
+    is read is removed)."""
+    traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)
+    left = tmp_path / "traces" / f"{temp_prefix('tetra-8').rsplit('~', 2)[0]}~{_dead_pid()}~abc.tmp"
+    left.mkdir()
+    assert traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)[2]["cached"]
+    assert not left.exists()
+
+
+def test_a_cache_entry_that_is_a_file_is_replaced(tmp_path):
+    """Fails if the file standing where the entry's folder goes is not removed first (the rename of the
+    new entry then fails with 'Not a directory' on every run)."""
+    _, _, info = traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)
+    entry = Path(info["path"])
+    shutil.rmtree(entry)
+    entry.write_text("x")
+    with pytest.warns(UserWarning, match="a file, not a folder"):
+        _, trace, again = traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)
+    assert not again["cached"] and (entry / "render.json").is_file() and trace.n_records > 0
 
 
 def test_write_files_atomic_writes_all_or_nothing(tmp_path):
