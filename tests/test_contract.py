@@ -1,0 +1,112 @@
+"""Two rules of the library code, checked on every run.
+
+- No function outside a compiled kernel takes more than ten parameters
+  (``self`` and ``cls`` not counted): related choices travel as one object.
+- No comment or string points outside the repository (a design-notes file
+  nobody has, "issue 12", a section sign): say the fact in place or point
+  into ``docs/`` (``docs/design.md`` holds the design).
+
+Library code is every package at the repository's root (a folder with an
+``__init__.py``), tests and benchmarks aside.
+"""
+from __future__ import annotations
+
+import ast
+import io
+import re
+import tokenize
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MAX_PARAMETERS = 10
+
+#: Functions still over the limit, as "path:function", each with the helper
+#: who is removing it; the lead empties this list once they have landed.
+#: An entry whose function is back under the limit is ignored.
+OVER_THE_LIMIT_FOR_NOW = {
+    # H5 (one Experiment object for the orchestrators)
+    "analyses/report.py:build_report",
+    "analyses/report.py:_assemble",
+    "analyses/report.py:_results_table",
+    "analyses/report_html.py:report_html",
+    "analyses/paper.py:reproduce",
+    "coherence/studies.py:study",
+    "analyses/crossover.py:crossover_study",
+    # H2 (the renderer's options as one object)
+    "tracer/render.py:render",
+}
+
+#: Files allowed a pointer for now, each with the helper who removes it.
+POINTERS_FOR_NOW = {
+    # H6: paper.json's calibration text; changing it changes an output, so it lands with the digest check
+    "analyses/paper_output.py",
+}
+
+# "DESIGN.md", "issue 12", "issues 12 and 13", "#12 of the issues", "§4"
+_OUTSIDE = re.compile(r"DESIGN\.md|\b[Ii]ssues?\s+#?\d+|§")
+
+
+def _library_files(root: Path = ROOT) -> list[Path]:
+    packages = [path.parent for path in root.glob("*/__init__.py")
+                if path.parent.name not in ("tests", "benchmarks", "docs", "build", "dist")]
+    return sorted(file for package in packages for file in package.rglob("*.py"))
+
+
+def _is_kernel(node: ast.FunctionDef) -> bool:
+    return any("jit" in ast.unparse(decorator) for decorator in node.decorator_list)
+
+
+def over_the_limit(root: Path = ROOT) -> list[str]:
+    """``"path:function takes N parameters"`` for every non-kernel function of more than ten."""
+    found = []
+    for path in _library_files(root):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not _is_kernel(node):
+                arguments = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+                count = len([a for a in arguments if a.arg not in ("self", "cls")])
+                if count > MAX_PARAMETERS:
+                    found.append(f"{path.relative_to(root).as_posix()}:{node.name} takes {count} parameters")
+    return found
+
+
+def pointers_outside(root: Path = ROOT) -> list[str]:
+    """``"path:line: text"`` for every comment or string naming something outside the repository."""
+    found = []
+    for path in _library_files(root):
+        source = path.read_text(encoding="utf-8")
+        for token in tokenize.generate_tokens(io.StringIO(source).readline):
+            if token.type not in (tokenize.COMMENT, tokenize.STRING):
+                continue
+            for match in _OUTSIDE.finditer(token.string):
+                line = token.start[0] + token.string.count("\n", 0, match.start())
+                found.append(f"{path.relative_to(root).as_posix()}:{line}: {match.group(0)!r}")
+    return found
+
+
+def test_no_function_takes_more_than_ten_parameters():
+    """Fails if ``coherence.metrics.add_speedups`` gets ten more keyword
+    parameters (``*, a=0, b=0, ...``), or any other non-kernel function an eleventh."""
+    offending = [item for item in over_the_limit() if item.split(" takes ")[0] not in OVER_THE_LIMIT_FOR_NOW]
+    assert not offending, "pass a bundle instead of:\n" + "\n".join(offending)
+
+
+def test_no_comment_points_outside_the_repository():
+    """Fails if a comment ``# see DESIGN.md`` (or ``# issue 12``) is added to
+    ``coherence/metrics.py``."""
+    offending = [item for item in pointers_outside() if item.split(":")[0] not in POINTERS_FOR_NOW]
+    assert not offending, "say it in place or point into docs/:\n" + "\n".join(offending)
+
+
+def test_the_checks_see_what_they_look_for(tmp_path):
+    """The checks find a hand-made offender of each rule and spare a kernel.
+    Fails if ``_is_kernel`` returns True for every function."""
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "m.py").write_text(
+        "from numba import njit\n\n\n"
+        "def wide(a, b, c, d, e, f, g, h, i, j, k):\n    '''See issue 7.'''\n\n\n"
+        "class C:\n    def method(self, a, b, c, d, e, f, g, h, i, j):  # as DESIGN.md says\n        pass\n\n\n"
+        "@njit(cache=True)\ndef _kernel(a, b, c, d, e, f, g, h, i, j, k, l):\n    return a\n")
+    assert over_the_limit(tmp_path) == ["pkg/m.py:wide takes 11 parameters"]
+    assert pointers_outside(tmp_path) == ["pkg/m.py:5: 'issue 7'", "pkg/m.py:9: 'DESIGN.md'"]
