@@ -8,35 +8,10 @@ scene (:meth:`MemoryLayout.place`) lays the kinds out one after another from
 sizes. A record read touches every cache line its bytes span, so a 96-byte
 triangle read costs three or four 32-byte lines.
 
-Presets (sizes in bytes, alignment in brackets):
-
-==========  =====================================  ==========================================
-kind        ``compact`` (float32, today's tracer)  ``alpha1997`` (a 1990s C tracer's structs)
-==========  =====================================  ==========================================
-kd node     8 [8]: split float + child/axis word   40 [8]: split, axis, two child pointers,
-                                                   object-list pointer
-index       4 [4]: int32 primitive number          16 [8]: linked-list entry (object, next)
-sphere      16 [16]: centre, radius                104 [8]: 64 B header (type, material
-                                                   pointer, bounding box) + centre, radii
-triangle    36 [4]: three vertices                 176 [8]: header, vertices, plane, axis
-polygon     4 + 12 n [4]: count, n vertices        112 + 24 n [8]: header, plane, count,
-                                                   vertex pointer; then n vertices
-patch       4 + 24 n [4]: count, vertices,         112 + 48 n [8]: as polygon, with a normal
-            normals                                per vertex
-cone        32 [16]: base, radii, apex             160 [8]: header, base, apex, axis, radii
-material    32 [16]: colour, kd, ks, shine, t,     88 [8]: two colours, five coefficients
-            ior
-light       24 [8]: position, colour               48 [8]: position, colour
-ray stack   44 [4]: origin, direction, weight,     96 [8]: the same in doubles, tmin, tmax
-            depth, type
-hit record  16 [8]: distance, element              72 [8]: t, point, normal, object, flag
-shading     36 [4]: hit point, normal, colour      96 [8]: light and reflected directions,
-temps       sum                                    colour, three dot products
-frame buf.  12 [4]: float RGB                      3 [1]: 24-bit RGB pixel
-texel       4 [4]: RGBA8                           4 [4]: RGBA8
-texture     32 [8]: texel pointer, sizes, levels   64 [8]: texel pointer, sizes, levels,
-                                                   level pointers, filter, wrap modes
-==========  =====================================  ==========================================
+Presets (:data:`LAYOUTS`): ``compact``, the float32 records of today's
+tracer, and ``alpha1997``, a 1990s C tracer's structs on the 64-bit Alpha.
+Their sizes are one table, :data:`PRESET_RECORDS`; ``docs/memory_image.md``
+shows it with the reason for every size (a test keeps the two equal).
 
 Texels are not packed in index order: the layout's
 :class:`~coherence.texture_layout.TextureLayout` (``MemoryLayout.texels``:
@@ -45,9 +20,9 @@ row-major by default; tiled, Morton or blocked) places them, see
 ``texture`` out gets the compact sizes.
 
 Ray stack to frame buffer are the tracer's own per-ray data, logged only by the
-``study1997`` workload (:mod:`tracer.workload`). The ``alpha1997`` sizes are
-those of ``docs/memory_image.md``, where every struct is spelled out with its
-reasons; they were fixed before any fitting. The study's code is not public:
+``study1997`` workload (:mod:`tracer.workload`). The ``alpha1997`` sizes
+follow the C struct rules spelled out in ``docs/memory_image.md``; they
+were fixed before any fitting. The study's code is not public:
 this is a plausible tracer of its time on the 64-bit Alpha, not its code.
 """
 from __future__ import annotations
@@ -94,8 +69,29 @@ class RecordLayout:
             raise ValueError(f"RecordLayout.align must be a power of two, got {self.align}")
 
 
+#: Record sizes of the presets: kind -> (``compact``, ``alpha1997``), as
+#: RecordLayout(bytes, alignment[, bytes per vertex]). ``docs/memory_image.md``
+#: renders this table with the reason for each size.
+PRESET_RECORDS = {
+    "kd_node": (RecordLayout(8, 8), RecordLayout(40, 8)),
+    "index_entry": (RecordLayout(4, 4), RecordLayout(16, 8)),
+    "sphere": (RecordLayout(16, 16), RecordLayout(104, 8)),
+    "triangle": (RecordLayout(36, 4), RecordLayout(176, 8)),
+    "polygon": (RecordLayout(4, 4, 12), RecordLayout(112, 8, 24)),
+    "patch": (RecordLayout(4, 4, 24), RecordLayout(112, 8, 48)),
+    "cone": (RecordLayout(32, 16), RecordLayout(160, 8)),
+    "material": (RecordLayout(32, 16), RecordLayout(88, 8)),
+    "light": (RecordLayout(24, 8), RecordLayout(48, 8)),
+    "ray_stack": (RecordLayout(44, 4), RecordLayout(96, 8)),
+    "hit_record": (RecordLayout(16, 8), RecordLayout(72, 8)),
+    "shading_temp": (RecordLayout(36, 4), RecordLayout(96, 8)),
+    "frame_buffer": (RecordLayout(12, 4), RecordLayout(3, 1)),
+    "texel": (RecordLayout(4, 4), RecordLayout(4, 4)),
+    "texture": (RecordLayout(32, 8), RecordLayout(64, 8)),
+}
+
 # what a layout that does not name the texture kinds gets (the compact sizes)
-_TEXTURE_DEFAULTS = {"texel": RecordLayout(4, 4), "texture": RecordLayout(32, 8)}
+_TEXTURE_DEFAULTS = {name: PRESET_RECORDS[name][0] for name in ("texel", "texture")}
 
 
 @dataclass(frozen=True)
@@ -515,28 +511,12 @@ def _first_bad_record(records, kind_counts):
 
 
 def _compact() -> MemoryLayout:
-    return MemoryLayout(name="compact", records={
-        "kd_node": RecordLayout(8, 8), "index_entry": RecordLayout(4, 4),
-        "sphere": RecordLayout(16, 16), "triangle": RecordLayout(36, 4),
-        "polygon": RecordLayout(4, 4, 12), "patch": RecordLayout(4, 4, 24),
-        "cone": RecordLayout(32, 16), "material": RecordLayout(32, 16), "light": RecordLayout(24, 8),
-        "ray_stack": RecordLayout(44, 4), "hit_record": RecordLayout(16, 8),
-        "shading_temp": RecordLayout(36, 4), "frame_buffer": RecordLayout(12, 4),
-        "texel": RecordLayout(4, 4), "texture": RecordLayout(32, 8),
-    })
+    return MemoryLayout(name="compact", records={name: sizes[0] for name, sizes in PRESET_RECORDS.items()})
 
 
 def _alpha1997() -> MemoryLayout:
     # docs/memory_image.md: DEC C on the Alpha (LP64), one struct per record
-    return MemoryLayout(name="alpha1997", records={
-        "kd_node": RecordLayout(40, 8), "index_entry": RecordLayout(16, 8),
-        "sphere": RecordLayout(104, 8), "triangle": RecordLayout(176, 8),
-        "polygon": RecordLayout(112, 8, 24), "patch": RecordLayout(112, 8, 48),
-        "cone": RecordLayout(160, 8), "material": RecordLayout(88, 8), "light": RecordLayout(48, 8),
-        "ray_stack": RecordLayout(96, 8), "hit_record": RecordLayout(72, 8),
-        "shading_temp": RecordLayout(96, 8), "frame_buffer": RecordLayout(3, 1),
-        "texel": RecordLayout(4, 4), "texture": RecordLayout(64, 8),
-    })
+    return MemoryLayout(name="alpha1997", records={name: sizes[1] for name, sizes in PRESET_RECORDS.items()})
 
 
 LAYOUTS = {"compact": _compact, "alpha1997": _alpha1997}

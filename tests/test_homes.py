@@ -28,3 +28,28 @@ def test_paper_help_quotes_the_study_table():
     assert f"({times} at 512x512;" in text
     assert f"(default all five: {', '.join(STUDY_SCENES)})" in text
     assert "%(" not in text
+
+
+def _size_text(record) -> str:
+    """A RecordLayout as the memory-image page writes it: ``104 [8]`` or ``112 + 24 n [8]``."""
+    per_vertex = f" + {record.per_vertex} n" if record.per_vertex else ""
+    return f"{record.size}{per_vertex} [{record.align}]"
+
+
+def test_memory_image_page_shows_the_layout_table():
+    """docs/memory_image.md's table has one row per record kind whose
+    ``compact`` and ``alpha1997`` sizes are the code's. Fails if the
+    ``alpha1997`` sphere in ``PRESET_RECORDS`` becomes ``RecordLayout(96, 8)``."""
+    from coherence.layout import get_layout
+    from tracer.records import RecordKind
+
+    rows = {}
+    for line in (ROOT / "docs" / "memory_image.md").read_text(encoding="utf-8").splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if line.startswith("| `") and len(cells) >= 3:
+            rows[cells[0].strip("`")] = (cells[1].split(":")[0], cells[2].split(":")[0])
+    kinds = [kind.name.lower() for kind in RecordKind]
+    assert sorted(rows) == sorted(kinds)
+    compact, alpha1997 = get_layout("compact"), get_layout("alpha1997")
+    for kind in kinds:
+        assert rows[kind] == (_size_text(compact.record(kind)), _size_text(alpha1997.record(kind))), kind
