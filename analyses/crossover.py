@@ -48,12 +48,12 @@ def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", sc
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
     cost : coherence.cost.CostModel or str
         The cost model (``coherence paper`` passes its calibrated one).
     hierarchy, layout : preset name or object
         The machine and memory image at scale (1, 1).
-    scene : tracer.scene.Scene, optional
+    scene : tracer.scenes.model.Scene, optional
         For exact polygon sizes in the layout.
     n_processes : int
     machine : coherence.simulation.Machine, optional

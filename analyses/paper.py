@@ -8,7 +8,7 @@
 
 1. renders (or loads from the trace cache of :mod:`analyses.traces`) each
    scene's access trace with the study-era workload (``study1997``,
-   :mod:`tracer.workload`: a spatial-median BSP, one rule for every scene,
+   :mod:`tracer.rendering.workload`: a spatial-median BSP, one rule for every scene,
    whose test counts are near the study's, and the tracer's own per-ray
    data), laid out as a 1990s C tracer's structs (``alpha1997``);
 2. runs each scene once with one process and the strip mapping S, which gives
@@ -88,7 +88,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     n_processes : sequence of int
         Process counts (1 is always added).
     scenes : sequence of str, optional
-        Study scenes (default all five, :data:`tracer.scenes.PAPER_SCENES`).
+        Study scenes (default all five, :data:`tracer.scenes.catalog.PAPER_SCENES`).
     mappings : sequence of str
         Mappings (default S, P, R, B, DB).
     background : int
@@ -102,7 +102,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
         The machine's caches and the memory image (default the 21164 as its
         manuals describe it, and a 1990s C tracer's structs).
     workload : str
-        The tracer imitated (:data:`tracer.workload.WORKLOADS`; default the
+        The tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`; default the
         study's: its tests per ray are what the calibration's costs multiply).
     costs : coherence.calibration.CostStructure, optional
         Which cycles per operation are fitted and how the rest follow
@@ -136,9 +136,9 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     from coherence import Machine, get_layout, get_mapping, study
     from coherence.calibration import STUDY1997_COSTS, CostStructure
     from coherence.cost import alpha8400
-    from tracer.scenes import PAPER_SCENES
-    from tracer.trace import AccessTrace
-    from tracer.workload import get_workload
+    from tracer.scenes.catalog import PAPER_SCENES
+    from tracer.trace.access import AccessTrace
+    from tracer.rendering.workload import get_workload
 
     # every argument is checked before rendering anything
     scenes = check_scenes(PAPER_SCENES if scenes is None else scenes)

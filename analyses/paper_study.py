@@ -1,7 +1,7 @@
 """The study's numbers, the defaults of its reproduction, and the checks of its inputs.
 
 :data:`STUDY_TABLE` is Havran & Žára's scene table and sequential S times
-(:data:`tracer.study.STUDY_SCENES`) verbatim; :class:`PaperResult` is what
+(:data:`tracer.scenes.study.STUDY_SCENES`) verbatim; :class:`PaperResult` is what
 :func:`analyses.paper.reproduce` returns and :func:`analyses.paper.write_paper`
 writes. The checks run before any rendering, so a bad argument costs nothing.
 """
@@ -13,13 +13,13 @@ import pandas as pd
 
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.validate import require_int
-from tracer.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
+from tracer.scenes.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
            "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
            "check_size", "check_background"]
 
-#: The study's scene table and sequential S times (:data:`tracer.study.STUDY_SCENES`), verbatim.
+#: The study's scene table and sequential S times (:data:`tracer.scenes.study.STUDY_SCENES`), verbatim.
 STUDY_TABLE = pd.DataFrame([asdict(scene) for scene in STUDY_SCENES.values()]).rename(columns={"name": "scene"})
 
 #: Image width and height of the study's runs.

@@ -214,7 +214,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     cache_dir : path, optional
         Trace cache folder (see :func:`analyses.traces.cached_trace`).
     workload : str
-        The tracer imitated (:data:`tracer.workload.WORKLOADS`: ``modern``,
+        The tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`: ``modern``,
         the default, or the study's ``study1997``).
     out : path, optional
         Output folder to create and check for writing once the arguments
@@ -250,7 +250,7 @@ def build_report(scene="balls", size: int = 512, *, mappings=DEFAULT_MAPPINGS, m
     from coherence.simulation import Machine
 
     from analyses.traces import _scene_identity, cached_trace, check_cache_dir
-    from tracer.workload import get_workload
+    from tracer.rendering.workload import get_workload
 
     # everything that can be wrong with the arguments fails here, before rendering
     mapping_objects = [get_mapping(m) for m in mappings]
@@ -289,7 +289,7 @@ def _assemble(scene, trace, info, mapping_objects, counts, hierarchy, layout, co
               miss_map_choice, executor, shares, n_jobs):
     from coherence.missmap import miss_map
     from coherence.studies import place_layout, study
-    from tracer.trace import COUNTER_NAMES
+    from tracer.trace.access import COUNTER_NAMES
 
     from analyses.verdict import verdict as compute_verdict
 

@@ -30,7 +30,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
         Of a textured scene (``textures`` in its metadata).
     scene : Scene or None
         Gives polygons their vertex counts in the layout.
@@ -82,7 +82,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
 def _texel_curve(trace, placed, hierarchy) -> pd.DataFrame:
     """Miss-ratio curve of the texel reads alone, scan-line order, at the first level's line size."""
     from cachesim import ReuseCounter
-    from tracer.records import KIND_SHIFT, RecordKind
+    from tracer.trace.records import KIND_SHIFT, RecordKind
 
     line_size = hierarchy.levels[0].line_size
     records = np.asarray(trace.records)

@@ -8,7 +8,7 @@ trace by everything that decides its content:
 - the scene: its name for a built-in scene (``balls`` ...), or the SHA-256 of
   the file's bytes for an NFF/OBJ path (so editing the file misses the cache);
 - the image size, the kd-tree builder, the ray-tree depth and the workload
-  (:data:`tracer.workload.WORKLOADS`, with its parameters);
+  (:data:`tracer.rendering.workload.WORKLOADS`, with its parameters);
 - the package version, the trace format version and a digest of the
   ``tracer`` package's source files (an editable checkout changes the
   renderer without changing the version).
@@ -122,20 +122,21 @@ def _writable_traces_folder(root: Path) -> Path:
 
 
 def _source_digest() -> str:
-    """SHA-256 of the tracer package's ``.py`` files (name and bytes)."""
+    """SHA-256 of the tracer package's ``.py`` files, its subpackages' included (path and bytes)."""
     import tracer
 
     digest = hashlib.sha256()
-    for path in sorted(Path(tracer.__file__).parent.glob("*.py")):
-        digest.update(path.name.encode())
+    package = Path(tracer.__file__).parent
+    for path in sorted(package.rglob("*.py")):
+        digest.update(path.relative_to(package).as_posix().encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 
 
 def _scene_identity(name_or_path) -> tuple[str, str]:
     """(short label, identity string) of a scene name or file."""
-    from tracer.scenes import NAMED_SCENES
-    from tracer.study import canonical_scene_name
+    from tracer.scenes.catalog import NAMED_SCENES
+    from tracer.scenes.study import canonical_scene_name
 
     text = os.fspath(name_or_path)
     lowered = canonical_scene_name(text)
@@ -165,11 +166,11 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
     max_depth : int
         The ray-tree depth actually rendered (the scene's when not overridden).
     workload : str
-        A :data:`tracer.workload.WORKLOADS` name; its parameters are hashed too.
+        A :data:`tracer.rendering.workload.WORKLOADS` name; its parameters are hashed too.
     """
     from coherence import __version__
-    from tracer.trace import FORMAT_VERSION
-    from tracer.workload import get_workload
+    from tracer.trace.access import FORMAT_VERSION
+    from tracer.rendering.workload import get_workload
 
     label, identity = _scene_identity(name_or_path)
     preset = get_workload(workload)
@@ -203,15 +204,15 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     progress : bool
         Show a progress bar on stderr while rendering.
     workload : str
-        The tracer imitated: a :data:`tracer.workload.WORKLOADS` name.
+        The tracer imitated: a :data:`tracer.rendering.workload.WORKLOADS` name.
     memory_budget : int, optional
         Bytes of records a render holds in RAM before it writes them to the
-        entry in chunks (default :data:`tracer.render.DEFAULT_MEMORY_BUDGET`).
+        entry in chunks (default :data:`tracer.rendering.render.DEFAULT_MEMORY_BUDGET`).
 
     Returns
     -------
-    scene : tracer.scene.Scene
-    trace : tracer.trace.AccessTrace
+    scene : tracer.scenes.model.Scene
+    trace : tracer.trace.access.AccessTrace
         Records memory-mapped from the cache.
     render_info : dict
         ``key``, ``path`` (the entry folder), ``png`` (image path), ``cached``
@@ -226,11 +227,11 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     FileNotFoundError
         A scene path that does not exist.
     """
-    from tracer.scenes import load
-    from tracer.trace import AccessTrace
-    from tracer.workload import WORKLOADS
+    from tracer.scenes.catalog import load
+    from tracer.trace.access import AccessTrace
+    from tracer.rendering.workload import WORKLOADS
 
-    from tracer.trace import TraceIntegrityError
+    from tracer.trace.access import TraceIntegrityError
 
     size = require_int("size", size, 1)
     if workload not in WORKLOADS:
@@ -287,7 +288,7 @@ def _remove(path: Path) -> None:
 
 
 def _check_image(entry: Path, info: dict) -> None:
-    from tracer.trace import TraceIntegrityError
+    from tracer.trace.access import TraceIntegrityError
 
     expected = info.get("image_checksum")
     if expected is not None and xxhash.xxh3_64_hexdigest((entry / "image.png").read_bytes()) != expected:
@@ -311,8 +312,8 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
     # explicit_kd: a builder other than the workload's, with its defaults
     from tqdm.auto import tqdm
 
-    from tracer.kdtree import KdTreeConfig
-    from tracer.render import DEFAULT_MEMORY_BUDGET, render, save_png
+    from tracer.kd.tree import KdTreeConfig
+    from tracer.rendering.render import DEFAULT_MEMORY_BUDGET, render, save_png
 
     kd_config = KdTreeConfig(builder=explicit_kd) if explicit_kd else None
     tree = None

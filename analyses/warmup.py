@@ -141,8 +141,8 @@ def synthetic_trace(folder, width: int = 6, height: int = 5, seed: int = 0):
     render's, which is what the compiled kernels are specialised on. Some
     records are writes, as in the study-era workload.
     """
-    from tracer.records import RecordKind, pack
-    from tracer.trace import COUNTER_NAMES, AccessTrace
+    from tracer.trace.records import RecordKind, pack
+    from tracer.trace.access import COUNTER_NAMES, AccessTrace
 
     rng = np.random.default_rng(seed)
     kinds = [RecordKind.KD_NODE, RecordKind.INDEX_ENTRY, RecordKind.SPHERE, RecordKind.TRIANGLE,
@@ -164,7 +164,7 @@ def _compile(hierarchy, layout, cost, machine, mappings) -> None:
     """The report's simulation steps on a synthetic trace (see :mod:`analyses.report`)."""
     from coherence.missmap import miss_map
     from coherence.studies import place_layout, study
-    from tracer.trace import COUNTER_NAMES
+    from tracer.trace.access import COUNTER_NAMES
 
     from analyses.report_curves import miss_ratio_curves
 

@@ -217,8 +217,8 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:
     """Simulate one grid point on a stored trace; one row per mapping at the point's n."""
     from coherence.studies import study as run_study
-    from tracer.scenes import load
-    from tracer.trace import AccessTrace
+    from tracer.scenes.catalog import load
+    from tracer.trace.access import AccessTrace
 
     hierarchy, layout, cost, machine, n_processes = configure(study, point)
     trace = AccessTrace.load(Path(trace_folder))
@@ -310,14 +310,14 @@ def exact_lru_curves(study: WhatIf, *, cache_dir=None, progress: bool = False) -
     from coherence.layout import get_layout
     from coherence.mappings import get_mapping
     from coherence.studies import place_layout
-    from tracer.trace import AccessTrace
+    from tracer.trace.access import AccessTrace
 
     sized = {key.split(".")[0]: values for key, values in study.grid.items() if key.endswith(".size")}
     if not sized or "scene_size" in study.grid:
         return None
     folder = _traces_for(study, [{}], cache_dir, progress)[None]
     trace = AccessTrace.load(Path(folder))
-    from tracer.scenes import load
+    from tracer.scenes.catalog import load
 
     placed = place_layout(get_layout(study.layout), trace, load(study.scene))
     levels = {level.name: level for level in study.base_hierarchy().levels}
@@ -462,9 +462,9 @@ def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
 def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     """An NFF file of an SPD scene at another size factor (in the cache folder)."""
     from analyses.traces import cache_root
-    from tracer import spd
-    from tracer.nff import write_nff
-    from tracer.study import PAPER_DEPTH, canonical_scene_name
+    from tracer.scenes import spd
+    from tracer.scenes.nff import write_nff
+    from tracer.scenes.study import PAPER_DEPTH, canonical_scene_name
 
     generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells}
     key = canonical_scene_name(name)

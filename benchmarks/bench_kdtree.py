@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer import spd
-from tracer.kd_sah import _build_sah
-from tracer.kdtree import KdTreeConfig, build_params, builder_inputs, default_tree_depth
-from tracer.scenes import PAPER_SCENES, load
+from tracer.scenes import spd
+from tracer.kd.sah import _build_sah
+from tracer.kd.tree import KdTreeConfig, build_params, builder_inputs, default_tree_depth
+from tracer.scenes.catalog import PAPER_SCENES, load
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from naive_kdtree import build_per_node_sah_kernel  # noqa: E402  (the test-only peer)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from timing import best_of
-from tracer.nff import read_nff
+from tracer.scenes.nff import read_nff
 
 REFERENCE = Path("/work/shared/reference/spd")
 

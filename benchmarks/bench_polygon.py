@@ -22,8 +22,8 @@ TARGET_MB = 500.0
 CHILD = """
 import json, resource, sys, time
 import numpy as np
-from tracer.render import render
-from tracer.scene import Camera, SceneBuilder
+from tracer.rendering.render import render
+from tracer.scenes.model import Camera, SceneBuilder
 
 vertices, size = int(sys.argv[1]), int(sys.argv[2])
 angles = np.linspace(0.0, 2.0 * np.pi, vertices, endpoint=False)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tracer import spd  # noqa: E402
-from tracer.render import render  # noqa: E402
+from tracer.scenes import spd  # noqa: E402
+from tracer.rendering.render import render  # noqa: E402
 
 
 def one(size_factor, size):

@@ -26,7 +26,7 @@ from coherence.layout import get_layout
 from coherence.mappings import MAPPINGS, get_mapping
 from coherence.simulation import SCHEDULERS, Machine, simulate_run
 from coherence.studies import place_layout, study
-from tracer.trace import AccessTrace
+from tracer.trace.access import AccessTrace
 
 
 def balls_trace(size: int, folder: Path):

@@ -18,8 +18,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from timing import best_of  # noqa: E402
 
-from tracer.render import render  # noqa: E402
-from tracer.scenes import load  # noqa: E402
+from tracer.rendering.render import render  # noqa: E402
+from tracer.scenes.catalog import load  # noqa: E402
 
 TARGET_RATIO = 2.0
 

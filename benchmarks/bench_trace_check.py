@@ -23,9 +23,9 @@ import numpy as np
 
 from coherence.studies import study
 from timing import best_of
-from tracer.render import render
-from tracer.scenes import load
-from tracer.trace import AccessTrace, _read_meta, verify_trace
+from tracer.rendering.render import render
+from tracer.scenes.catalog import load
+from tracer.trace.access import AccessTrace, _read_meta, verify_trace
 
 
 def main():

@@ -21,12 +21,12 @@ import time
 import numba
 import numpy as np
 
-from tracer.kdtree import build_kdtree
-from tracer.camera import camera_rays
-from tracer.closest import closest_hit
-from tracer.render import render
-from tracer.scenes import PAPER_SCENES, load
-from tracer.study import STUDY_SCENES
+from tracer.kd.tree import build_kdtree
+from tracer.rendering.camera import camera_rays
+from tracer.kd.closest import closest_hit
+from tracer.rendering.render import render
+from tracer.scenes.catalog import PAPER_SCENES, load
+from tracer.scenes.study import STUDY_SCENES
 
 
 def _study_tests_1e6(name: str) -> float:

@@ -6,7 +6,7 @@ Renders balls, tetra and shell with every candidate rule (spatial-median
 tree: depth limit, leaf size, clipping, axis rule, splitting down to the
 depth limit or stopping where a plane separates nothing; shadow rays any-hit or
 nearest) at a reduced image size, without logging, and counts intersection
-tests (ray-primitive tests, see :mod:`tracer.workload`). Tests scale with the
+tests (ray-primitive tests, see :mod:`tracer.rendering.workload`). Tests scale with the
 pixel count, so a count at ``size`` x ``size`` is scaled by
 ``(512 / size)**2`` to the study's 512 x 512 (one ray per pixel); the script
 checks that scaling for the chosen rule at ``--check-size``. The score of a
@@ -35,11 +35,11 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tracer import scenes  # noqa: E402
-from tracer.kdtree import KdTreeConfig  # noqa: E402
-from tracer.render import render  # noqa: E402
-from tracer.study import STUDY_SCENES  # noqa: E402
-from tracer.workload import Workload  # noqa: E402
+from tracer.scenes import catalog as scenes  # noqa: E402
+from tracer.kd.tree import KdTreeConfig  # noqa: E402
+from tracer.rendering.render import render  # noqa: E402
+from tracer.scenes.study import STUDY_SCENES  # noqa: E402
+from tracer.rendering.workload import Workload  # noqa: E402
 
 FITTED = ("balls", "tetra", "shell")
 STAND_INS = ("room", "fluid")

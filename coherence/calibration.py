@@ -17,7 +17,7 @@ for every run: the honest error of a model fitted to few measurements.
 Strip times: three fitted costs (per intersection test, per ray, per kd-node
 visit); every other operation is tied to the test cost by the ratio of
 floating-point operations in its routine (:data:`OPERATION_FLOPS`, counted by
-hand in ``tracer/geometry.py`` and ``tracer/whitted.py``), except the square
+hand in ``tracer/rendering/geometry.py`` and ``tracer/rendering/whitted.py``), except the square
 root a sphere or cone test takes when its quadratic has real roots: the
 21164 has no square-root instruction, so that path pays a fixed
 :data:`coherence.cost.SQUARE_ROOT_CYCLES_21164` on top. The share of tests

@@ -9,7 +9,7 @@ latency changes one place.
 
 ``CostModel.calibrate`` fits the per-operation cycles by non-negative least
 squares to measured times, as the study's sequential times
-(:data:`tracer.study.STUDY_SCENES`) can be fitted with traces of the five scenes.
+(:data:`tracer.scenes.study.STUDY_SCENES`) can be fitted with traces of the five scenes.
 """
 from __future__ import annotations
 
@@ -204,7 +204,7 @@ def alpha8400() -> CostModel:
     Cycle counts are first guesses scaled to the study's slow tracer (about
     500 cycles per intersection test all told); refit them with
     :meth:`CostModel.calibrate` against the study's sequential times
-    (:data:`tracer.study.STUDY_SCENES`).
+    (:data:`tracer.scenes.study.STUDY_SCENES`).
     A test that takes a square root pays the 21164's software root on top
     (:data:`SQUARE_ROOT_CYCLES_21164`).
     """

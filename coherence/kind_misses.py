@@ -18,7 +18,7 @@ from numba import njit
 from cachesim import Hierarchy
 from cachesim.simulate import simulate
 from coherence.layout import PlacedLayout
-from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, RecordKind
+from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, RecordKind
 
 
 def process_pixels(distribution, task_owner=None) -> list[np.ndarray]:
@@ -103,7 +103,7 @@ def misses_by_kind(trace, placed: PlacedLayout, hierarchy: Hierarchy, distributi
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
     placed : PlacedLayout
     hierarchy : Hierarchy
         Every process gets a cold copy.
@@ -115,7 +115,7 @@ def misses_by_kind(trace, placed: PlacedLayout, hierarchy: Hierarchy, distributi
     -------
     DataFrame
         One row per (level, kind) with any accesses: ``level`` (name),
-        ``kind`` (lower-case :class:`~tracer.records.RecordKind` name),
+        ``kind`` (lower-case :class:`~tracer.trace.records.RecordKind` name),
         ``accesses``, ``misses`` (accesses the level did not serve).
     """
     table = misses_by_kind_per_layout(trace, {"": placed}, hierarchy, distribution, task_owner)

@@ -20,7 +20,7 @@ row-major by default; tiled, Morton or blocked) places them, see
 ``texture`` out gets the compact sizes.
 
 Ray stack to frame buffer are the tracer's own per-ray data, logged only by the
-``study1997`` workload (:mod:`tracer.workload`). The ``alpha1997`` sizes
+``study1997`` workload (:mod:`tracer.rendering.workload`). The ``alpha1997`` sizes
 follow the C struct rules spelled out in ``docs/memory_image.md``; they
 were fixed before any fitting. The study's code is not public:
 this is a plausible tracer of its time on the 64-bit Alpha, not its code.
@@ -35,7 +35,7 @@ from numba import njit
 
 from coherence.texture_layout import TextureLayout
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
-from tracer.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
+from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
 
@@ -101,7 +101,7 @@ class MemoryLayout:
     Parameters
     ----------
     records : dict of str to RecordLayout
-        One entry per :class:`tracer.trace.RecordKind` name (lower case:
+        One entry per :class:`tracer.trace.access.RecordKind` name (lower case:
         ``kd_node``, ``index_entry``, ``sphere``, ``triangle``, ``polygon``,
         ``patch``, ``cone``, ``material``, ``light``, ``ray_stack``,
         ``hit_record``, ``shading_temp``, ``frame_buffer``, and optionally
@@ -418,7 +418,7 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
 
     ``writes`` (bool, shape ``buffer.shape``, or (0,) to leave the flags out)
     receives each address's write flag: every line of a record whose write
-    flag is set (:func:`tracer.records.record_is_write`) is written. Both
+    flag is set (:func:`tracer.trace.records.record_is_write`) is written. Both
     buffers are replaced together when too short.
 
     Returns

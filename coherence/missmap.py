@@ -117,7 +117,7 @@ def miss_map(trace, mapping, n_processes: int, *, hierarchy="alpha21164", layout
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
         Per-pixel access logs of a W x H image.
     mapping : str or coherence.mappings.Mapping
         The work distribution (a name of :data:`coherence.mappings.MAPPINGS`
@@ -129,7 +129,7 @@ def miss_map(trace, mapping, n_processes: int, *, hierarchy="alpha21164", layout
     machine : coherence.simulation.Machine, optional
         CPUs, scheduler and background load (default ``Machine()``: 8 idle
         CPUs). The same machine as a study's gives that study's run.
-    scene : tracer.scene.Scene, optional
+    scene : tracer.scenes.model.Scene, optional
         For exact polygon sizes in the layout and the map's scene name
         (default: the name in the trace's metadata).
 

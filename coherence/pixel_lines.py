@@ -61,7 +61,7 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
     placed : PlacedLayout
         Where the trace's records live (its records are checked against it).
     line_size : int

@@ -9,7 +9,7 @@
   CPU the process runs on; its time is its compute cycles (cost model) plus
   the latency of the level that served each read (memory latency for the
   last level's misses). Written records (the write flag of
-  :mod:`tracer.records`: the study-era tracer's ray stack, hit records and
+  :mod:`tracer.trace.records`: the study-era tracer's ray stack, hit records and
   frame buffer) are writes to the caches, which allocate them as the
   hierarchy says; a write costs the first level's latency, as a store
   retired into the 21164's write buffer does. A hierarchy with a data TLB
@@ -277,7 +277,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
         Per-pixel access logs (``pixel_offsets`` (P + 1,), ``records`` (N,),
         ``counters`` (P, K)).
     distribution : Distribution
@@ -313,7 +313,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         dispatch_cycles, user_cycles, user_seconds, finish_cycles.
     """
     if counter_names is None:
-        from tracer.trace import COUNTER_NAMES as counter_names
+        from tracer.trace.access import COUNTER_NAMES as counter_names
     n_pixels = trace.width * trace.height
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "

@@ -22,7 +22,7 @@ from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import require_int
-from tracer.trace import COUNTER_NAMES, RecordKind
+from tracer.trace.access import COUNTER_NAMES, RecordKind
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
 
     Parameters
     ----------
-    trace : tracer.trace.AccessTrace
+    trace : tracer.trace.access.AccessTrace
     mappings : sequence of str or Mapping
         Names (``S``, ``P``, ``R``, ``B``, ``DB``, ``hilbert``, ...) or
         mapping objects.
@@ -87,7 +87,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     machine : Machine, optional
         CPUs, time slice, scheduler and background load (default: 8 idle
         CPUs sharing one run queue; see :class:`~coherence.simulation.Machine`).
-    scene : tracer.scene.Scene, optional
+    scene : tracer.scenes.model.Scene, optional
         For exact polygon sizes in the layout.
     progress : bool
         Show a progress bar on stderr.
@@ -99,7 +99,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         trace from ``trace_folder`` where it executes. The results are the
         same as a local study's.
     trace_folder : path, optional
-        Where ``trace`` was saved (:meth:`~tracer.trace.AccessTrace.save`);
+        Where ``trace`` was saved (:meth:`~tracer.trace.access.AccessTrace.save`);
         needed with ``executor``, and must be readable there.
     shared_lines_budget : int
         Bytes the runs may share in line addresses worked out once
@@ -205,7 +205,7 @@ def simulate_stored(trace_folder: str, distribution, hierarchy, placed, cost, ma
     A task for an executor: the trace is loaded (memory-mapped, checked) where
     the task runs, once per process, instead of travelling with the task.
     """
-    from tracer.trace import AccessTrace
+    from tracer.trace.access import AccessTrace
 
     folder = os.path.abspath(trace_folder)
     key = (folder, os.stat(os.path.join(folder, "meta.json")).st_mtime_ns)  # a trace saved again is loaded again

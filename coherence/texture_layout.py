@@ -2,7 +2,7 @@
 
 A trace names a texel by its *global number*: textures one after another,
 each texture's mip levels from the finest, each level row-major from its top
-row (``tracer.texture``). A :class:`TextureLayout` says where each of those
+row (``tracer.rendering.texture``). A :class:`TextureLayout` says where each of those
 texels sits in the texel region, in texels from the region's start; the
 :class:`~coherence.layout.MemoryLayout` multiplies by the texel size.
 

@@ -1,4 +1,4 @@
-"""The per-node SAH kd-tree builder: the slow peer of ``tracer.kd_sah._build_sah``.
+"""The per-node SAH kd-tree builder: the slow peer of ``tracer.kd.sah._build_sah``.
 
 Every node clips its primitives to its box and sorts their events there
 (O(m log m) per node, O(N log^2 N) in all), which is how the SAH builder
@@ -16,10 +16,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_build import (_clip_members, _emit_leaf, _partition, new_per_node_build, open_node, push_node)
-from tracer.kd_nodes import set_interior
-from tracer.kd_split import _area, _axis_events, _sah_sweep, _settle_split, new_clip_scratch
-from tracer.kdtree import build_params, builder_inputs, resolve_config
+from tracer.kd.build import (_clip_members, _emit_leaf, _partition, new_per_node_build, open_node, push_node)
+from tracer.kd.nodes import set_interior
+from tracer.kd.split import _area, _axis_events, _sah_sweep, _settle_split, new_clip_scratch
+from tracer.kd.tree import build_params, builder_inputs, resolve_config
 
 
 class EventScratch(NamedTuple):

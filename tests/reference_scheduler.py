@@ -12,7 +12,7 @@ import numpy as np
 
 from reference_cache import ReferenceLevel
 from reference_tlb import ReferenceTlb
-from tracer.records import WRITE_FLAG
+from tracer.trace.records import WRITE_FLAG
 
 BACKGROUND_BASE = 1 << 56
 BACKGROUND_SPACING = 1 << 48

@@ -1,9 +1,9 @@
-"""Small seeded scenes for tracer tests, built with :class:`tracer.scene.SceneBuilder`."""
+"""Small seeded scenes for tracer tests, built with :class:`tracer.scenes.model.SceneBuilder`."""
 from __future__ import annotations
 
 import numpy as np
 
-from tracer.scene import Camera, Material, SceneBuilder
+from tracer.scenes.model import Camera, Material, SceneBuilder
 
 KINDS = ("sphere", "triangle", "polygon", "patch", "cone")
 

@@ -33,7 +33,7 @@ OVER_THE_LIMIT_FOR_NOW = {
     "coherence/studies.py:study",
     "analyses/crossover.py:crossover_study",
     # H2 (the renderer's options as one object)
-    "tracer/render.py:render",
+    "tracer/rendering/render.py:render",
 }
 
 #: Files allowed a pointer for now, each with the helper who removes it.

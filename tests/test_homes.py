@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tracer.study import STUDY_SCENES
+from tracer.scenes.study import STUDY_SCENES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -19,7 +19,7 @@ def _help(*command: str) -> str:
 
 
 def test_paper_help_quotes_the_study_table():
-    """``coherence paper --help`` names the fitting targets from ``tracer.study``'s
+    """``coherence paper --help`` names the fitting targets from ``tracer.scenes.study``'s
     table: every scene's sequential S time and the five scenes. Fails if
     ``HelpFormatter._format_text`` stops expanding the epilog's names (the
     help then prints ``%(study_times)s``)."""
@@ -41,7 +41,7 @@ def test_memory_image_page_shows_the_layout_table():
     ``compact`` and ``alpha1997`` sizes are the code's. Fails if the
     ``alpha1997`` sphere in ``PRESET_RECORDS`` becomes ``RecordLayout(96, 8)``."""
     from coherence.layout import get_layout
-    from tracer.records import RecordKind
+    from tracer.trace.records import RecordKind
 
     rows = {}
     for line in (ROOT / "docs" / "memory_image.md").read_text(encoding="utf-8").splitlines():

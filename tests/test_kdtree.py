@@ -7,9 +7,9 @@ import pytest
 from jit_mode import shrink
 from scene_factory import KINDS, one_sphere, random_rays, random_scene
 from naive_kdtree import build_per_node_sah
-from tracer.kdtree import KdTreeConfig, build_kdtree, default_tree_depth
-from tracer.closest import closest_hit, closest_hit_bruteforce
-from tracer.scene import ElementKind, Material, Scene, SceneBuilder
+from tracer.kd.tree import KdTreeConfig, build_kdtree, default_tree_depth
+from tracer.kd.closest import closest_hit, closest_hit_bruteforce
+from tracer.scenes.model import ElementKind, Material, Scene, SceneBuilder
 
 CONFIGS = {
     "sah": KdTreeConfig(),
@@ -241,7 +241,7 @@ def _sah_costs(boxes_lo, boxes_hi, lo, hi, axis, sides, config):
     its counts are taken at that side and its areas at the float32 plane the
     tree would store. (Where rounding moves the plane past box sides, the
     partition then differs from the count, e.g. a side on a face of the
-    float64 root box seen as an empty cut; see ``tracer.kd_split._sah_sweep``.)
+    float64 root box seen as an empty cut; see ``tracer.kd.split._sah_sweep``.)
     A primitive lying in the plane is put left, then right; the cheaper counts.
     """
     a = boxes_lo[:, axis][None, :]

@@ -5,8 +5,8 @@ import pytest
 
 from coherence.cost import CostModel, alpha8400, get_cost_model, modern
 from coherence.layout import MemoryLayout, RecordLayout, get_layout, record_counts_of
-from tracer.trace import COUNTER_NAMES, RecordKind, pack
-from tracer.records import KIND_SHIFT
+from tracer.trace.access import COUNTER_NAMES, RecordKind, pack
+from tracer.trace.records import KIND_SHIFT
 
 
 def reference_addresses(placed, records, line_size):
@@ -157,7 +157,7 @@ def test_calibrate_with_fixed_costs_and_errors():
 
 def test_render_metadata_counts_every_record_kind():
     from scene_factory import random_scene
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = random_scene(n=40, seed=3)
     trace = render(scene, size=(12, 12)).trace
@@ -171,7 +171,7 @@ def test_render_metadata_counts_every_record_kind():
 
 def test_record_lines_and_writes_flag_every_line_of_a_written_record():
     from coherence.layout import record_lines, record_lines_and_writes
-    from tracer.records import pack
+    from tracer.trace.records import pack
 
     rng = np.random.default_rng(11)
     placed = get_layout("alpha1997").place({kind: 50 for kind in RecordKind}, textures=[[(10, 5)]])
@@ -199,7 +199,7 @@ def test_record_lines_equal_a_slow_reference_whether_counted_first_or_not(shift)
     # enough lets it fill straight away. Either way: every line of every
     # record, in order, each flagged as its record is.
     from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
-    from tracer.records import pack
+    from tracer.trace.records import pack
 
     rng = np.random.default_rng(shift)
     n_vertices = rng.integers(3, 60, 30)

@@ -18,7 +18,7 @@ from coherence.layout import get_layout  # noqa: E402
 from coherence.mappings import DynamicBlock, Pixel  # noqa: E402
 from coherence.simulation import Machine, simulate_run  # noqa: E402
 from coherence.studies import place_layout  # noqa: E402
-from tracer.trace import COUNTER_NAMES, AccessTrace  # noqa: E402
+from tracer.trace.access import COUNTER_NAMES, AccessTrace  # noqa: E402
 
 from reference_scheduler import reference_schedule  # noqa: E402
 from trace_factory import SMALL, random_trace  # noqa: E402
@@ -49,9 +49,9 @@ def test_miss_map_equals_the_reference_schedule(mapping, background, hierarchy):
 
 
 def test_a_textured_scene_maps_its_texel_misses_too():
-    from tracer.records import RecordKind, unpack
-    from tracer.render import render
-    from tracer.scenes import load
+    from tracer.trace.records import RecordKind, unpack
+    from tracer.rendering.render import render
+    from tracer.scenes.catalog import load
 
     scene = load("balls-textured")
     trace = render(scene, size=8).trace

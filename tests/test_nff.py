@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tracer.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
-from tracer.scene import ElementKind, Material, SceneBuilder, scenes_equal
+from tracer.scenes.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
+from tracer.scenes.model import ElementKind, Material, SceneBuilder, scenes_equal
 
 # Copies of ../shared/reference/spd (output of the original SPD generators).
 REFERENCE = Path(__file__).resolve().parent / "data" / "spd"
@@ -341,8 +341,8 @@ def _either(reader, text):
 
 
 def _positioned(text):
-    from tracer.nff import _normalise_line_breaks, _parse_positioned
-    from tracer.nff_fast import assemble
+    from tracer.scenes.nff import _normalise_line_breaks, _parse_positioned
+    from tracer.scenes.nff_fast import assemble
 
     parts, _ = _parse_positioned(_normalise_line_breaks(text), "<string>")
     return assemble(parts, "scene", 5)

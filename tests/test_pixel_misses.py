@@ -13,7 +13,7 @@ from cachesim import CacheLevel, Hierarchy
 from coherence.mappings import Strip
 from coherence.pixel_lines import pixel_lines
 from coherence.simulation import Machine, simulate_run
-from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
 from reference_scheduler import reference_schedule
 from test_scheduler import COST, INCLUSIVE, MAPPINGS, SMALL_TLB, placed_for

@@ -1,4 +1,4 @@
-"""Which polygons are convex (tracer.polygons.polygon_even_odd_axes), against a slow obvious reference."""
+"""Which polygons are convex (tracer.rendering.polygons.polygon_even_odd_axes), against a slow obvious reference."""
 from __future__ import annotations
 
 import tracemalloc
@@ -6,7 +6,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from tracer.polygons import CONVEX, CONVEXITY_TOLERANCE, polygon_even_odd_axes
+from tracer.rendering.polygons import CONVEX, CONVEXITY_TOLERANCE, polygon_even_odd_axes
 
 
 def _axes_reference(offsets, vertices, normals):

@@ -2,7 +2,7 @@
 import numpy as np
 from numba import njit
 
-from tracer.records import COUNTER_NAMES, INDEX_MASK, Counter, RecordKind, make_record, pack, record_id, record_kind, unpack
+from tracer.trace.records import COUNTER_NAMES, INDEX_MASK, Counter, RecordKind, make_record, pack, record_id, record_kind, unpack
 
 
 @njit
@@ -44,7 +44,7 @@ def test_counter_names_follow_the_enum():
 
 
 def test_every_kind_has_its_counter():
-    from tracer.records import COUNTER_OF_KIND
+    from tracer.trace.records import COUNTER_OF_KIND
 
     assert set(COUNTER_OF_KIND) == set(RecordKind)
     assert len(set(COUNTER_OF_KIND.values())) == len(RecordKind)
@@ -52,7 +52,7 @@ def test_every_kind_has_its_counter():
 
 
 def test_write_flag_round_trips_and_leaves_kind_and_id_alone():
-    from tracer.records import WRITE_FLAG, make_write_record, record_is_write
+    from tracer.trace.records import WRITE_FLAG, make_write_record, record_is_write
 
     kinds = np.array([0, 3, 8, 8])
     ids = np.array([0, 5, INDEX_MASK, 12])

@@ -23,8 +23,8 @@ import pytest
 
 from analyses import traces
 from rtcommon.files import remove_stale_temporaries, temp_prefix, write_files_atomic
-from tracer.records import INDEX_MASK, KIND_SHIFT, RecordKind, pack
-from tracer.trace import AccessTrace, TraceIntegrityError, _first_record_out_of_range, _index_limits
+from tracer.trace.records import INDEX_MASK, KIND_SHIFT, RecordKind, pack
+from tracer.trace.access import AccessTrace, TraceIntegrityError, _first_record_out_of_range, _index_limits
 from trace_factory import random_trace
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -348,8 +348,8 @@ _RUNNER = textwrap.dedent('''
 @pytest.fixture(scope="module")
 def scratch(tmp_path_factory):
     """The scratch folder the table's paths are relative to."""
-    from tracer.render import render
-    from tracer.scenes import load
+    from tracer.rendering.render import render
+    from tracer.scenes.catalog import load
 
     folder = tmp_path_factory.mktemp("cli")
     (folder / "afile").write_text("x\n")
@@ -488,7 +488,7 @@ def test_paper_help_lists_only_the_scenes_paper_accepts(capsys):
     import re
 
     from analyses.paper_study import check_scenes
-    from tracer.scenes import NAMED_SCENES, PAPER_SCENES
+    from tracer.scenes.catalog import NAMED_SCENES, PAPER_SCENES
 
     listed = [word for word in re.findall(r"[a-z][a-z-]*", _scenes_help(capsys)) if word in NAMED_SCENES]
     assert sorted(listed) == sorted(PAPER_SCENES)

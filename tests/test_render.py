@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from scene_factory import KINDS, one_sphere, random_scene
-from tracer.kdtree import KdTreeConfig, build_kdtree
-import tracer.render as render_module
-from tracer.camera import camera_rays
-from tracer.closest import closest_hit
-from tracer.render import render, save_png
-from tracer.records import FORMAT_VERSION, INDEX_MASK
-from tracer.trace import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, TraceWriter, pack, unpack
+from tracer.kd.tree import KdTreeConfig, build_kdtree
+import tracer.rendering.render as render_module
+from tracer.rendering.camera import camera_rays
+from tracer.kd.closest import closest_hit
+from tracer.rendering.render import render, save_png
+from tracer.trace.records import FORMAT_VERSION, INDEX_MASK
+from tracer.trace.access import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, TraceWriter, pack, unpack
 
 
 @pytest.fixture(scope="module")
@@ -253,7 +253,7 @@ def test_save_png(tmp_path):
 def test_huge_coordinates_are_refused_before_any_overflow(field, value):
     import warnings
 
-    from tracer.scene import Material, SceneBuilder
+    from tracer.scenes.model import Material, SceneBuilder
     from scene_factory import one_sphere
 
     b = SceneBuilder("huge")

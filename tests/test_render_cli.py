@@ -4,7 +4,7 @@ import json
 import pytest
 
 from analyses.cli import main
-from tracer.trace import AccessTrace
+from tracer.trace.access import AccessTrace
 
 
 def test_render_named_scene_json_png_and_trace(tmp_path, capsys):
@@ -23,7 +23,7 @@ def test_render_named_scene_json_png_and_trace(tmp_path, capsys):
 
 def test_render_nff_file_table(tmp_path, capsys):
     from scene_factory import random_scene
-    from tracer.nff import write_nff
+    from tracer.scenes.nff import write_nff
     path = tmp_path / "mini.nff"
     write_nff(random_scene(n=20, seed=3), path)
     assert main(["render", str(path), "--size", "8", "--kd", "median", "--no-log"]) == 0
@@ -47,7 +47,7 @@ def test_render_help_has_examples(capsys):
 
 @pytest.mark.jit_only  # two kd-tree builds of balls (7,381 elements)
 def test_render_epsilon_option(capsys):
-    from tracer.render import SPD_EPSILON
+    from tracer.rendering.render import SPD_EPSILON
     assert main(["render", "balls", "--size", "8", "--no-log", "--epsilon", "spd", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["epsilon"] == SPD_EPSILON
     assert main(["render", "balls", "--size", "8", "--no-log", "--epsilon", "0.002", "--json"]) == 0

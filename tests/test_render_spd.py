@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracer.nff import read_nff
-from tracer.render import SPD_EPSILON, render
-from tracer.scenes import load
+from tracer.scenes.nff import read_nff
+from tracer.rendering.render import SPD_EPSILON, render
+from tracer.scenes.catalog import load
 
 # Copies of ../shared/reference/spd (output of the original SPD generators).
 SPD = Path(__file__).resolve().parent / "data" / "spd"
@@ -136,9 +136,9 @@ def _even_odd_reference(scene, origin, directions, chunk=96):
 
 
 def _primary_agreement(scene, size):
-    from tracer.camera import camera_rays
-    from tracer.closest import closest_hit
-    from tracer.scene import ElementKind
+    from tracer.rendering.camera import camera_rays
+    from tracer.kd.closest import closest_hit
+    from tracer.scenes.model import ElementKind
 
     origin, directions = camera_rays(scene, size)
     ours = closest_hit(scene, None, np.broadcast_to(origin, directions.reshape(-1, 3).shape),
@@ -150,7 +150,7 @@ def _primary_agreement(scene, size):
 
 
 def _flat_scene(outline, size=2.0):
-    from tracer.scene import Camera, SceneBuilder
+    from tracer.scenes.model import Camera, SceneBuilder
 
     builder = SceneBuilder("outline")
     builder.camera = Camera(eye=(0.3, -0.2, 6.0), look_at=(0.0, 0.0, 0.0), up=(0, 1, 0), angle=45,
@@ -177,9 +177,9 @@ def test_concave_outlines_match_an_independent_even_odd_test(outline):
 def test_concave_patches_match_an_independent_even_odd_test(outline):
     # the same outline as a patch (vertex normals): element 0 is the patch, element 1 the floor, as
     # polygons 0 and 1 are in the all-polygon twin the reference reads
-    from tracer.camera import camera_rays
-    from tracer.closest import closest_hit
-    from tracer.scene import Camera, SceneBuilder
+    from tracer.rendering.camera import camera_rays
+    from tracer.kd.closest import closest_hit
+    from tracer.scenes.model import Camera, SceneBuilder
 
     twin = _flat_scene(outline)
     builder = SceneBuilder("outline-patch")
@@ -198,7 +198,7 @@ def test_concave_patches_match_an_independent_even_odd_test(outline):
 
 
 def test_convexity_is_decided_per_polygon():
-    from tracer.geometry import CONVEX, prepare_geometry
+    from tracer.rendering.geometry import CONVEX, prepare_geometry
 
     square = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
     nearly = [(-1, -1), (0, -1 - 1e-13), (1, -1), (1, 1), (-1, 1)]  # a collinear vertex, float noise

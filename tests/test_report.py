@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import tracer.render
+import tracer.rendering.render
 from analyses import traces
 from analyses.report import RESULT_COLUMNS, SECTIONS, build_report
 from analyses.verdict import format_percent, verdict
@@ -30,7 +30,7 @@ def reports(tmp_path_factory):
     first, second = root / "first", root / "second"
     assert main(["report", "balls", *ARGS, "--out", str(first), "--cache", str(cache)]) == 0
     patch = pytest.MonkeyPatch()
-    patch.setattr(tracer.render, "render", _no_render)
+    patch.setattr(tracer.rendering.render, "render", _no_render)
     try:
         assert main(["report", "balls", *ARGS, "--out", str(second), "--cache", str(cache)]) == 0
     finally:
@@ -165,9 +165,9 @@ def test_summary_records_parameters_versions_and_headline(reports):
 
 
 def test_report_with_the_study_workload(tmp_path):
-    from tracer.records import RecordKind, unpack
-    from tracer.trace import AccessTrace
-    from tracer.workload import WORKLOADS
+    from tracer.trace.records import RecordKind, unpack
+    from tracer.trace.access import AccessTrace
+    from tracer.rendering.workload import WORKLOADS
 
     out = tmp_path / "out"
     assert main(["report", "tetra", "--size", "16", "--processes", "2", "--mappings", "S", "R", "--workload",
@@ -187,7 +187,7 @@ def test_trace_cache_hit_and_key(tmp_path, monkeypatch):
     assert traces.default_cache_dir() == tmp_path / "env" / "traces"
     scene, trace, info = traces.cached_trace("tetra", 8, progress=False)
     assert not info["cached"] and info["path"].startswith(str(tmp_path / "env"))
-    monkeypatch.setattr(tracer.render, "render", _no_render)
+    monkeypatch.setattr(tracer.rendering.render, "render", _no_render)
     _, again, info2 = traces.cached_trace("tetra", 8, progress=False)
     assert info2["cached"] and info2["key"] == info["key"]
     assert isinstance(again.records, np.memmap)
@@ -220,7 +220,7 @@ def test_trace_key_follows_file_content(tmp_path):
     (["report", "balls", "--memory-budget", "nan"], "--memory-budget must be at least 704 MB, got nan"),
 ])
 def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(tracer.render, "render", _no_render)
+    monkeypatch.setattr(tracer.rendering.render, "render", _no_render)
     assert main([*argv, "--size", "8", "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "c")]) == 2
     error = capsys.readouterr().err
     assert "coherence report: error:" in error and message in error
@@ -229,7 +229,7 @@ def test_user_errors_come_before_rendering(argv, message, tmp_path, monkeypatch,
 
 def test_budget_too_small_for_the_image_fails_before_rendering(tmp_path, monkeypatch):
     # The budget is the process's; at 4096^2 the runs alone need more than 1000 MB.
-    monkeypatch.setattr(tracer.render, "render", _no_render)
+    monkeypatch.setattr(tracer.rendering.render, "render", _no_render)
     with pytest.raises(ValueError, match=r"memory_budget \(--memory-budget\) of 1000 MB is too small.*give at least"):
         build_report("balls", 4096, memory_budget=1000 << 20, out=tmp_path / "out", cache_dir=tmp_path / "c",
                      progress=False)
@@ -237,7 +237,7 @@ def test_budget_too_small_for_the_image_fails_before_rendering(tmp_path, monkeyp
 
 
 def test_output_path_that_is_a_file(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(tracer.render, "render", _no_render)
+    monkeypatch.setattr(tracer.rendering.render, "render", _no_render)
     target = tmp_path / "taken"
     target.write_text("not a folder")
     assert main(["report", "balls", "--size", "8", "--out", str(target), "--cache", str(tmp_path / "c")]) == 2

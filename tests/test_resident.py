@@ -81,7 +81,7 @@ def test_bad_limits_are_refused(mapped):
 @linux_only
 def test_loading_a_trace_checks_it_without_keeping_it_resident(tmp_path):
     # AccessTrace.load hashes every record; the pages it checked must not stay resident.
-    from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
+    from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
 
     rng = np.random.default_rng(3)
     n_pixels, per_pixel = 64 * 64, 3200  # 13.1 M records, 52 MB
@@ -133,8 +133,8 @@ def test_runs_at_once_fit_the_budget():
 
 
 def _synthetic_trace(folder, size):
-    from tracer.records import RecordKind, pack
-    from tracer.trace import COUNTER_NAMES, AccessTrace
+    from tracer.trace.records import RecordKind, pack
+    from tracer.trace.access import COUNTER_NAMES, AccessTrace
 
     rng = np.random.default_rng(size)
     kinds = np.array([RecordKind.KD_NODE, RecordKind.SPHERE, RecordKind.MATERIAL], dtype=np.int64)

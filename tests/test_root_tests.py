@@ -13,10 +13,10 @@ import pytest
 from scene_factory import one_sphere, random_scene
 from coherence.calibration import STUDY1997_COSTS
 from coherence.cost import SQUARE_ROOT_CYCLES_21164, CostModel, alpha8400, modern
-from tracer.camera import camera_rays
-from tracer.geometry import hit_sphere
-from tracer.render import render
-from tracer.trace import COUNTER_NAMES, RecordKind, unpack
+from tracer.rendering.camera import camera_rays
+from tracer.rendering.geometry import hit_sphere
+from tracer.rendering.render import render
+from tracer.trace.access import COUNTER_NAMES, RecordKind, unpack
 
 
 def _ray(origin, direction):

@@ -6,8 +6,8 @@ import json
 import pytest
 
 from analyses import cli
-from tracer.nff import read_nff
-from tracer.scenes import load
+from tracer.scenes.nff import read_nff
+from tracer.scenes.catalog import load
 
 
 def test_table_shows_counts_lights_depth_and_box(capsys):

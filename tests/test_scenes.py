@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracer import spd
-from tracer.nff import format_nff, parse_nff, read_nff, write_nff
-from tracer.obj import OBJError, read_obj
-from tracer.scene import ARRAY_FIELDS, scenes_equal
-from tracer.scenes import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, load
-from tracer.standins import fluid, room
+from tracer.scenes import spd
+from tracer.scenes.nff import format_nff, parse_nff, read_nff, write_nff
+from tracer.scenes.obj import OBJError, read_obj
+from tracer.scenes.model import ARRAY_FIELDS, scenes_equal
+from tracer.scenes.catalog import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, load
+from tracer.scenes.standins import fluid, room
 
 # Copies of ../shared/reference/spd (output of the original SPD generators).
 REFERENCE = Path(__file__).resolve().parent / "data" / "spd"

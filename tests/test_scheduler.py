@@ -11,7 +11,7 @@ from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip
 from coherence.metrics import run_summary
 from coherence.pixel_lines import pixel_lines
 from coherence.simulation import Machine, simulate_run
-from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
 from reference_scheduler import reference_schedule
 from trace_factory import SMALL, random_trace

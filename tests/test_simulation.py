@@ -15,7 +15,7 @@ from coherence.distribution import Distribution
 from coherence.mappings import get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.simulation import Machine, simulate_run
-from tracer.trace import COUNTER_NAMES, RecordKind
+from tracer.trace.access import COUNTER_NAMES, RecordKind
 
 from trace_factory import SMALL, random_trace
 
@@ -149,7 +149,7 @@ from coherence.mappings import get_mapping
 from coherence.layout import get_layout
 from coherence.cost import CostModel
 from coherence.simulation import Machine, simulate_run
-from tracer.trace import RecordKind
+from tracer.trace.access import RecordKind
 from trace_factory import SMALL
 warnings.simplefilter("ignore")
 trace = random_trace(width=8, height=4, seed=5)

@@ -8,7 +8,7 @@ from coherence.metrics import DECOMPOSITION_COLUMNS, EFFICIENCY_FACTORS, LOSS_CO
 from coherence.simulation import Machine
 from coherence.studies import study
 from trace_factory import SMALL, random_trace
-from tracer.trace import COUNTER_NAMES
+from tracer.trace.access import COUNTER_NAMES
 
 
 @pytest.fixture(scope="module")

@@ -10,15 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-import tracer.nff as nff
-from tracer.images import png_bytes, read_image, write_png
-from tracer.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
-from tracer.nff_fast import Fallback, parse_fast
-from tracer.obj import OBJError, read_obj
-from tracer.records import RecordKind
-from tracer.render import render
-from tracer.scene import Camera, ElementKind, Material, SceneBuilder, scenes_equal, untextured
-from tracer.texture import procedural_texture
+import tracer.scenes.nff as nff
+from tracer.scenes.images import png_bytes, read_image, write_png
+from tracer.scenes.nff import NFFError, format_nff, parse_nff, read_nff, write_nff
+from tracer.scenes.nff_fast import Fallback, parse_fast
+from tracer.scenes.obj import OBJError, read_obj
+from tracer.trace.records import RecordKind
+from tracer.rendering.render import render
+from tracer.scenes.model import Camera, ElementKind, Material, SceneBuilder, scenes_equal, untextured
+from tracer.rendering.texture import procedural_texture
 
 DATA = Path(__file__).resolve().parent / "data" / "textures"
 NAN = np.nan
@@ -210,7 +210,7 @@ def _plain_text():
 
 
 def test_plain_nff_takes_the_fast_path_with_the_positional_readers_result(monkeypatch):
-    from tracer.nff_fast import assemble
+    from tracer.scenes.nff_fast import assemble
 
     text = _plain_text()
     positional, _ = nff._parse_positioned(text, "<string>")

@@ -11,17 +11,17 @@ from coherence.layout import get_layout
 from coherence.studies import place_layout
 from coherence.texture_layout import TextureLayout
 from reference_cache import reference_simulate
-from tracer.records import Counter, RecordKind, make_record, pack, unpack
-from tracer.scene import Material, SceneBuilder
-from tracer.texture import MipChains, TextureFilter, filtered_lookup, halve, mip_chains, procedural_texture
-from tracer.traverse import RecordLog
-from tracer.uv import surface_uv, uv_maps
+from tracer.trace.records import Counter, RecordKind, make_record, pack, unpack
+from tracer.scenes.model import Material, SceneBuilder
+from tracer.rendering.texture import MipChains, TextureFilter, filtered_lookup, halve, mip_chains, procedural_texture
+from tracer.kd.traverse import RecordLog
+from tracer.rendering.uv import surface_uv, uv_maps
 
 
 # ---------------------------------------------------------------- (u, v) and density
 
 def _geometry(scene):
-    from tracer.geometry import prepare_geometry
+    from tracer.rendering.geometry import prepare_geometry
     return prepare_geometry(scene)
 
 
@@ -93,7 +93,7 @@ def test_mip_chain_levels_and_numbering():
 # ---------------------------------------------------------------- filtered lookups
 
 def _reference_lookup(levels, u, v, detail, mode):
-    """Colour and texel reads (level, x, y) of a lookup, by the rules of tracer.texture, in plain Python."""
+    """Colour and texel reads (level, x, y) of a lookup, by the rules of tracer.rendering.texture, in plain Python."""
     coarsest = len(levels) - 1
     level = min(max(detail, 0.0), coarsest)
 
@@ -292,7 +292,7 @@ def test_memory_layout_places_texels_by_its_texture_layout():
 # ---------------------------------------------------------------- rendering and replay
 
 def _small_textured_scene():
-    from tracer.textured import balls_textured
+    from tracer.scenes.textured import balls_textured
 
     scene = balls_textured(floor_size=64, sphere_size=32)
     scene.max_depth = 2
@@ -300,7 +300,7 @@ def _small_textured_scene():
 
 
 def test_textured_render_logs_texels_and_counts_them():
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = _small_textured_scene()
     results = {mode: render(scene, size=24, texture_filter=mode) for mode in ("nearest", "bilinear", "trilinear")}
@@ -315,7 +315,7 @@ def test_textured_render_logs_texels_and_counts_them():
     assert 4 * lookups < results["trilinear"].totals()["texel_reads"] <= 8 * lookups
     # the same rays whatever the filter; the texture changes the picture
     assert results["nearest"].totals()["primary_hits"] == results["trilinear"].totals()["primary_hits"]
-    from tracer.spd import balls
+    from tracer.scenes.spd import balls
     plain = balls()
     plain.max_depth = 2
     assert not np.allclose(render(plain, size=24, log=False).image, results["trilinear"].image)
@@ -323,7 +323,7 @@ def test_textured_render_logs_texels_and_counts_them():
 
 @pytest.mark.parametrize("order", ["linear", "morton", "blocked"])
 def test_textured_trace_replays_exactly_through_cachesim(order):
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = _small_textured_scene()
     trace = render(scene, size=12).trace
@@ -353,7 +353,7 @@ def test_misses_by_kind_equal_a_plain_replay_per_process():
     from cachesim.config import Hierarchy
     from coherence.kind_misses import misses_by_kind, texture_summary
     from coherence.mappings import get_mapping
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = _small_textured_scene()
     trace = render(scene, size=12).trace
@@ -418,7 +418,7 @@ def test_texture_whatif_runs_on_a_small_image(tmp_path):
 def test_misses_per_layout_equal_one_layout_at_a_time():
     from coherence.kind_misses import misses_by_kind, misses_by_kind_per_layout
     from coherence.mappings import get_mapping
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = _small_textured_scene()
     trace = render(scene, size=12).trace
@@ -441,7 +441,7 @@ def test_report_texture_section_tables():
     from analyses.report_texture import LAYOUTS, texture_section
     from coherence.cost import get_cost_model
     from coherence.mappings import get_mapping
-    from tracer.render import render
+    from tracer.rendering.render import render
 
     scene = _small_textured_scene()
     trace = render(scene, size=12).trace
@@ -494,9 +494,9 @@ def test_report_of_a_textured_scene_has_the_texture_section(tmp_path):
 
 
 def test_textured_paper_scenes_round_trip_through_nff(tmp_path):
-    from tracer.nff import read_nff, write_nff
-    from tracer.scene import scenes_equal
-    from tracer.textured import balls_textured, room_textured
+    from tracer.scenes.nff import read_nff, write_nff
+    from tracer.scenes.model import scenes_equal
+    from tracer.scenes.textured import balls_textured, room_textured
 
     for scene in (balls_textured(floor_size=64, sphere_size=32), room_textured(floor_size=32, wall_size=16)):
         path = tmp_path / f"{scene.name}.nff"

@@ -4,13 +4,13 @@ import pytest
 
 from jit_mode import shrink
 from scene_factory import KINDS, random_rays, random_scene
-from tracer import scenes
-from tracer.closest import closest_hit, closest_hit_bruteforce
-from tracer.kdtree import KdTreeConfig, build_kdtree
-from tracer.records import COUNTER_NAMES, COUNTER_OF_KIND, RecordKind, WRITE_FLAG, unpack
-from tracer.render import render
-from tracer.study import PAPER_SCENES
-from tracer.workload import WORKLOADS, Workload, get_workload
+from tracer.scenes import catalog as scenes
+from tracer.kd.closest import closest_hit, closest_hit_bruteforce
+from tracer.kd.tree import KdTreeConfig, build_kdtree
+from tracer.trace.records import COUNTER_NAMES, COUNTER_OF_KIND, RecordKind, WRITE_FLAG, unpack
+from tracer.rendering.render import render
+from tracer.scenes.study import PAPER_SCENES
+from tracer.rendering.workload import WORKLOADS, Workload, get_workload
 
 
 @pytest.fixture(scope="module")
@@ -217,7 +217,7 @@ def test_missing_rays_test_every_object_of_every_leaf_they_cross(config):
     # without mailboxes a ray that hits nothing tests every entry of every
     # leaf its line crosses, however often an object is listed: the slow
     # reference sums the leaf counts of the leaves a slab test says it meets
-    from tracer.camera import camera_rays
+    from tracer.rendering.camera import camera_rays
 
     scene = random_scene(("sphere", "triangle"), n=60, seed=5, size=0.5, extent=3.0)
     tree = build_kdtree(scene, config)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from cachesim import CacheLevel, Hierarchy
-from tracer.trace import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
 
 SMALL = Hierarchy((CacheLevel("L1", 512, 32, 1, latency=2), CacheLevel("L2", 3072, 64, 3, latency=9)),
                   memory_latency=50)

@@ -1,4 +1,4 @@
 """Tracer: scenes, NFF, kd-tree and the instrumented renderer."""
-from tracer.scene import Camera, ElementKind, Scene
+from tracer.scenes.model import Camera, ElementKind, Scene
 
 __all__ = ["Camera", "ElementKind", "Scene"]

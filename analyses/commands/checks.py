@@ -76,8 +76,8 @@ def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_
 
 def check_scene_argument(scene, option: str = "SCENE") -> None:
     """A scene given as a path must be a regular file (a FIFO would hang the reader)."""
-    from tracer.scenes import NAMED_SCENES
-    from tracer.study import canonical_scene_name
+    from tracer.scenes.catalog import NAMED_SCENES
+    from tracer.scenes.study import canonical_scene_name
 
     if scene is None or canonical_scene_name(str(scene)) in NAMED_SCENES:
         return

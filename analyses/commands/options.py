@@ -9,7 +9,7 @@ the difference, so ``--help`` always says why.
 
 Choices come from the registries that define them (hierarchy presets in
 :mod:`cachesim.config`, memory layouts and cost models in :mod:`coherence`,
-kd-tree builders in :mod:`tracer.kdtree`, mappings, study scenes) through
+kd-tree builders in :mod:`tracer.kd.tree`, mappings, study scenes) through
 :class:`RegistryNames`. Those modules load numba, which takes seconds, so the
 names are looked up only when argparse needs them (to check a value or to
 print a subcommand's help): ``coherence --help`` stays instant.
@@ -68,25 +68,25 @@ class RegistryNames(Sequence):
         return ", ".join(str(name) for name in self.names)
 
 
-SCENES = RegistryNames("tracer.scenes", "NAMED_SCENES")
-PAPER_SCENES = RegistryNames("tracer.scenes", "PAPER_SCENES")
+SCENES = RegistryNames("tracer.scenes.catalog", "NAMED_SCENES")
+PAPER_SCENES = RegistryNames("tracer.scenes.catalog", "PAPER_SCENES")
 MAPPINGS = RegistryNames("coherence.mappings", "MAPPINGS")
 DEFAULT_MAPPINGS = RegistryNames("coherence.mappings", "DEFAULT_MAPPINGS")
 HIERARCHIES = RegistryNames("cachesim.config", "PRESETS")
 LAYOUTS = RegistryNames("coherence.layout", "LAYOUTS")
 COST_MODELS = RegistryNames("coherence.cost", "COST_MODELS")
-KD_BUILDERS = RegistryNames("tracer.kdtree", "BUILDERS")
-WORKLOADS = RegistryNames("tracer.workload", "WORKLOADS")
+KD_BUILDERS = RegistryNames("tracer.kd.tree", "BUILDERS")
+WORKLOADS = RegistryNames("tracer.rendering.workload", "WORKLOADS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
 SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
 
 class StudyTimes:
-    """The study's sequential S times in words (``"Balls 345.8 s, ..."``), read from :mod:`tracer.study` when printed."""
+    """The study's sequential S times in words (``"Balls 345.8 s, ..."``), read from :mod:`tracer.scenes.study` when printed."""
 
     def __str__(self) -> str:
-        from tracer.study import STUDY_SCENES
+        from tracer.scenes.study import STUDY_SCENES
 
         return ", ".join(f"{scene.name.capitalize()} {scene.sequential_seconds} s" for scene in STUDY_SCENES.values())
 
@@ -102,7 +102,7 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     ``%(hierarchies)s`` or ``%(paper_processes)s``: the registry's names,
     looked up when the help is printed. A description or epilog may say the
     same, and ``%(study_times)s`` (the study's sequential S times, from
-    :mod:`tracer.study`).
+    :mod:`tracer.scenes.study`).
     """
 
     _REGISTRIES = {"scenes": SCENES, "paper_scenes": PAPER_SCENES, "mappings": MAPPINGS, "default_mappings": DEFAULT_MAPPINGS,
@@ -190,7 +190,7 @@ def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the sc
 
 
 def workload_options(default: str = "modern", why: str = "") -> argparse.ArgumentParser:
-    """``--workload NAME``: the tracer imitated (:data:`tracer.workload.WORKLOADS`); ``why`` explains the default."""
+    """``--workload NAME``: the tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`); ``why`` explains the default."""
     parent = _parent()
     parent.add_argument("--workload", default=default, choices=WORKLOADS, metavar="NAME",
                         help="tracer imitated: %(choices)s; modern = today's SAH tracer, study1997 = the "

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.paper import (DEFAULT_PROCESSES, check_output_folder, check_process_counts, check_scenes,
                                 paper_summary, reproduce, write_paper)
     from coherence import get_mapping
-    from tracer.scenes import PAPER_SCENES
+    from tracer.scenes.catalog import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
     from analyses.commands.checks import check_memory, require_distributed

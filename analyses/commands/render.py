@@ -67,7 +67,7 @@ def register(subparsers) -> None:
 
 
 def _epsilon(text: str) -> float:
-    from tracer.render import SPD_EPSILON
+    from tracer.rendering.render import SPD_EPSILON
 
     if text.strip().lower() == "spd":
         return SPD_EPSILON
@@ -81,7 +81,7 @@ def _epsilon(text: str) -> float:
 
 
 def _png_bytes(image) -> bytes:
-    """The PNG that ``tracer.render.save_png`` writes, as bytes (written atomically by the caller)."""
+    """The PNG that ``tracer.rendering.render.save_png`` writes, as bytes (written atomically by the caller)."""
     import io
 
     import matplotlib.pyplot as plt
@@ -94,9 +94,9 @@ def _png_bytes(image) -> bytes:
 
 def _load_scene(name: str, max_depth):
     try:
-        from tracer.scenes import load
+        from tracer.scenes.catalog import load
     except ImportError as error:  # pragma: no cover - scenes module missing
-        raise ValueError(f"cannot load scene {name!r}: tracer.scenes is unavailable ({error})") from None
+        raise ValueError(f"cannot load scene {name!r}: tracer.scenes.catalog is unavailable ({error})") from None
     return load(name, max_depth=max_depth)
 
 
@@ -158,8 +158,8 @@ def _table(rep: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
-    from tracer.kdtree import KdTreeConfig
-    from tracer.render import render
+    from tracer.kd.tree import KdTreeConfig
+    from tracer.rendering.render import render
 
     # every user error surfaces here, before the scene is built or a ray is traced
     check_at_least(args, size=1)

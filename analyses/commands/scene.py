@@ -50,7 +50,7 @@ def _vector(values) -> str:
 
 
 def format_summary(summary: dict) -> str:
-    """The summary of :meth:`tracer.scene.Scene.summary` as a readable table."""
+    """The summary of :meth:`tracer.scenes.model.Scene.summary` as a readable table."""
     lines = [f"scene {summary['name']}: {summary['elements']} elements, "
              f"{summary['lights']} lights, max depth {summary['max_depth']}", ""]
     lines.append(f"  {'primitive':<10} {'count':>8}")
@@ -76,7 +76,7 @@ def format_summary(summary: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
-    from tracer.scenes import load
+    from tracer.scenes.catalog import load
 
     # every user error surfaces here, before the scene is built
     checks.check_range("--max-depth", args.max_depth, 1, 64)
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     scene = load(args.scene, max_depth=args.max_depth)
     summary = scene.summary()
     if args.nff_out is not None:
-        from tracer.nff import write_nff
+        from tracer.scenes.nff import write_nff
 
         write_nff(scene, args.nff_out)
         summary["nff_out"] = str(args.nff_out)

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from coherence.provenance import provenance, write_csv_atomic
     from coherence.simulation import Machine
     from coherence.studies import study
-    from tracer.trace import AccessTrace
+    from tracer.trace.access import AccessTrace
 
     # every user error surfaces here, before the trace is read
     checks.check_range("--processes", args.processes, 1)

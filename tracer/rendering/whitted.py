@@ -1,10 +1,10 @@
 """The renderer's compiled kernels: Whitted's rules for one sample, and the loops over samples.
 
-:func:`render_kernel` traces work items (:class:`~tracer.render_types.WorkItems`
+:func:`render_kernel` traces work items (:class:`~tracer.rendering.types.WorkItems`
 of :data:`CHUNK` samples) in parallel; each item's samples are traced one
 after another by a loop compiled without reference counting
 (:data:`rtcommon.jit.NO_REFCOUNTS`), into which the ray tree of a sample
-and its traversals are inlined. :func:`tracer.render.render` is the public
+and its traversals are inlined. :func:`tracer.rendering.render.render` is the public
 entry point.
 
 Rules (SPD test procedure, see ``reference/spd/README.md``):
@@ -22,7 +22,7 @@ Rules (SPD test procedure, see ``reference/spd/README.md``):
 * any hit blocks a shadow ray (transparent objects cast full shadows);
 * reflection, refraction and shadow rays ignore hits closer than
   ``epsilon`` to their origin (default a self-intersection tolerance of
-  1e-8 of the scene's diagonal; :data:`tracer.render.SPD_EPSILON`
+  1e-8 of the scene's diagonal; :data:`tracer.rendering.render.SPD_EPSILON`
   reproduces the published SPD counts).
 """
 from __future__ import annotations
@@ -33,13 +33,13 @@ import numpy as np
 from numba import njit, prange
 
 from rtcommon.jit import NO_REFCOUNTS
-from tracer.geometry import Ray, element_normal
-from tracer.records import Counter, RecordKind, make_record, make_write_record
-from tracer.render_types import (N_RAY_COLUMNS, LightColumn, MaterialColumn, RayColumn, RayType, SampleRange,
+from tracer.rendering.geometry import Ray, element_normal
+from tracer.trace.records import Counter, RecordKind, make_record, make_write_record
+from tracer.rendering.types import (N_RAY_COLUMNS, LightColumn, MaterialColumn, RayColumn, RayType, SampleRange,
                                  SampleScratch)
-from tracer.scene import ElementKind
-from tracer.shading import texture_colour
-from tracer.traverse import RecordLog, new_stack, traverse
+from tracer.scenes.model import ElementKind
+from tracer.rendering.shading import texture_colour
+from tracer.kd.traverse import RecordLog, new_stack, traverse
 
 CHUNK = 64  # samples per parallel work item
 

@@ -1,9 +1,9 @@
-"""Writing scenes as NFF (the reader, and the format with our texture extension, are in :mod:`tracer.nff`).
+"""Writing scenes as NFF (the reader, and the format with our texture extension, are in :mod:`tracer.scenes.nff`).
 
 :func:`format_nff` gives the text, :func:`write_nff` writes it and a
 textured scene's images beside it, as one unit. Numbers are written in the
 shortest form that reads back as the same float64, so a read of a written
-scene gives the same arrays (:func:`tracer.scene.scenes_equal`).
+scene gives the same arrays (:func:`tracer.scenes.model.scenes_equal`).
 """
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from rtcommon.files import write_files_atomic
-from tracer.nff_fast import KEYWORDS, TOKEN
-from tracer.scene import ElementKind, Scene, vertices_and_uv
+from tracer.scenes.nff_fast import KEYWORDS, TOKEN
+from tracer.scenes.model import ElementKind, Scene, vertices_and_uv
 
 __all__ = ["format_nff", "write_nff"]
 
@@ -168,7 +168,7 @@ def write_nff(scene: Scene, path) -> Path:
     ValueError
         The scene has an element NFF cannot express (see :func:`format_nff`).
     """
-    from tracer.images import png_bytes
+    from tracer.scenes.images import png_bytes
 
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")

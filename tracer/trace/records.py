@@ -11,7 +11,7 @@ into kernels, and :class:`Counter` members are compile-time constants there.
 
 Element primitives map to record kinds and test counters by offset:
 ``RecordKind.SPHERE + element_kind`` and ``Counter.TESTS_SPHERE +
-element_kind`` (``tracer.scene.ElementKind`` order: sphere, triangle,
+element_kind`` (``tracer.scenes.model.ElementKind`` order: sphere, triangle,
 polygon, patch, cone).
 """
 from __future__ import annotations
@@ -31,7 +31,7 @@ FORMAT_VERSION = 3  # 2: counter ROOT_TESTS added; 3: texture kinds and counters
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
 #   9-12  in use: the study-era tracer's own data (workload study1997): ray-stack entry, hit
 #         record, shading temporaries, frame-buffer pixel;
-#   13-14 in use: textures (tracer.texture): texel (a global texel number across every
+#   13-14 in use: textures (tracer.rendering.texture): texel (a global texel number across every
 #         texture and mip level, 27 bits = 128 M texels) and texture header;
 #   15    spare.
 # A kind is added to RecordKind when its writer lands, with its counter.
@@ -55,7 +55,7 @@ class RecordKind(enum.IntEnum):
     HIT_RECORD = 10    #: the hit record of a ray tree level: written by a trace, read by shading
     SHADING_TEMP = 11  #: shading temporaries of a level (hit point, normal, colour sum)
     FRAME_BUFFER = 12  #: a pixel of the frame buffer, written once
-    # textures (tracer.texture); index: the texel's global number (textures one
+    # textures (tracer.rendering.texture); index: the texel's global number (textures one
     # after another, each level after level, each level row-major), the texture
     TEXEL = 13    #: one texel read by a texture lookup's filter
     TEXTURE = 14  #: a texture's header (size, levels, where its texels are), read once per lookup

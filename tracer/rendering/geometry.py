@@ -1,6 +1,6 @@
 """Ray/primitive intersection and the flat geometry arrays the kernels read.
 
-:func:`prepare_geometry` turns a :class:`~tracer.scene.Scene` into a
+:func:`prepare_geometry` turns a :class:`~tracer.scenes.model.Scene` into a
 :class:`Geometry` bundle of arrays with per-primitive quantities precomputed
 once (triangle edges, polygon plane normals, cone frames). The compiled
 functions here take that bundle, a :class:`Ray` and scalars only, so the
@@ -26,8 +26,8 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
-from tracer.polygons import CONVEX, hit_convex, hit_polygon, polygon_even_odd_axes  # noqa: F401 (re-exported)
-from tracer.scene import ElementKind, Scene
+from tracer.rendering.polygons import CONVEX, hit_convex, hit_polygon, polygon_even_odd_axes  # noqa: F401 (re-exported)
+from tracer.scenes.model import ElementKind, Scene
 
 INF = np.inf
 class Geometry(NamedTuple):
@@ -401,7 +401,7 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
     otherwise take the ``Geometry`` bundle apart, with reference counting,
     on every call (the renderer ran 3% slower than with positional arrays).
 
-    ``kind`` is an :class:`~tracer.scene.ElementKind` value, ``idx`` the row
+    ``kind`` is an :class:`~tracer.scenes.model.ElementKind` value, ``idx`` the row
     in that kind's arrays of ``geo`` (:class:`Geometry`).
     """
     if kind == ElementKind.SPHERE:

@@ -1,7 +1,7 @@
 """Per-pixel access logs: record packing, counters and :class:`AccessTrace`.
 
 A *record* is one read of one scene record, packed into a uint32 as
-described in :mod:`tracer.records` (4-bit kind, write flag, 27-bit index):
+described in :mod:`tracer.trace.records` (4-bit kind, write flag, 27-bit index):
 
 =============  ===============================================================
 KD_NODE        kd-tree node ``index`` (row of ``KdTree.nodes``), each visit;
@@ -33,7 +33,7 @@ from numba import njit
 from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.jsonio import json_default
-from tracer.records import (  # noqa: F401  (re-exported: the format's names)
+from tracer.trace.records import (  # noqa: F401  (re-exported: the format's names)
     COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
     Counter, RecordKind, pack, record_id, record_kind, unpack,
 )

@@ -1,6 +1,6 @@
 """Wavefront OBJ triangle meshes, with MTL colours and textures, as scenes.
 
-A small reader of our own (images through Pillow, :mod:`tracer.images`). It
+A small reader of our own (images through Pillow, :mod:`tracer.scenes.images`). It
 takes these lines and ignores every other one (normals, groups, smoothing,
 lines):
 
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.scene import Camera, Material, Scene, SceneBuilder
+from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
 
 __all__ = ["OBJError", "read_obj", "read_mtl", "frame_mesh"]
 
@@ -199,7 +199,7 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
         Once per file, naming the first line: faces that name texture
         coordinates before any ``vt`` line (those indices are ignored).
     """
-    from tracer.images import read_image
+    from tracer.scenes.images import read_image
 
     path = Path(path)
     if not path.is_file():

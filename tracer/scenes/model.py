@@ -21,7 +21,7 @@ CONE      cone or cylinder without caps: ``cone_base`` (C, 3),
           visible (NFF convention)
 ========  ==========================================================
 
-Textures (optional; see :mod:`tracer.texture`): ``texture_size`` (X, 2)
+Textures (optional; see :mod:`tracer.rendering.texture`): ``texture_size`` (X, 2)
 width and height of each image, ``texture_offsets`` (X + 1,) and
 ``texture_texels`` (N, 4) uint8 RGBA, the images one after another, each
 row-major from its top row. ``material_texture`` (M,) names the texture that

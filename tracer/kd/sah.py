@@ -1,8 +1,8 @@
 """The O(N log N) SAH kd-tree builder: events of all three axes sorted once, then partitioned in order.
 
-:func:`_build_sah` emits the flat arrays of :mod:`tracer.kd_nodes` from a
-:class:`~tracer.kd_split.BuildInputs` and a
-:class:`~tracer.kd_split.BuildParams`, as :func:`tracer.kd_build._build_median`
+:func:`_build_sah` emits the flat arrays of :mod:`tracer.kd.nodes` from a
+:class:`~tracer.kd.split.BuildInputs` and a
+:class:`~tracer.kd.split.BuildParams`, as :func:`tracer.kd.build._build_median`
 does.
 """
 from __future__ import annotations
@@ -12,9 +12,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_build import DEEPEST, EMPTY_LEAVES, LEAVES, _close_leaf
-from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior
-from tracer.kd_split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
+from tracer.kd.build import DEEPEST, EMPTY_LEAVES, LEAVES, _close_leaf
+from tracer.kd.nodes import NODE_WORDS, set_above_child, set_interior
+from tracer.kd.split import (_area, _axis_events, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
                              _sah_sweep, _settle_split, new_clip_scratch)
 
 

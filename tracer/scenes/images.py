@@ -1,7 +1,7 @@
 """Texture images on disk: PNG and JPEG in, PNG out (through Pillow).
 
 Scenes hold textures as (height, width, 4) uint8 RGBA arrays, row 0 at the
-top (:meth:`tracer.scene.SceneBuilder.texture`). :func:`read_image` gives
+top (:meth:`tracer.scenes.model.SceneBuilder.texture`). :func:`read_image` gives
 any PNG or JPEG in that form: grey, palette and RGB images get alpha 255,
 16-bit grey keeps its high byte. :func:`write_png` writes such an array
 losslessly, so reading it back gives the same texels.

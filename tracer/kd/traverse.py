@@ -1,11 +1,11 @@
 """kd-tree traversal shared by the renderer and the closest-hit API.
 
-:func:`traverse` walks the flat tree of :mod:`tracer.kdtree` front to back
+:func:`traverse` walks the flat tree of :mod:`tracer.kd.tree` front to back
 and appends every record it reads to the access log; :func:`brute_force` is
 the slow reference that tests every element. The kernels take their arrays
 as bundles: :class:`TreeArrays` (the tree, prepared by :func:`tree_arrays`),
-:class:`~tracer.geometry.Geometry` (elements), a
-:class:`~tracer.geometry.Ray`, a :class:`RecordLog` and
+:class:`~tracer.rendering.geometry.Geometry` (elements), a
+:class:`~tracer.rendering.geometry.Ray`, a :class:`RecordLog` and
 :class:`TraversalStack` scratch.
 
 Bundles passed to a ``parallel=True`` kernel are flat (no bundle inside a
@@ -18,18 +18,18 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.geometry import hit_element
-from tracer.kd_nodes import above_child, below_child, is_leaf, leaf_count, leaf_offset, node_axis, split_position
-from tracer.kdtree import KdTree, KdTreeConfig, build_kdtree
-from tracer.records import Counter, RecordKind, make_record
-from tracer.scene import Scene
+from tracer.rendering.geometry import hit_element
+from tracer.kd.nodes import above_child, below_child, is_leaf, leaf_count, leaf_offset, node_axis, split_position
+from tracer.kd.tree import KdTree, KdTreeConfig, build_kdtree
+from tracer.trace.records import Counter, RecordKind, make_record
+from tracer.scenes.model import Scene
 
 #: entries of a traversal stack: the deepest tree (MAX_TREE_DEPTH) fits
 STACK_DEPTH = 64
 
 
 class TreeArrays(NamedTuple):
-    """A kd-tree as the kernels read it (format in :mod:`tracer.kd_nodes`)."""
+    """A kd-tree as the kernels read it (format in :mod:`tracer.kd.nodes`)."""
 
     nodes: np.ndarray              #: (N, 2) uint32
     splits: np.ndarray             #: (N, 2) float32 view of ``nodes`` (interior split planes)
@@ -45,7 +45,7 @@ class RecordLog(NamedTuple):
     whose slot overflows learns the size it needs.
     """
 
-    records: np.ndarray  #: (R,) uint32 packed records (:mod:`tracer.records`)
+    records: np.ndarray  #: (R,) uint32 packed records (:mod:`tracer.trace.records`)
     limit: int
 
 
@@ -79,7 +79,7 @@ def traverse(tree, geo, ray, tmin, tmax, anyhit, log, pos, cnt, stack):
     pos : int
         Position of the next record in ``log``.
     cnt : ndarray, shape (K,) int64
-        Counters (:class:`~tracer.records.Counter` columns): every node
+        Counters (:class:`~tracer.trace.records.Counter` columns): every node
         visit, leaf index-entry read and primitive test is counted and
         advances ``pos``; a test that took a square root is counted again
         in ``ROOT_TESTS`` (no record).

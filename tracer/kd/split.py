@@ -1,7 +1,7 @@
 """kd-tree split kernels: primitives clipped to a node, SAH event sweeps and costs.
 
-Used by the builders of :mod:`tracer.kd_build` and :mod:`tracer.kd_sah` (and
-the per-node SAH peer in ``tests/naive_kdtree.py``); see :mod:`tracer.kdtree`
+Used by the builders of :mod:`tracer.kd.build` and :mod:`tracer.kd.sah` (and
+the per-node SAH peer in ``tests/naive_kdtree.py``); see :mod:`tracer.kd.tree`
 for the rules. The
 kernels take the scene as :class:`BuildInputs`, the configuration as
 :class:`BuildParams` and (3,) boxes to clip into as :class:`ClipScratch`.
@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_nodes import LINK_WORD
+from tracer.kd.nodes import LINK_WORD
 
 # SAH event types, in the order the sweep takes events at one position
 EVENT_END = 0     # a box ends there
@@ -22,7 +22,7 @@ EVENT_START = 2   # a box starts there
 
 
 class BuildInputs(NamedTuple):
-    """What the builders read of a scene (see :func:`tracer.kdtree.builder_inputs`).
+    """What the builders read of a scene (see :func:`tracer.kd.tree.builder_inputs`).
 
     n elements; float64 but where noted.
     """
@@ -37,7 +37,7 @@ class BuildInputs(NamedTuple):
 
 
 class BuildParams(NamedTuple):
-    """A :class:`~tracer.kdtree.KdTreeConfig` as the builders read it (``tree_depth`` resolved)."""
+    """A :class:`~tracer.kd.tree.KdTreeConfig` as the builders read it (``tree_depth`` resolved)."""
 
     tree_depth: int
     leaf_size: int

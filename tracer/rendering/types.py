@@ -1,6 +1,6 @@
 """The renderer's kernel vocabulary: ray kinds, the columns of its flat arrays, and its argument bundles.
 
-:func:`tracer.render.render` and its compiled kernels share these; they live
+:func:`tracer.rendering.render.render` and its compiled kernels share these; they live
 apart so that the kernels' module holds only the tracing itself.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tracer.traverse import TraversalStack
+from tracer.kd.traverse import TraversalStack
 
 
 class RayType(enum.IntEnum):
@@ -22,7 +22,7 @@ class RayType(enum.IntEnum):
 
 
 class RayColumn(enum.IntEnum):
-    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`tracer.whitted._trace_sample`."""
+    """Columns of the ray stack (S, N_RAY_COLUMNS) float64 of :func:`tracer.rendering.whitted._trace_sample`."""
 
     ORIGIN = 0     # x; y and z follow
     DIRECTION = 3  # x, unit; y and z follow
@@ -59,11 +59,11 @@ N_LIGHT_COLUMNS = 6
 
 
 class Shading(NamedTuple):
-    """What shading reads: materials per element, the lights and the textures (see :func:`tracer.shading.shading_of`).
+    """What shading reads: materials per element, the lights and the textures (see :func:`tracer.rendering.shading.shading_of`).
 
     Flat (arrays and scalars only): a bundle inside a bundle can't reach a
     parallel kernel's loop body. The texture fields are those of
-    :class:`tracer.uv.UvMaps` and :class:`tracer.texture.MipChains`, so the
+    :class:`tracer.rendering.uv.UvMaps` and :class:`tracer.rendering.texture.MipChains`, so the
     texture kernels read this bundle as either.
     """
 
@@ -105,7 +105,7 @@ class SampleOutputs(NamedTuple):
 
 
 class WorkItems(NamedTuple):
-    """Parallel work items of :func:`tracer.whitted.render_kernel`: ``CHUNK`` samples each.
+    """Parallel work items of :func:`tracer.rendering.whitted.render_kernel`: ``CHUNK`` samples each.
 
     Item ``k`` covers samples ``start[k] .. start[k] + CHUNK`` (fewer at the
     end) and logs them into ``records[base[k] : base[k] + capacity[k]]``;
@@ -127,7 +127,7 @@ class SampleRange(NamedTuple):
 
 
 class SampleScratch(NamedTuple):
-    """Per-thread scratch of :func:`tracer.whitted._trace_sample` (allocated once per work item)."""
+    """Per-thread scratch of :func:`tracer.rendering.whitted._trace_sample` (allocated once per work item)."""
 
     counters: np.ndarray  #: (N_COUNTERS,) int64 of the sample being traced
     stack: TraversalStack

@@ -1,7 +1,7 @@
 """What the renderer's shading reads, gathered from a scene, and the textured part of shading.
 
 :func:`shading_of` checks a scene's materials, lights and textures and makes
-the flat :class:`~tracer.render_types.Shading` bundle the kernels read: the
+the flat :class:`~tracer.rendering.types.Shading` bundle the kernels read: the
 lights scaled by SPD's rule (``sqrt(L) / (2 L)`` for ``L`` lights, the
 ambient level too), the (u, v) maps of the textured elements and every
 texture's mip pyramid. :func:`texture_colour` is the compiled lookup of one
@@ -17,10 +17,10 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
-from tracer.render_types import N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, Shading
-from tracer.scene import Scene
-from tracer.texture import TextureFilter, filtered_lookup, mip_chains
-from tracer.uv import surface_uv, uv_maps
+from tracer.rendering.types import N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, Shading
+from tracer.scenes.model import Scene
+from tracer.rendering.texture import TextureFilter, filtered_lookup, mip_chains
+from tracer.rendering.uv import surface_uv, uv_maps
 
 
 def shading_of(scene: Scene, texture_filter: TextureFilter = TextureFilter.TRILINEAR) -> Shading:
@@ -71,7 +71,7 @@ def _texturing(scene: Scene, element_material: np.ndarray, n_materials: int, tex
 def texture_colour(shading, material, kind, element, geo, hit, footprint, log, pos, cnt):
     """The texture colour of ``material`` at ``hit`` of ``element`` (of ``kind``), and the next record position.
 
-    (u, v) come from the surface (:func:`tracer.uv.surface_uv`); the level of
+    (u, v) come from the surface (:func:`tracer.rendering.uv.surface_uv`); the level of
     detail from a ray cone of width ``footprint[0]`` meeting the surface at
     cosine ``footprint[1]`` (module docstring). Returns ``r, g, b, pos``.
     """

@@ -18,10 +18,10 @@ import dataclasses
 
 import numpy as np
 
-from tracer import spd, standins
-from tracer.geometry import newell_normal
-from tracer.scene import ElementKind, Scene
-from tracer.texture import procedural_texture
+from tracer.scenes import spd, standins
+from tracer.rendering.geometry import newell_normal
+from tracer.scenes.model import ElementKind, Scene
+from tracer.rendering.texture import procedural_texture
 
 #: textured scene name -> its base scene
 TEXTURED_SCENES = {"balls-textured": "balls", "room-textured": "room"}

@@ -15,7 +15,7 @@ count (floor tiles in the room, water-surface particles in the fluid) makes
 up the rest.
 
 Their materials and Fluid's camera distance were re-tuned once,
-so that the study-era tracer (``tracer.workload``, ``study1997``) makes
+so that the study-era tracer (``tracer.rendering.workload``, ``study1997``) makes
 about the study's number of intersection tests on them, as it does on the
 SPD scenes with no tuning at all: element, light and depth counts did not
 change. Room 1.84x -> 1.01x of the study's 114.4 M tests, Fluid 11x -> 1.14x
@@ -29,8 +29,8 @@ import math
 
 import numpy as np
 
-from tracer.scene import Camera, Material, Scene, SceneBuilder
-from tracer.study import PAPER_ELEMENTS
+from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
+from tracer.scenes.study import PAPER_ELEMENTS
 
 __all__ = ["room", "fluid", "ROOM_ELEMENTS", "FLUID_ELEMENTS"]
 

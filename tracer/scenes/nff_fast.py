@@ -2,14 +2,14 @@
 
 :func:`parse_fast` reads a well-formed file without tracking where tokens
 are; anything unusual (a bad token, a degenerate polygon, a missing view)
-raises :class:`Fallback`, and :mod:`tracer.nff`'s positional reader reads
+raises :class:`Fallback`, and :mod:`tracer.scenes.nff`'s positional reader reads
 the file again to say where the fault is. Both readers fill the same
 :class:`SceneParts`, and :func:`assemble` turns them into a
-:class:`~tracer.scene.Scene`, so a file reads the same either way (the tests
+:class:`~tracer.scenes.model.Scene`, so a file reads the same either way (the tests
 compare the two on fuzzed input).
 
 The texture extension (``texture``, ``usetexture``, ``tp``, ``tpp``; see
-:mod:`tracer.nff`) is read by the positional reader only: its keywords are
+:mod:`tracer.scenes.nff`) is read by the positional reader only: its keywords are
 unknown here and raise :class:`Fallback`, so plain NFF keeps this fast path
 unchanged.
 """
@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from tracer.scene import Camera, ElementKind, Material, Scene, untextured
+from tracer.scenes.model import Camera, ElementKind, Material, Scene, untextured
 
 TOKEN = re.compile(r"\S+")
 DEPTH_PRAGMA = re.compile(r"^[ \t]*#[ \t]*max_depth[ \t]+([0-9]+)[ \t]*$", re.MULTILINE)

@@ -9,7 +9,7 @@ the same view, lights, background and materials; the reference files print 6
 significant digits, these scenes keep full double precision.
 
 The scenes carry the SPD procedure's maximum depth of 5;
-:func:`tracer.scenes.load` sets the paper's depth (2) for the study.
+:func:`tracer.scenes.catalog.load` sets the paper's depth (2) for the study.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from rtcommon.validate import require_int
-from tracer.scene import Camera, Material, Scene, SceneBuilder
+from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
 
 __all__ = ["balls", "tetra", "shells", "balls_count", "tetra_count", "shells_count"]
 

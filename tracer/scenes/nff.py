@@ -1,4 +1,4 @@
-"""Reading (and, from :mod:`tracer.nff_write`, writing) scenes in Eric Haines's Neutral File Format (NFF).
+"""Reading (and, from :mod:`tracer.scenes.nff_write`, writing) scenes in Eric Haines's Neutral File Format (NFF).
 
 NFF is parsed by whitespace-separated tokens, not by lines, because writers
 differ in where they break lines (``c`` may put its two ends on one line or
@@ -26,7 +26,7 @@ The texture extension (our own; a file without these keywords is plain NFF):
     a texture read from a PNG or JPEG file (path relative to the NFF file;
     one token: no whitespace, no ``#``)
 ``texture NAME procedural W H SEED [CELLS]``
-    a seeded image of W x H texels (:func:`tracer.texture.procedural_texture`;
+    a seeded image of W x H texels (:func:`tracer.rendering.texture.procedural_texture`;
     CELLS default 8)
 ``usetexture NAME [SCALE]``
     the objects that follow use texture NAME (repeated SCALE times across
@@ -62,15 +62,15 @@ positional reader run to say where (``benchmarks/bench_nff.py`` compares
 
 NFF has no recursion depth. :func:`write_nff` records the scene's depth in a
 comment line ``# max_depth N`` and the reader honours such a line; without it
-the depth is the SPD procedure's 5 (the :class:`~tracer.scene.Scene` default).
-:func:`tracer.scenes.load` applies the paper's depth per named scene instead.
+the depth is the SPD procedure's 5 (the :class:`~tracer.scenes.model.Scene` default).
+:func:`tracer.scenes.catalog.load` applies the paper's depth per named scene instead.
 
 Materials are deduplicated and numbered in order of first use (see
-:class:`~tracer.scene.SceneBuilder`), which makes read -> write -> read exact:
+:class:`~tracer.scenes.model.SceneBuilder`), which makes read -> write -> read exact:
 the writer prints every number with the shortest representation that reads
 back to the same float64. :func:`write_nff` writes a textured scene's images
 as lossless PNG files beside the NFF file (a procedural texture's parameters
-are not kept in a :class:`~tracer.scene.Scene`, so its texels are written).
+are not kept in a :class:`~tracer.scenes.model.Scene`, so its texels are written).
 """
 from __future__ import annotations
 
@@ -80,10 +80,10 @@ from pathlib import Path
 import numpy as np
 
 from rtcommon.files import regular_file
-from tracer.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
+from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
                              OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS, Fallback, SceneParts,
                              assemble, parse_fast, polygon_measures, view_direction_problem)
-from tracer.scene import Camera, ElementKind, Scene
+from tracer.scenes.model import Camera, ElementKind, Scene
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
 
@@ -185,8 +185,8 @@ _VERTEX_FIELDS = {"p": (3, "x y z"), "pp": (6, "x y z nx ny nz"), "tp": (5, "x y
 def _texture_image(tokens: _Tokens, folder: Path | None) -> np.ndarray:
     """The image of a ``texture NAME ...`` line, read from the tokens after its name:
     a PNG or JPEG file, or ``procedural WIDTH HEIGHT SEED [CELLS]``; shape (H, W, 4) uint8."""
-    from tracer.images import read_image
-    from tracer.texture import MAX_TEXELS, procedural_texture
+    from tracer.scenes.images import read_image
+    from tracer.rendering.texture import MAX_TEXELS, procedural_texture
 
     at = tokens.pos
     what = tokens.next("an image file or 'procedural' after the texture name")
@@ -384,7 +384,7 @@ def _warn_about(scene: Scene, element_tokens: list, text: str, source: str) -> N
 
 def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
               max_depth: int | None = None, folder=None) -> Scene:
-    """Parse NFF text into a :class:`~tracer.scene.Scene`.
+    """Parse NFF text into a :class:`~tracer.scenes.model.Scene`.
 
     Parameters
     ----------
@@ -404,7 +404,7 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     -------
     Scene
         Elements numbered in file order; materials numbered by first use (as
-        :class:`~tracer.scene.SceneBuilder` numbers them).
+        :class:`~tracer.scenes.model.SceneBuilder` numbers them).
 
     Raises
     ------
@@ -446,7 +446,7 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
     max_depth : int, optional
         Recursion depth; default the file's ``# max_depth N`` comment, else 5
         (the SPD procedure's depth, not the paper's 2; use
-        :func:`tracer.scenes.load` for the paper's depths).
+        :func:`tracer.scenes.catalog.load` for the paper's depths).
 
     Raises
     ------
@@ -463,4 +463,4 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
 
 
 # the writer lives in its own module; these names stay importable from here
-from tracer.nff_write import format_nff, write_nff  # noqa: E402
+from tracer.scenes.nff_write import format_nff, write_nff  # noqa: E402

@@ -1,7 +1,7 @@
 """kd-tree (the study's "BSP"): SAH and spatial-median builders, flat arrays.
 
 Node layout (pbrt style, 8 bytes): ``nodes`` is (N, 2) uint32, the words and
-bits named in :mod:`tracer.kd_nodes`.
+bits named in :mod:`tracer.kd.nodes`.
 
 * interior node: ``word0`` = the split position as float32 bits, ``word1`` =
   ``above_child << 2 | axis`` (axis 0, 1, 2); the below child is the next
@@ -55,11 +55,11 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from tracer.geometry import check_coordinates, element_bounds, element_clip_shapes
-from tracer.kd_build import _build_median
-from tracer.kd_sah import _build_sah
-from tracer.kd_split import BuildInputs, BuildParams
-from tracer.scene import Scene
+from tracer.rendering.geometry import check_coordinates, element_bounds, element_clip_shapes
+from tracer.kd.build import _build_median
+from tracer.kd.sah import _build_sah
+from tracer.kd.split import BuildInputs, BuildParams
+from tracer.scenes.model import Scene
 
 BUILDERS = ("sah", "median")
 AXIS_RULES = ("longest", "cycle")
@@ -252,7 +252,7 @@ def builder_inputs(scene: Scene) -> BuildInputs:
     ------
     ValueError
         If a coordinate or size is not finite or too large
-        (:func:`tracer.geometry.check_coordinates`).
+        (:func:`tracer.rendering.geometry.check_coordinates`).
     """
     check_coordinates(scene)
     lo, hi = element_bounds(scene)

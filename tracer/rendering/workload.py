@@ -1,7 +1,7 @@
 """Workload presets: which tracer the renderer imitates, today's or the study's.
 
 A :class:`Workload` bundles the kd-tree rule and the behaviour levers of the
-tracer that :func:`tracer.render.render` imitates. Two presets
+tracer that :func:`tracer.rendering.render.render` imitates. Two presets
 (:data:`WORKLOADS`):
 
 * ``"modern"``: today's tracer, the default: SAH kd-tree, shadow rays stop
@@ -13,7 +13,7 @@ tracer that :func:`tracer.render.render` imitates. Two presets
   objects split down to depth 16, objects sorted into children by their
   bounding boxes (not clipped); shadow rays that look for the nearest hit;
   and the tracer's own per-ray data logged (ray stack, hit records, shading
-  temporaries, frame-buffer writes; :mod:`tracer.records`).
+  temporaries, frame-buffer writes; :mod:`tracer.trace.records`).
 
 What a "test" is (decided before any fitting, and kept)
 -------------------------------------------------------
@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from tracer.kdtree import KdTreeConfig
+from tracer.kd.tree import KdTreeConfig
 
 __all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "get_workload"]
 
@@ -65,7 +65,7 @@ class Workload:
         Log the tracer's own per-ray data besides the scene records: ray
         stack pushes and pops, hit-record writes and reads, shading
         temporaries and one frame-buffer write per pixel
-        (:class:`tracer.records.RecordKind` 9-12).
+        (:class:`tracer.trace.records.RecordKind` 9-12).
     """
 
     name: str

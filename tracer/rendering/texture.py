@@ -4,7 +4,7 @@ A scene's texture images (``Scene.texture_*``) become :class:`MipChains`:
 each image and its box-filtered halvings down to 1 x 1, every level
 row-major from its top row. A texel's *global number* counts the texels of
 all textures, each level after level (the record index of
-:attr:`tracer.records.RecordKind.TEXEL`); where that texel lives in memory
+:attr:`tracer.trace.records.RecordKind.TEXEL`); where that texel lives in memory
 is the memory layout's choice (:mod:`coherence.texture_layout`).
 
 A lookup (:func:`filtered_lookup`) reads the texture's header record, then
@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
-from tracer.records import Counter, RecordKind, make_record
+from tracer.trace.records import Counter, RecordKind, make_record
 
 #: the most texels a trace can name (27-bit record indices)
 MAX_TEXELS = 1 << 27
@@ -221,7 +221,7 @@ def filtered_lookup(chains, texture, u, v, detail, filter_mode, log, pos, cnt):
         ``detail == k``, clamped to the pyramid.
     filter_mode : int
         A :class:`TextureFilter` value.
-    log : tracer.traverse.RecordLog
+    log : tracer.kd.traverse.RecordLog
         Records go to ``log.records[pos:]`` while below ``log.limit``.
     pos : int
     cnt : ndarray of int64, shape (N_COUNTERS,)

@@ -11,11 +11,11 @@ import numpy as np
 from numba import njit, prange
 
 from rtcommon.jit import NO_REFCOUNTS
-from tracer.geometry import Ray, prepare_geometry
-from tracer.kdtree import KdTree
-from tracer.scene import Scene
-from tracer.records import N_COUNTERS, Counter
-from tracer.traverse import RecordLog, brute_force, new_stack, traverse, tree_arrays
+from tracer.rendering.geometry import Ray, prepare_geometry
+from tracer.kd.tree import KdTree
+from tracer.scenes.model import Scene
+from tracer.trace.records import N_COUNTERS, Counter
+from tracer.kd.traverse import RecordLog, brute_force, new_stack, traverse, tree_arrays
 
 
 class RayBatch(NamedTuple):
@@ -112,7 +112,7 @@ def closest_hit(scene: Scene, tree: KdTree | None, origins, directions, tmin=0.0
     ----------
     scene : Scene
     tree : KdTree or None
-        Built with :func:`~tracer.kdtree.build_kdtree` if None.
+        Built with :func:`~tracer.kd.tree.build_kdtree` if None.
     origins, directions : array_like, shape (R, 3)
         Directions are normalised here (``t`` is a distance).
     tmin, tmax : float or array_like (R,)

@@ -2,9 +2,9 @@
 
 :func:`_build_median` halves each node's longest axis (or cycles the axes),
 clipping the node's primitives to it. The O(N log N) SAH builder is in
-:mod:`tracer.kd_sah`. Both emit the flat arrays described in
-:mod:`tracer.kd_nodes` and take a :class:`~tracer.kd_split.BuildInputs` and
-a :class:`~tracer.kd_split.BuildParams`. The per-node pieces of the median
+:mod:`tracer.kd.sah`. Both emit the flat arrays described in
+:mod:`tracer.kd.nodes` and take a :class:`~tracer.kd.split.BuildInputs` and
+a :class:`~tracer.kd.split.BuildParams`. The per-node pieces of the median
 builder (:class:`NodeStack`, :func:`_clip_members`, :func:`_partition`,
 :func:`_emit_leaf`) are the ones a per-node SAH builder needs too.
 """
@@ -15,8 +15,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.kd_nodes import NODE_WORDS, set_above_child, set_interior, set_leaf
-from tracer.kd_split import (_area, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
+from tracer.kd.nodes import NODE_WORDS, set_above_child, set_interior, set_leaf
+from tracer.kd.split import (_area, _clipped_bounds, _grow_1d, _grow_nodes, _overlap_bounds, _root_area,
                              new_clip_scratch)
 
 

@@ -3,10 +3,10 @@
 :func:`render` traces one ray through every pixel centre (or, with
 ``corner_rays``, a (W+1) x (H+1) grid through the pixel corners, as SPD's
 published counts use), shades by Whitted's rules and, with ``log=True``,
-returns an :class:`~tracer.trace.AccessTrace` of every scene record each
-pixel read (see :mod:`tracer.trace` for the record order).
+returns an :class:`~tracer.trace.access.AccessTrace` of every scene record each
+pixel read (see :mod:`tracer.trace.access` for the record order).
 
-The shading rules are stated in :mod:`tracer.whitted`, whose kernels do the
+The shading rules are stated in :mod:`tracer.rendering.whitted`, whose kernels do the
 tracing.
 
 Logging takes one pass, parallel over work items of 64 samples handed out
@@ -26,18 +26,18 @@ import numba
 import numpy as np
 
 from rtcommon.versions import package_versions
-from tracer.camera import _resolve_size, camera_frame
-from tracer.geometry import prepare_geometry
-from tracer.kdtree import KdTree, KdTreeConfig
-from tracer.records import COUNTER_NAMES, N_COUNTERS
-from tracer.render_types import RenderParams, SampleOutputs, WorkItems
-from tracer.scene import Scene
-from tracer.shading import shading_of
-from tracer.texture import MipChains, TextureFilter
-from tracer.trace import AccessTrace, TraceWriter, column_sums
-from tracer.traverse import tree_arrays
-from tracer.whitted import CHUNK, render_kernel
-from tracer.workload import Workload, get_workload
+from tracer.rendering.camera import _resolve_size, camera_frame
+from tracer.rendering.geometry import prepare_geometry
+from tracer.kd.tree import KdTree, KdTreeConfig
+from tracer.trace.records import COUNTER_NAMES, N_COUNTERS
+from tracer.rendering.types import RenderParams, SampleOutputs, WorkItems
+from tracer.scenes.model import Scene
+from tracer.rendering.shading import shading_of
+from tracer.rendering.texture import MipChains, TextureFilter
+from tracer.trace.access import AccessTrace, TraceWriter, column_sums
+from tracer.kd.traverse import tree_arrays
+from tracer.rendering.whitted import CHUNK, render_kernel
+from tracer.rendering.workload import Workload, get_workload
 
 DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: ``epsilon`` with which :func:`render` reproduces the published SPD counts
@@ -60,7 +60,7 @@ class RenderResult:
     image : ndarray, shape (H, W, 3) float64
         Linear RGB, not clipped.
     counters : ndarray, shape (H * W, K) int64
-        Per-pixel counters, columns :data:`tracer.trace.COUNTER_NAMES`.
+        Per-pixel counters, columns :data:`tracer.trace.access.COUNTER_NAMES`.
     trace : AccessTrace or None
         The access log (``log=True``), possibly memory-mapped from disk.
     tree : KdTree
@@ -72,7 +72,7 @@ class RenderResult:
     epsilon : float
         The self-intersection tolerance used (scene units).
     workload : dict
-        The :class:`~tracer.workload.Workload` imitated, as plain values.
+        The :class:`~tracer.rendering.workload.Workload` imitated, as plain values.
     texture_filter : str
         How textured surfaces were filtered.
     """
@@ -205,11 +205,11 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
         bounding-box diagonal. :data:`SPD_EPSILON` reproduces the published
         SPD counts.
     workload : str or Workload, optional
-        The tracer imitated, a :data:`tracer.workload.WORKLOADS` name or a
-        :class:`~tracer.workload.Workload`; default ``"modern"`` (today's
+        The tracer imitated, a :data:`tracer.rendering.workload.WORKLOADS` name or a
+        :class:`~tracer.rendering.workload.Workload`; default ``"modern"`` (today's
         SAH tracer). Recorded in the trace's metadata.
     texture_filter : {"trilinear", "bilinear", "nearest"}
-        How textured surfaces filter their texels (:mod:`tracer.texture`);
+        How textured surfaces filter their texels (:mod:`tracer.rendering.texture`);
         the level of detail comes from ray cones. Recorded in the metadata.
 
     Returns

@@ -1,6 +1,6 @@
 """The study's scenes by name, and user scenes by path.
 
->>> from tracer.scenes import load, PAPER_SCENES
+>>> from tracer.scenes.catalog import load, PAPER_SCENES
 >>> PAPER_SCENES
 ('balls', 'tetra', 'shell', 'room', 'fluid')
 >>> load("tetra").n_elements
@@ -8,7 +8,7 @@
 
 Named scenes get the paper's maximum depth (balls, tetra, shell: 2; room: 4;
 fluid: 5), not the SPD procedure's 5; ``max_depth`` overrides it. Files keep
-the depth they carry (:func:`tracer.nff.read_nff`: a ``# max_depth N``
+the depth they carry (:func:`tracer.scenes.nff.read_nff`: a ``# max_depth N``
 comment, else 5; OBJ: 5) unless ``max_depth`` is given.
 """
 from __future__ import annotations
@@ -16,10 +16,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tracer import spd, standins, textured
+from tracer.scenes import spd, standins, textured
 from rtcommon.validate import require_int
-from tracer.scene import Scene
-from tracer.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
+from tracer.scenes.model import Scene
+from tracer.scenes.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
 
 __all__ = ["PAPER_SCENES", "NAMED_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
 
@@ -45,7 +45,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     name_or_path : str or os.PathLike
         One of :data:`PAPER_SCENES` (case-insensitive; ``"shells"`` is
         accepted for ``"shell"``), a textured variant (``balls-textured``,
-        ``room-textured``: :mod:`tracer.textured`), or a path ending in
+        ``room-textured``: :mod:`tracer.scenes.textured`), or a path ending in
         ``.nff`` or ``.obj``.
     max_depth : int, optional
         Maximum recursion depth; default the paper's for a named scene and
@@ -60,7 +60,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     ValueError
         Unknown name (the message lists the valid names), unsupported file
         type, bad ``max_depth``, or a malformed file
-        (:class:`tracer.nff.NFFError`, :class:`tracer.obj.OBJError`).
+        (:class:`tracer.scenes.nff.NFFError`, :class:`tracer.scenes.obj.OBJError`).
     FileNotFoundError
         A path that does not exist.
     """
@@ -80,10 +80,10 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         if not path.exists():
             raise FileNotFoundError(f"scene file not found: {text!r}")
         if suffix == ".nff":
-            from tracer.nff import read_nff
+            from tracer.scenes.nff import read_nff
 
             return read_nff(path, max_depth=max_depth)
-        from tracer.obj import read_obj
+        from tracer.scenes.obj import read_obj
 
         return read_obj(path, max_depth=5 if max_depth is None else max_depth)
     if path.exists():

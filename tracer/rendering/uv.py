@@ -10,7 +10,7 @@
 The *uv density* of an element is the (u, v) area per unit of surface area:
 ``|det|`` of the plane map's 2 x 2 part, and ``1 / (4 pi r^2)`` on a sphere
 (its whole (u, v) square over its area, a mean over latitudes). The level of
-detail of a lookup uses it (:mod:`tracer.render`).
+detail of a lookup uses it (:mod:`tracer.rendering.render`).
 """
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from tracer.geometry import newell_normal
-from tracer.scene import ElementKind, Scene, vertices_and_uv
+from tracer.rendering.geometry import newell_normal
+from tracer.scenes.model import ElementKind, Scene, vertices_and_uv
 
 
 class UvMaps(NamedTuple):
@@ -94,10 +94,10 @@ def surface_uv(kind, element, index, geo, maps, hx, hy, hz):
     Parameters
     ----------
     kind : int
-        The element's :class:`~tracer.scene.ElementKind`.
+        The element's :class:`~tracer.scenes.model.ElementKind`.
     element, index : int
         Element id and its row in that kind's arrays.
-    geo : tracer.geometry.Geometry
+    geo : tracer.rendering.geometry.Geometry
     maps : UvMaps
     hx, hy, hz : float
     """

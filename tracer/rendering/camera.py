@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tracer.scene import Scene
+from tracer.scenes.model import Scene
 
 
 class CameraFrame(NamedTuple):

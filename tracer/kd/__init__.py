@@ -1,0 +1,1 @@
+"""Acceleration: kd-tree builders (SAH, spatial median), node format, traversal and closest-hit queries."""

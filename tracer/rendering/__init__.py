@@ -1,0 +1,1 @@
+"""Rendering: the instrumented Whitted renderer, shading, camera, intersection tests, textures."""
