@@ -303,7 +303,13 @@ class Hierarchy:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such hierarchy file")
         suffix = path.suffix.lower()
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
+        try:
+            text = data.decode("utf-8-sig")  # a byte-order mark, as some editors write, is skipped
+        except UnicodeDecodeError as error:
+            line = data[: error.start].count(b"\n") + 1
+            raise ValueError(f"{path}:{line}: not a text file (byte {error.start} is not UTF-8); expected "
+                             f"a {suffix.lstrip('.').upper() or 'TOML or JSON'} hierarchy") from None
         try:
             if suffix == ".toml":
                 data = tomllib.loads(text)

@@ -111,8 +111,13 @@ class CacheState:
         """Empty every level and zero the counters."""
         n_levels = len(self.hierarchy.levels)
         total_ways = int(np.sum(self._geometry.n_sets * self._geometry.ways))
-        self.tags = np.full(total_ways, -1, dtype=np.int64)
-        self.stamps = np.zeros(total_ways, dtype=np.int64)
+        try:
+            self.tags = np.full(total_ways, -1, dtype=np.int64)
+            self.stamps = np.zeros(total_ways, dtype=np.int64)
+        except MemoryError:
+            raise MemoryError(f"hierarchy {self.hierarchy.name!r}: its {total_ways:,} cache lines need "
+                              f"{16 * total_ways / 2**30:,.1f} GiB of simulator state (tags and stamps, "
+                              "8 bytes each), more than this machine can allocate") from None
         self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
         self.clock = 0
         self.tlb = T.empty_tlb(self.hierarchy.tlb.entries) if self.hierarchy.tlb is not None else None

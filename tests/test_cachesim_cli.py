@@ -112,6 +112,15 @@ def test_bad_hierarchy_and_output_folder_fail_before_reading(tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("suffix", [".toml", ".json"])
+def test_hierarchy_file_with_a_byte_order_mark_loads(tmp_path, suffix):
+    """Fails if Hierarchy.load decodes with "utf-8" instead of "utf-8-sig":
+    the mark is then the first character of the TOML or JSON text, which both refuse."""
+    path = alpha21164().save(tmp_path / f"h{suffix}")
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    assert Hierarchy.load(path) == alpha21164()
+
+
 def test_help_teaches(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["cachesim", "--help"])

@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from analyses.commands import checks
-    from cachesim import get_hierarchy, read_addresses, simulate
+    from cachesim import CacheState, get_hierarchy, read_addresses, simulate
     from coherence.provenance import provenance, write_csv_atomic
 
     # every user error surfaces here, before the stream is read
@@ -70,8 +70,17 @@ def run(args: argparse.Namespace) -> int:
     if args.csv:
         checks.check_output_file("--csv", args.csv)
         checks.check_output_file("--csv", args.csv + ".meta.json")
-    addresses = read_addresses(args.addresses)
-    result = simulate(addresses, hierarchy)
+    try:
+        state = CacheState(hierarchy)
+    except MemoryError as error:
+        raise ValueError(f"--hierarchy {args.hierarchy}: {error}; use smaller caches") from None
+    try:
+        addresses = read_addresses(args.addresses)
+        result = simulate(addresses, state)
+    except MemoryError:
+        size = Path(args.addresses).stat().st_size
+        raise ValueError(f"{args.addresses}: out of memory simulating its addresses ({size / 2**20:,.0f} MB "
+                         "file); split the stream into shorter files") from None
     table = result.to_frame()
     meta = provenance(addresses=str(args.addresses), n_addresses=int(addresses.size))
     if args.csv:
