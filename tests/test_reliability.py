@@ -247,6 +247,8 @@ def test_write_files_atomic_writes_all_or_nothing(tmp_path):
 # variables. Paths are relative to a scratch folder that holds: afile (a regular file), adir (a
 # folder), pipe.nff and pipe.txt (FIFOs), trace8 (a tetra 8x8 trace), trace8-flipped (one byte of
 # its records flipped), trace8-outside (no checksums, a record beyond the scene), addresses.txt,
+# bom.txt (addresses after a UTF-8 byte-order mark), binary.toml (not text), petabyte.toml (a
+# hierarchy whose 4 PB level cannot be allocated),
 # empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses) and huge.nff (a
 # triangle at 1e300, which the renderer refuses).
 CLI_CASES = [
@@ -287,6 +289,9 @@ CLI_CASES = [
     (["cachesim", "missing.txt"], 2, "no such file"),
     (["cachesim", "addresses.txt", "--csv", "nodir/x.csv"], 2, "'nodir' does not exist"),
     (["cachesim", "addresses.txt", "--hierarchy", "pipe.txt.toml"], 2, ""),
+    (["cachesim", "addresses.txt", "--hierarchy", "binary.toml"], 2, "binary.toml:1: not a text file"),
+    (["cachesim", "addresses.txt", "--hierarchy", "petabyte.toml"], 2, "use smaller caches"),
+    (["cachesim", "bom.txt"], 0, ""),
     (["whatif", "--grid", "L1.size=4KB", "--grid", "L1.size=8KB"], 2, "--grid L1.size is given more than once"),
     (["whatif", "latency", "--jobs", "0"], 2, "--jobs must be >= 1"),
     (["whatif", "latency", "--jobs", "-1"], 2, "--jobs must be >= 1"),
@@ -358,6 +363,9 @@ def scratch(tmp_path_factory):
     os.mkfifo(folder / "pipe.txt")
     os.mkfifo(folder / "pipe.txt.toml")
     (folder / "addresses.txt").write_text("0\n64\n4096\n0\n")
+    (folder / "binary.toml").write_bytes(b"\xff\xfe\x00n\x00a")
+    (folder / "bom.txt").write_bytes(b"\xef\xbb\xbf0\n64\n")
+    (folder / "petabyte.toml").write_text('[[levels]]\nname = "L1"\nsize = 4503599627370496\nline_size = 64\n')
     (folder / "empty.nff").write_text("# nothing but a comment\n")
     (folder / "noview.nff").write_text("s 0 0 0 1\n")
     view = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\n"
