@@ -208,6 +208,7 @@ def test_write_is_atomic_and_keeps_the_old_file_on_failure(tmp_path, monkeypatch
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
 positive = st.floats(min_value=1e-6, max_value=1e6, allow_nan=False)
+non_negative = st.floats(min_value=0.0, max_value=1e6, allow_nan=False)
 
 
 @st.composite
@@ -218,8 +219,8 @@ def scenes(draw):
         builder.light(draw(st.tuples(finite, finite, finite)),
                       draw(st.sampled_from([(1.0, 1.0, 1.0), (0.5, 0.2, 0.1)])))
     for _ in range(draw(st.integers(1, 8))):
-        builder.material(Material(draw(st.tuples(finite, finite, finite)),
-                                  *draw(st.tuples(finite, finite, finite, finite, finite))))
+        builder.material(Material(draw(st.tuples(non_negative, non_negative, non_negative)),
+                                  *draw(st.tuples(non_negative, non_negative, finite, non_negative, non_negative))))
         kind = draw(st.sampled_from(["s", "p", "pp", "c"]))
         centre = np.array(draw(st.tuples(finite, finite, finite)))
         size = draw(positive)

@@ -501,3 +501,97 @@ def test_paper_help_lists_only_the_scenes_paper_accepts(capsys):
     listed = [word for word in re.findall(r"[a-z][a-z-]*", _scenes_help(capsys)) if word in NAMED_SCENES]
     assert sorted(listed) == sorted(PAPER_SCENES)
     assert check_scenes(listed) == listed
+
+
+# ------------------------------------------------------------- scene files
+SCENE_VIEW = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\n"
+QUAD_OBJ = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"
+
+
+def test_a_byte_order_mark_is_skipped(tmp_path):
+    """An OBJ, MTL or NFF file that starts with a UTF-8 BOM reads as it does without one. Fails if the
+    readers decode with plain "utf-8" (the OBJ then loses its first vertex, the others fail)."""
+    from tracer.scenes.nff import read_nff
+    from tracer.scenes.obj import read_obj
+    from tracer.scenes.model import scenes_equal
+
+    material = "newmtl red\nKd 1 0 0\n"
+    obj = "mtllib m.mtl\nusemtl red\n" + QUAD_OBJ
+    nff = SCENE_VIEW + "f 1 0 0 1 0 0 0 1\ns 0 0 0 1\n"
+    scenes = {}
+    for folder, mark in (("plain", b""), ("marked", b"\xef\xbb\xbf")):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "m.mtl").write_bytes(mark + material.encode())
+        (tmp_path / folder / "q.obj").write_bytes(mark + obj.encode())
+        (tmp_path / folder / "s.nff").write_bytes(mark + nff.encode())
+        scenes[folder] = read_obj(tmp_path / folder / "q.obj"), read_nff(tmp_path / folder / "s.nff")
+    for plain, marked in zip(scenes["plain"], scenes["marked"]):
+        assert scenes_equal(plain, marked)
+    assert scenes["marked"][0].material_color.tolist() == [[1.0, 0.0, 0.0]]
+
+
+@pytest.mark.parametrize("field", ["r", "g", "b", "Kd", "Ks", "T", "ior"])
+def test_a_negative_nff_material_value_is_refused_where_it_stands(field):
+    """Fails if either NFF reader lets a negative colour, Kd, Ks, T or ior through (drop the check in
+    the positional reader: the fast reader falls back to it and the file reads)."""
+    from tracer.scenes.nff import NFFError, parse_nff
+    from tracer.scenes.nff_fast import MATERIAL_FIELDS
+
+    at = MATERIAL_FIELDS.index(field)
+    values = ["0.5", "0.5", "0.5", "0.8", "0.1", "30", "0", "1"]
+    values[at] = "-0.25"
+    text = SCENE_VIEW + "f " + " ".join(values) + "\ns 0 0 0 1\n"
+    column = len("f ") + sum(len(v) + 1 for v in values[:at]) + 1
+    with pytest.raises(NFFError, match=rf"scene.nff:8:{column}: expected {field} >= 0 .*found '-0.25'"):
+        parse_nff(text, "scene.nff")
+    values[at], values[5] = "0", "-3"  # a negative Phong exponent is allowed
+    assert parse_nff(SCENE_VIEW + "f " + " ".join(values) + "\ns 0 0 0 1\n").material_shine.tolist() == [-3.0]
+
+
+@pytest.mark.parametrize("field", ["color", "kd", "ks", "t", "ior"])
+def test_a_negative_material_is_refused_by_its_config(field):
+    """Fails if Material accepts a negative colour, kd, ks, t or ior (drop its check)."""
+    from tracer.scenes.model import Material
+
+    value = (0.5, -0.1, 0.5) if field == "color" else -0.1
+    with pytest.raises(ValueError, match=f"Material.{field} must be >= 0"):
+        Material(**{field: value})
+
+
+def test_a_max_depth_line_outside_1_to_64_is_refused_naming_file_and_line():
+    """Fails if the reader takes '# max_depth 0' (render then refused it without naming the file)."""
+    from tracer.scenes.nff import NFFError, parse_nff
+    from tracer.scenes.catalog import load
+
+    text = SCENE_VIEW + "s 0 0 0 1\n# max_depth 0\n"
+    with pytest.raises(NFFError, match=r"deep.nff:9:13: expected a max_depth in 1\.\.64, found '0'"):
+        parse_nff(text, "deep.nff")
+    assert parse_nff(text, "deep.nff", max_depth=3).max_depth == 3  # an explicit depth replaces the line
+    with pytest.raises(ValueError, match=r"max_depth must be in \[1, 64\], got 0"):
+        load("tetra", max_depth=0)
+
+
+@pytest.mark.parametrize("before, face, expected", [
+    ("", "f 1/a 2 3", "q.obj:5: expected a texture coordinate index, found '1/a'"),
+    ("vn 0 0 1\n", "f 1//2 2//1 3//1", r"q.obj:5: expected a normal index in 1\.\.1 or negative, found '1//2'"),
+    ("vn 0 0 1\n", "f 1/1/1 2/1/1 3/1/9", r"q.obj:5: expected a normal index in 1\.\.1 or negative, found '3/1/9'"),
+    ("vt 0 0\n", "f 1//1 2 3", r"q.obj:5: expected a normal index \(none is defined before this line\), found '1//1'"),
+])
+def test_obj_face_indices_are_checked_even_where_unused(tmp_path, before, face, expected):
+    """Fails if a face's normal index is not checked against the 'vn' lines before it, or a texture
+    index is only checked once a 'vt' exists ('1/a' was reported as a missing 'vt')."""
+    from tracer.scenes.obj import OBJError, read_obj
+
+    (tmp_path / "q.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + (before or "g mesh\n") + face + "\n")
+    with pytest.raises(OBJError, match=expected):
+        read_obj(tmp_path / "q.obj")
+
+
+def test_obj_usemtl_without_mtllib_warns_once(tmp_path):
+    """Fails if a 'usemtl' that names nothing (no 'mtllib' before it) passes in silence."""
+    from tracer.scenes.obj import read_obj
+
+    (tmp_path / "q.obj").write_text("usemtl red\n" + QUAD_OBJ + "usemtl blue\n")
+    with pytest.warns(UserWarning, match=r"q.obj:1: 'usemtl red' names a material, but no 'mtllib'") as seen:
+        scene = read_obj(tmp_path / "q.obj")
+    assert len(seen) == 1 and scene.material_color.tolist() == [[0.8, 0.8, 0.8]]

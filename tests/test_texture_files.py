@@ -388,7 +388,7 @@ def test_obj_vt_defaults_and_relative_indices(tmp_path):
 
 
 def test_texture_indices_before_any_vt_are_ignored_with_one_warning(tmp_path):
-    path = _write_obj(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/2 3/3\nf 1/7/1 2/7/1 3/7/1\n")
+    path = _write_obj(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/2 3/3\nf 1/7 2/7 3/7\n")
     with pytest.warns(UserWarning, match=r"t\.obj:4: a face names texture coordinates, but no 'vt'") as caught:
         scene = read_obj(path)
     assert len(caught) == 1 and np.isnan(scene.triangle_uv).all()

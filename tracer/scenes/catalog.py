@@ -48,7 +48,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         ``room-textured``: :mod:`tracer.scenes.textured`), or a path ending in
         ``.nff`` or ``.obj``.
     max_depth : int, optional
-        Maximum recursion depth; default the paper's for a named scene and
+        Maximum recursion depth, 1..64; default the paper's for a named scene and
         the file's (see module docstring) for a path.
 
     Returns
@@ -65,7 +65,7 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         A path that does not exist.
     """
     if max_depth is not None:
-        max_depth = require_int("max_depth", max_depth, 0)
+        max_depth = require_int("max_depth", max_depth, 1, 64)
     text = os.fspath(name_or_path)
     key = canonical_scene_name(text)
     if key in _GENERATORS and not isinstance(name_or_path, Path):

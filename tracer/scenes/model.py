@@ -10,7 +10,7 @@ Kinds (``ElementKind``):
 ========  ==========================================================
 SPHERE    ``sphere_center`` (S, 3), ``sphere_radius`` (S,)
 TRIANGLE  ``triangle_vertices`` (T, 3, 3): NFF ``p 3``
-POLYGON   convex planar polygon with n >= 4 vertices, CSR:
+POLYGON   planar polygon with n >= 4 vertices, convex or not, CSR:
           ``polygon_offsets`` (P + 1,), ``polygon_vertices`` (V, 3)
 PATCH     polygon with vertex normals (NFF ``pp n``), CSR:
           ``patch_offsets`` (Q + 1,), ``patch_vertices`` (W, 3),
@@ -284,16 +284,16 @@ class Material:
     Parameters
     ----------
     color : tuple of 3 float
-        Surface colour (r, g, b).
+        Surface colour (r, g, b), each >= 0.
     kd, ks : float
-        Diffuse and specular (reflection) coefficients; ``ks > 0`` spawns a
-        reflection ray.
+        Diffuse and specular (reflection) coefficients, >= 0; ``ks > 0``
+        spawns a reflection ray.
     shine : float
         Phong exponent of the highlight.
     t : float
-        Transmittance; ``t > 0`` spawns a refraction ray.
+        Transmittance, >= 0; ``t > 0`` spawns a refraction ray.
     ior : float
-        Index of refraction.
+        Index of refraction, >= 0 (SPD files give 0 for opaque surfaces).
     texture : int
         Texture (of :meth:`SceneBuilder.texture`) whose texels multiply
         ``color``; -1 for none.
@@ -319,6 +319,11 @@ class Material:
         values = (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
         if not all(np.isfinite(v) for v in values):
             raise ValueError(f"Material values must be finite, got {values!r}")
+        if min(self.color) < 0.0:
+            raise ValueError(f"Material.color must be >= 0 in each channel, got {self.color!r}")
+        for name in ("kd", "ks", "t", "ior"):  # not shine: any Phong exponent is a highlight
+            if getattr(self, name) < 0.0:
+                raise ValueError(f"Material.{name} must be >= 0, got {getattr(self, name)!r}")
         if isinstance(self.texture, bool) or not isinstance(self.texture, (int, np.integer)) or self.texture < -1:
             raise ValueError(f"Material.texture must be a texture number or -1, got {self.texture!r}")
         object.__setattr__(self, "texture", int(self.texture))

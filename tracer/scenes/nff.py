@@ -49,10 +49,14 @@ The reader is strict, as a C reader of the format would be: the view
 (``v`` with all six of ``from``, ``at``, ``up``, ``angle``, ``hither`` and
 ``resolution``) is required, a scene without objects is an error, and numbers
 follow C's syntax (``[+-]digits[.digits][e[+-]digits]``; no ``1_0``, no
-non-ASCII digits, no ``inf`` or ``nan``). A non-planar polygon or a cone with
-both radii 0 gets one warning per file naming file and line; an error found
-after the tokens were read (a zero-length vertex normal, ``up`` parallel to
-the view direction, a degenerate polygon) still names file, line and column.
+non-ASCII digits, no ``inf`` or ``nan``); every number of ``f`` but the Phong
+exponent ``shine`` is >= 0 (an SPD ``ior`` of 0 is kept: it is an opaque
+surface's). A UTF-8 byte-order mark at the start of a file is skipped (one
+anywhere else is a token like any other, and refused as such). A non-planar
+polygon or a cone with both radii 0 gets one warning per file naming file
+and line; an error found after the tokens were read (a zero-length vertex
+normal, ``up`` parallel to the view direction, a degenerate polygon) still
+names file, line and column.
 
 Speed: a file is read by a fast pass (split on whitespace, convert numbers
 in slices, check the geometry with numpy at the end); only when that pass
@@ -61,9 +65,11 @@ positional reader run to say where (``benchmarks/bench_nff.py`` compares
 :func:`read_nff` with a plain split-and-float pass).
 
 NFF has no recursion depth. :func:`write_nff` records the scene's depth in a
-comment line ``# max_depth N`` and the reader honours such a line; without it
-the depth is the SPD procedure's 5 (the :class:`~tracer.scenes.model.Scene` default).
-:func:`tracer.scenes.catalog.load` applies the paper's depth per named scene instead.
+comment line ``# max_depth N`` and the reader honours such a line (N in
+1..64, else an error naming file and line, unless ``max_depth`` is given);
+without it the depth is the SPD procedure's 5 (the
+:class:`~tracer.scenes.model.Scene` default). :func:`tracer.scenes.catalog.load`
+applies the paper's depth per named scene instead.
 
 Materials are deduplicated and numbered in order of first use (see
 :class:`~tracer.scenes.model.SceneBuilder`), which makes read -> write -> read exact:
@@ -81,11 +87,17 @@ import numpy as np
 
 from rtcommon.files import regular_file
 from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PRAGMA, KEYWORDS, LINE_BREAKS,
-                             OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS, Fallback, SceneParts,
-                             assemble, parse_fast, polygon_measures, view_direction_problem)
+                                    MATERIAL_FIELDS, OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS,
+                                    Fallback, SceneParts, assemble, parse_fast, polygon_measures,
+                                    view_direction_problem)
 from tracer.scenes.model import Camera, ElementKind, Scene
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
+
+#: A UTF-8 byte-order mark (as decoded) at the start of a file: skipped.
+BYTE_ORDER_MARK = "\ufeff"
+#: The largest ``# max_depth N`` the renderer takes.
+MAX_DEPTH = 64
 
 class NFFError(ValueError):
     """A malformed NFF file.
@@ -119,9 +131,19 @@ def _normalise_line_breaks(text: str) -> str:
     return LINE_BREAKS.sub("\n", text)
 
 
-def _depth_pragma(text: str) -> int | None:
-    found = DEPTH_PRAGMA.findall(text)
-    return int(found[-1]) if found else None
+def _depth_pragma(text: str, source: str) -> int | None:
+    """The depth of the file's last ``# max_depth N`` line (None without one); refused outside 1..64."""
+    found = None
+    for found in DEPTH_PRAGMA.finditer(text):
+        pass
+    if found is None:
+        return None
+    depth = int(found.group(1))
+    if not 1 <= depth <= MAX_DEPTH:
+        line = text.count("\n", 0, found.start(1)) + 1
+        column = found.start(1) - text.rfind("\n", 0, found.start(1))
+        raise NFFError(source, line, column, f"a max_depth in 1..{MAX_DEPTH}", found.group(1))
+    return depth
 
 
 class _Tokens:
@@ -275,7 +297,11 @@ def _parse_positioned(text: str, source: str, folder: Path | None = None) -> tup
                 color = tokens.numbers(3, "a number (r g b of the light) or a keyword")
             parts.lights.append((*position, *color))
         elif keyword == "f":
+            at = tokens.pos
             parts.material = tokens.numbers(8, "a number (f: r g b Kd Ks shine T ior)")
+            for k, (name, value) in enumerate(zip(MATERIAL_FIELDS, parts.material)):
+                if value < 0.0 and name != "shine":
+                    raise tokens.error(f"{name} >= 0 (f: r g b Kd Ks shine T ior)", at + k)
             parts.texture_use, texture_in_use = (), None  # a texture lasts until the next 'f'
         elif keyword == "s":
             values = tokens.numbers(4, "a number (s: x y z radius)")
@@ -421,8 +447,8 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     """
     if name is None:
         name = "scene" if source.startswith("<") else (Path(source).stem or "scene")
-    text = _normalise_line_breaks(text)
-    pragma = _depth_pragma(text)
+    text = _normalise_line_breaks(text.removeprefix(BYTE_ORDER_MARK))
+    pragma = None if max_depth is not None else _depth_pragma(text, source)
     depth = int(max_depth) if max_depth is not None else (pragma if pragma is not None else 5)
     try:
         parts = parse_fast(text)

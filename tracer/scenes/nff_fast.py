@@ -28,6 +28,8 @@ COMMENT = re.compile(r"#[^\n]*")
 C_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 C_INTEGER = re.compile(r"[+-]?[0-9]+")
 VIEW_KEYWORDS = ("from", "at", "up", "angle", "hither", "resolution")
+#: the numbers of ``f``; all but ``shine`` must be >= 0
+MATERIAL_FIELDS = ("r", "g", "b", "Kd", "Ks", "shine", "T", "ior")
 #: the extension's keywords (textures, polygons and patches with (u, v)), read by the positional reader only
 TEXTURE_KEYWORDS = ("texture", "usetexture", "tp", "tpp")
 OBJECT_KEYWORDS = ("c", "s", "p", "pp", "tp", "tpp")
@@ -244,8 +246,8 @@ def parse_fast(text: str) -> SceneParts:
                     polygons += values
             elif keyword == "f":
                 material = tuple(map(float, tokens[position:position + 8]))
-                if len(material) != 8:
-                    raise Fallback
+                if len(material) != 8 or min(material[:5]) < 0.0 or min(material[6:]) < 0.0:
+                    raise Fallback  # the positional reader names a negative value
                 parts.material, row = material, None
                 position += 8
                 continue

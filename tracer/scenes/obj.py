@@ -1,8 +1,8 @@
 """Wavefront OBJ triangle meshes, with MTL colours and textures, as scenes.
 
-A small reader of our own (images through Pillow, :mod:`tracer.scenes.images`). It
-takes these lines and ignores every other one (normals, groups, smoothing,
-lines):
+A small reader of our own (images through Pillow, :mod:`tracer.scenes.images`).
+It takes these lines and ignores every other one (groups, smoothing, lines);
+a UTF-8 byte-order mark at the start of a file is skipped:
 
 * ``v x y z``: a vertex;
 * ``vt u [v [w]]``: texture coordinates (``v`` defaults to 0; ``w`` is
@@ -10,6 +10,8 @@ lines):
 * ``f``: a face of vertex references ``i``, ``i/t``, ``i//n`` or ``i/t/n``
   (negative indices count back from the last one read), fan-triangulated;
   either every vertex names texture coordinates or none does;
+* ``vn x y z``: a vertex normal, counted only, so that a face's normal
+  indices can be checked (shading uses the face's own normal);
 * ``mtllib FILE...``: material libraries, relative to the OBJ file;
 * ``usemtl NAME``: the material of the faces that follow.
 
@@ -20,10 +22,12 @@ options such as ``-s`` are not supported). Everything else in it is ignored.
 Materials: colour ``Kd`` (default 0.8 grey), Kd 0.8, Ks 0.1, shine 30, no
 transmission; a ``map_Kd`` image multiplies the colour on faces that have
 texture coordinates. A face without them gets NaN (u, v) and its material's
-colour untextured. Without a ``usemtl`` (or in a file without ``mtllib``,
-where ``usemtl`` has nothing to name) faces get the 0.8 grey material, as
-they always have. Texture coordinate indices in a file that has read no
-``vt`` line yet are ignored, with one warning per file.
+colour untextured. Without a ``usemtl`` faces get the 0.8 grey material; so
+do they after a ``usemtl`` that comes before any ``mtllib`` (it has nothing
+to name), with one warning per file. Texture coordinate indices in a file
+that has read no ``vt`` line yet are ignored (they must still be integers),
+with one warning per file. Every index is checked against the lines read
+before it.
 
 OBJ carries no view or light, so the scene gets a default camera and one
 white light that frame the mesh (see :func:`frame_mesh`).
@@ -135,7 +139,7 @@ def read_mtl(path, materials: dict | None = None) -> dict:
     source = str(path)
     materials = {} if materials is None else materials
     current = None
-    with path.open(encoding="utf-8", errors="replace") as stream:
+    with path.open(encoding="utf-8-sig", errors="replace") as stream:
         for number, line in enumerate(stream, start=1):
             fields = line.split("#", 1)[0].split()
             if not fields or fields[0] not in ("newmtl", "Kd", "map_Kd"):
@@ -152,6 +156,8 @@ def read_mtl(path, materials: dict | None = None) -> dict:
                                   "(r [g b]; 'spectral' and 'xyz' are not supported)", line)
                 if len(values) == 2:
                     raise OBJError(source, number, "one or three finite numbers after 'Kd'", line.strip())
+                if min(values) < 0.0:
+                    raise OBJError(source, number, "a colour of numbers >= 0 after 'Kd'", line.strip())
                 current.color = values * 3 if len(values) == 1 else values
             else:
                 if len(fields) < 2:
@@ -197,7 +203,8 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
     -----
     UserWarning
         Once per file, naming the first line: faces that name texture
-        coordinates before any ``vt`` line (those indices are ignored).
+        coordinates before any ``vt`` line (those indices are ignored); a
+        ``usemtl`` before any ``mtllib`` (its faces get the default material).
     """
     from tracer.scenes.images import read_image
 
@@ -212,8 +219,10 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
     triangle_material: list = []  # per triangle: the _MtlMaterial in use, or None
     libraries: dict | None = None  # materials of the mtllib files; None before any mtllib
     material = None
+    normals = 0  # 'vn' lines read so far: normals are not used, but their indices must exist
     ignored_uv_line = None
-    with path.open(encoding="utf-8", errors="replace") as stream:
+    unnamed_material = None  # (line, name) of the first 'usemtl' without an mtllib to name it
+    with path.open(encoding="utf-8-sig", errors="replace") as stream:
         for number, line in enumerate(stream, start=1):
             fields = line.split("#", 1)[0].split()
             if not fields:
@@ -228,6 +237,8 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
                     raise OBJError(source, number, "three finite numbers after 'v'",
                                    line.strip())
                 vertices.append(xyz)
+            elif fields[0] == "vn":
+                normals += 1
             elif fields[0] == "vt":
                 values = _numbers(fields[1:], (1, 3), source, number,
                                   "one to three finite numbers after 'vt' (u [v [w]])", line)
@@ -241,10 +252,13 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
                     corners.append(_index(parts[0], len(vertices), source, number, "a vertex index", item))
                     if len(parts) > 1 and parts[1]:
                         if not uvs:
+                            _index(parts[1], None, source, number, "a texture coordinate index", item)
                             ignored_uv_line = ignored_uv_line or number
                         else:
                             corner_uv.append(_index(parts[1], len(uvs), source, number,
                                                     "a texture coordinate index", item))
+                    if len(parts) > 2 and parts[2]:
+                        _index(parts[2], normals, source, number, "a normal index", item)
                 if len(corners) < 3:
                     raise OBJError(source, number, "at least three vertices after 'f'",
                                    line.strip())
@@ -268,7 +282,9 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
             elif fields[0] == "usemtl":
                 if len(fields) < 2:
                     raise OBJError(source, number, "a material name after 'usemtl'", line.strip())
-                if libraries is not None:
+                if libraries is None:
+                    unnamed_material = unnamed_material or (number, " ".join(fields[1:]))
+                else:
                     name = " ".join(fields[1:])
                     if name not in libraries:
                         defined = ", ".join(repr(n) for n in libraries) or "none"
@@ -277,6 +293,10 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
                     material = libraries[name]
     if not triangles:
         raise OBJError(source, 0, "at least one face ('f' line)", "none")
+    if unnamed_material is not None:
+        warnings.warn(f"{source}:{unnamed_material[0]}: 'usemtl {unnamed_material[1]}' names a material, but no "
+                      "'mtllib' line came before it; faces get the default grey material until an 'mtllib' "
+                      "defines the materials", stacklevel=2)
     if ignored_uv_line is not None:
         warnings.warn(f"{source}:{ignored_uv_line}: a face names texture coordinates, but no 'vt' line came "
                       "before it; texture coordinate indices before the first 'vt' are ignored", stacklevel=2)
@@ -320,13 +340,20 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
     return builder.build()
 
 
-def _index(text: str, count: int, source: str, number: int, what: str, item: str) -> int:
-    """The 0-based index of a 1-based or negative (relative) OBJ index ``text`` among ``count`` items."""
+def _index(text: str, count: int | None, source: str, number: int, what: str, item: str) -> int:
+    """The 0-based index of a 1-based or negative (relative) OBJ index ``text`` among ``count`` items.
+
+    With ``count`` None only the syntax is checked (an integer other than 0)."""
     try:
         index = int(text)
     except ValueError:
         raise OBJError(source, number, what, item) from None
+    if count is None:
+        if index == 0:
+            raise OBJError(source, number, f"{what} other than 0", item)
+        return index
     resolved = index - 1 if index > 0 else count + index
     if index == 0 or not 0 <= resolved < count:
-        raise OBJError(source, number, f"{what} in 1..{count} or negative", item)
+        where = f"in 1..{count} or negative" if count else "(none is defined before this line)"
+        raise OBJError(source, number, f"{what} {where}", item)
     return resolved
