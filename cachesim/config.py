@@ -14,12 +14,10 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import write_text_atomic
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import require_bool, require_int, require_number
 
 POLICIES = ("lru", "fifo", "random")
 INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
@@ -94,9 +92,7 @@ class CacheLevel:
         object.__setattr__(self, "policy", self.policy.lower())
         object.__setattr__(self, "latency", require_number(f"{owner}.latency", self.latency, 0, "cycles"))
         object.__setattr__(self, "seed", require_int(f"{owner}.seed", self.seed, 0))
-        if not isinstance(self.write_allocate, (bool, np.bool_)):
-            raise ValueError(f"{owner}.write_allocate must be true or false, got {self.write_allocate!r}")
-        object.__setattr__(self, "write_allocate", bool(self.write_allocate))
+        object.__setattr__(self, "write_allocate", require_bool(f"{owner}.write_allocate", self.write_allocate))
 
     @property
     def ways(self) -> int:

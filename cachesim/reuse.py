@@ -26,6 +26,7 @@ from numba import njit
 
 from cachesim.simulate import as_addresses
 from rtcommon.jit import NO_REFCOUNTS
+from rtcommon.validate import require_power_of_two
 
 #: First size of the reuse kernel's Fenwick tree (it grows with the distinct lines): large
 #: enough that renumbering, which sorts the live times, runs rarely (every 60,000 or more
@@ -221,10 +222,7 @@ def _reuse_run(addresses, start, shift, distances, state):
 
 
 def _check_line_size(line_size) -> int:
-    if isinstance(line_size, bool) or not isinstance(line_size, (int, np.integer)) or line_size < 1 \
-            or line_size & (line_size - 1):
-        raise ValueError(f"line_size must be a power of two >= 1, got {line_size!r}")
-    return int(line_size).bit_length() - 1
+    return require_power_of_two("line_size", line_size).bit_length() - 1
 
 
 class ReuseCounter:

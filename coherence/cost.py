@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from rtcommon.resident import drop_pages, mapping_of
+from rtcommon.validate import require_number
 
 #: rows of counters :meth:`CostModel.compute_cycles` converts at a time (6.5 MB of float64 for 25 counters)
 COMPUTE_ROWS = 1 << 15
@@ -96,10 +97,7 @@ class CostModel:
 
     def __post_init__(self):
         for name in (*OPERATIONS, "clock_hz"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value) \
-                    or value < 0:
-                raise ValueError(f"CostModel.{name} must be a finite number >= 0, got {value!r}")
+            require_number(f"CostModel.{name}", getattr(self, name), 0)
         if self.clock_hz <= 0:
             raise ValueError(f"CostModel.clock_hz must be > 0, got {self.clock_hz}")
 

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtcommon.validate import require_int
+from rtcommon.validate import require_bool, require_int
 
 from .curves import CURVES, curve_order, hilbert_order, morton_keys
 from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _dynamic, _static
@@ -69,8 +69,7 @@ class CurveTiles(Mapping):
         require_int("CurveTiles.tile", self.tile, 1)
         if self.inner not in ("morton", "scan"):
             raise ValueError(f"CurveTiles.inner must be 'morton' or 'scan', got {self.inner!r}")
-        if not isinstance(self.dynamic, bool):
-            raise ValueError(f"CurveTiles.dynamic must be True or False, got {self.dynamic!r}")
+        object.__setattr__(self, "dynamic", require_bool("CurveTiles.dynamic", self.dynamic))
         _check_dynamic("CurveTiles", self.dispatch_cycles, self.take_ahead)
         if not self.dynamic and self.take_ahead != 0:
             raise ValueError("CurveTiles.take_ahead applies to dynamic=True only; it must be 0 when static")

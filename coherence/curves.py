@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from rtcommon.validate import require_int
 
 __all__ = [
     "CURVES",
@@ -52,10 +53,7 @@ _MAX_SIDE = 1 << 31
 
 def _check_size(width, height) -> tuple[int, int]:
     for name, value in (("width", width), ("height", height)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-        if value < 1:
-            raise ValueError(f"{name} must be >= 1, got {value}")
+        require_int(name, value, 1)
         if value >= _MAX_SIDE:
             raise ValueError(f"{name} must be < 2**31, got {value}")
     return int(width), int(height)

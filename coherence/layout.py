@@ -35,6 +35,7 @@ from numba import njit
 
 from coherence.texture_layout import TextureLayout
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
+from rtcommon.validate import require_int, require_power_of_two
 from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
@@ -60,13 +61,10 @@ class RecordLayout:
 
     def __post_init__(self):
         for name in ("size", "align", "per_vertex"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-                raise ValueError(f"RecordLayout.{name} must be a non-negative integer, got {value!r}")
+            require_int(f"RecordLayout.{name}", getattr(self, name), 0)
         if self.size + self.per_vertex < 1:
             raise ValueError("RecordLayout.size must be >= 1 byte")
-        if self.align < 1 or self.align & (self.align - 1):
-            raise ValueError(f"RecordLayout.align must be a power of two, got {self.align}")
+        require_power_of_two("RecordLayout.align", self.align)
 
 
 #: Record sizes of the presets: kind -> (``compact``, ``alpha1997``), as
@@ -138,10 +136,8 @@ class MemoryLayout:
                 raise ValueError(f"MemoryLayout.records[{name!r}] must be a RecordLayout")
             if record.per_vertex and RecordKind[name.upper()] not in _VARIABLE:
                 raise ValueError(f"MemoryLayout.records[{name!r}].per_vertex is only for polygons and patches")
-        if not isinstance(self.base, (int, np.integer)) or not 0 <= self.base < 2**48:
-            raise ValueError(f"MemoryLayout.base must be an integer in [0, 2**48), got {self.base!r}")
-        if self.region_align < 1 or self.region_align & (self.region_align - 1):
-            raise ValueError(f"MemoryLayout.region_align must be a power of two, got {self.region_align}")
+        require_int("MemoryLayout.base", self.base, 0, 2**48 - 1)
+        require_power_of_two("MemoryLayout.region_align", self.region_align)
 
     def scaled(self, factor: int) -> "MemoryLayout":
         """This layout with every record ``factor`` times as many bytes (alignments kept).
@@ -149,8 +145,7 @@ class MemoryLayout:
         The what-if "what if the scene's records were bigger": a richer
         material, a double-precision vertex, a fatter node.
         """
-        if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
-            raise ValueError(f"MemoryLayout.scaled: factor must be an integer >= 1, got {factor!r}")
+        require_int("MemoryLayout.scaled: factor", factor, 1)
         records = {name: RecordLayout(record.size * int(factor), record.align, record.per_vertex * int(factor))
                    for name, record in self.records.items()}
         return MemoryLayout(records=records, base=self.base, region_align=self.region_align,

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from coherence.layout import FILL_AHEAD, PlacedLayout, _count_lines, _fill_lines
+from rtcommon.validate import require_power_of_two
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
 SHARED_LINES_BUDGET = 1 << 30
@@ -74,10 +75,7 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     -------
     PixelLines or None
     """
-    if isinstance(line_size, bool) or not isinstance(line_size, (int, np.integer)) or line_size < 1 \
-            or line_size & (line_size - 1):
-        raise ValueError(f"line_size must be a power of two, got {line_size!r}")
-    line_shift = int(line_size).bit_length() - 1
+    line_shift = require_power_of_two("line_size", line_size).bit_length() - 1
     records = np.asarray(trace.records)
     placed.check_records(records)
     pixel_offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)

@@ -46,7 +46,7 @@ from coherence.pixel_lines import PixelLines, no_pixel_lines
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
                                  RunOutputs, RunQueues, run_schedule)
-from rtcommon.validate import require_int
+from rtcommon.validate import require_bool, require_int, require_number
 
 SCHEDULERS = ("shared-queue", "static")
 PLACEMENTS = ("round-robin", "neighbours")
@@ -118,10 +118,7 @@ class Machine:
     def __post_init__(self):
         require_int("Machine.n_cpus", self.n_cpus, 1)
         for name in ("quantum_cycles", "switch_cycles"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not value >= 0 \
-                    or not np.isfinite(value):
-                raise ValueError(f"Machine.{name} must be a finite number >= 0, got {value!r}")
+            require_number(f"Machine.{name}", getattr(self, name), 0)
         if self.scheduler not in SCHEDULERS:
             raise ValueError(f"Machine.scheduler must be one of {SCHEDULERS}, got {self.scheduler!r}")
         if self.placement not in PLACEMENTS:
@@ -318,8 +315,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")
-    if not isinstance(pixel_misses, (bool, np.bool_)):
-        raise ValueError(f"pixel_misses must be True or False, got {pixel_misses!r}")
+    require_bool("pixel_misses", pixel_misses)
     counters = np.asarray(trace.counters)
     if compute is None:
         compute = cost.compute_cycles(counters, counter_names)

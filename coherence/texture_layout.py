@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from rtcommon.validate import require_power_of_two
 
 ORDERS = ("linear", "tiled", "morton", "blocked")
 CHAINS = ("contiguous", "by_level")
@@ -65,10 +66,7 @@ class TextureLayout:
         if self.chains not in CHAINS:
             raise ValueError(f"TextureLayout.chains must be one of {', '.join(CHAINS)}, got {self.chains!r}")
         for name in ("tile", "superblock"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1 \
-                    or value & (value - 1):
-                raise ValueError(f"TextureLayout.{name} must be a power of two >= 1, got {value!r}")
+            require_power_of_two(f"TextureLayout.{name}", getattr(self, name))
 
     @classmethod
     def from_label(cls, text: str) -> "TextureLayout":

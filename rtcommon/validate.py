@@ -65,3 +65,32 @@ def require_number(name: str, value, minimum: float | None = None, unit: str = "
         suffix = f" ({unit})" if unit else ""
         raise ValueError(f"{name} must be a finite number{_range_text(minimum, None)}{suffix}, got {value!r}")
     return float(value)
+
+
+def require_bool(name: str, value) -> bool:
+    """``value`` as a Python bool; ``True``, ``False`` and numpy booleans only.
+
+    Raises
+    ------
+    ValueError
+        ``"<name> must be True or False, got 1"`` for anything else (an
+        integer or a string is refused, not taken for its truth value).
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def require_power_of_two(name: str, value) -> int:
+    """``value`` as a Python int that is a power of two (1, 2, 4, ...).
+
+    Raises
+    ------
+    ValueError
+        ``"<name> must be a power of two >= 1, got 12"`` for a non-integer
+        (``bool`` included), a value below 1 or one with more than one bit set.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1 \
+            or value & (value - 1):
+        raise ValueError(f"{name} must be a power of two >= 1, got {value!r}")
+    return int(value)

@@ -8,7 +8,7 @@ import pytest
 
 from rtcommon.files import write_bytes_atomic, write_text_atomic
 from rtcommon.jsonio import json_default
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import require_bool, require_int, require_number, require_power_of_two
 
 
 def test_require_int_accepts_python_and_numpy_integers():
@@ -41,6 +41,28 @@ def test_require_number():
     for bad in (-1, float("nan"), float("inf"), True, "3"):
         with pytest.raises(ValueError, match=r"^latency must be a finite number >= 0 \(cycles\), got"):
             require_number("latency", bad, 0, "cycles")
+
+
+def test_require_bool():
+    """True, False and numpy booleans pass as Python bools; 1, 0, "yes" and
+    None are refused. Fails if ``require_bool`` also accepts ``int``."""
+    assert require_bool("flag", True) is True and require_bool("flag", np.bool_(False)) is False
+    for bad in (1, 0, "yes", None):
+        with pytest.raises(ValueError, match=rf"^flag must be True or False, got {bad!r}$"):
+            require_bool("flag", bad)
+
+
+def test_require_power_of_two():
+    """Every power of two up to 2**40 passes (numpy ones too); a value with two
+    bits set, 0, a negative, a bool and a float are refused. Fails if
+    ``require_power_of_two`` drops its ``value & (value - 1)`` clause."""
+    for bit in range(41):
+        assert require_power_of_two("line_size", 1 << bit) == 1 << bit
+    value = require_power_of_two("line_size", np.int64(64))
+    assert value == 64 and type(value) is int
+    for bad in (3, 12, 96, 0, -4, True, 4.0):
+        with pytest.raises(ValueError, match=rf"^line_size must be a power of two >= 1, got {bad!r}$"):
+            require_power_of_two("line_size", bad)
 
 
 def test_atomic_write_replaces_whole_file_with_plain_permissions(tmp_path):

@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
+from rtcommon.validate import require_int
 from tracer.trace.records import Counter, RecordKind, make_record
 
 #: the most texels a trace can name (27-bit record indices)
@@ -136,8 +137,7 @@ def procedural_texture(width: int, height: int | None = None, *, seed: int = 0, 
     """
     height = width if height is None else height
     for name, value in (("width", width), ("height", height), ("cells", cells)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"procedural_texture: {name} must be an int >= 1, got {value!r}")
+        require_int(f"procedural_texture: {name}", value, 1)
     rng = np.random.default_rng(seed)
     board = rng.integers(48, 232, size=(cells, cells, 3))
     rows = np.arange(height) * cells // height

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from rtcommon.validate import require_bool
 from tracer.kd.tree import KdTreeConfig
 
 __all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "get_workload"]
@@ -79,8 +80,7 @@ class Workload:
         if not isinstance(self.kd_config, KdTreeConfig):
             raise ValueError(f"Workload.kd_config must be a KdTreeConfig, got {type(self.kd_config).__name__}")
         for lever in ("shadow_nearest", "log_ray_data"):
-            if not isinstance(getattr(self, lever), bool):
-                raise ValueError(f"Workload.{lever} must be True or False, got {getattr(self, lever)!r}")
+            object.__setattr__(self, lever, require_bool(f"Workload.{lever}", getattr(self, lever)))
 
     def to_dict(self) -> dict:
         """The workload as plain Python values (for output metadata)."""

@@ -39,6 +39,7 @@ import enum
 from dataclasses import dataclass, field
 
 import numpy as np
+from rtcommon.validate import require_int
 
 
 class ElementKind(enum.IntEnum):
@@ -324,9 +325,10 @@ class Material:
         for name in ("kd", "ks", "t", "ior"):  # not shine: any Phong exponent is a highlight
             if getattr(self, name) < 0.0:
                 raise ValueError(f"Material.{name} must be >= 0, got {getattr(self, name)!r}")
-        if isinstance(self.texture, bool) or not isinstance(self.texture, (int, np.integer)) or self.texture < -1:
-            raise ValueError(f"Material.texture must be a texture number or -1, got {self.texture!r}")
-        object.__setattr__(self, "texture", int(self.texture))
+        texture = require_int("Material.texture", self.texture)
+        if texture < -1:
+            raise ValueError(f"Material.texture must be a texture number or -1, got {texture}")
+        object.__setattr__(self, "texture", texture)
         object.__setattr__(self, "uv_scale", float(self.uv_scale))
         if not (np.isfinite(self.uv_scale) and self.uv_scale > 0):
             raise ValueError(f"Material.uv_scale must be a positive finite number, got {self.uv_scale!r}")

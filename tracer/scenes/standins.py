@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from rtcommon.validate import require_number
 from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
 from tracer.scenes.study import PAPER_ELEMENTS
 
@@ -39,8 +40,7 @@ FLUID_ELEMENTS = PAPER_ELEMENTS["fluid"]
 
 
 def _target(name: str, paper_count: int, scale, lowest: float, highest: float) -> int:
-    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} scale must be a number, got {scale!r}")
+    require_number(f"{name} scale", scale)
     if not lowest <= scale <= highest:
         raise ValueError(f"{name} scale must be in [{lowest}, {highest}], got {scale}")
     return int(round(paper_count * float(scale)))
