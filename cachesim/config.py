@@ -17,14 +17,10 @@ from pathlib import Path
 from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import write_text_atomic
-from rtcommon.validate import require_bool, require_int, require_number
+from rtcommon.validate import require_bool, require_int, require_number, require_power_of_two
 
 POLICIES = ("lru", "fifo", "random")
 INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
-
-
-def _is_power_of_two(value: int) -> bool:
-    return value > 0 and value & (value - 1) == 0
 
 
 @dataclass(frozen=True)
@@ -71,8 +67,7 @@ class CacheLevel:
             raise ValueError(f"CacheLevel.name must be a non-empty string, got {self.name!r}")
         object.__setattr__(self, "size", require_int(f"{owner}.size", self.size, 1))
         object.__setattr__(self, "line_size", require_int(f"{owner}.line_size", self.line_size, 1))
-        if not _is_power_of_two(self.line_size):
-            raise ValueError(f"{owner}.line_size must be a power of two, got {self.line_size}")
+        require_power_of_two(f"{owner}.line_size", self.line_size)
         if self.line_size > self.size:
             raise ValueError(f"{owner}.line_size ({self.line_size}) must not exceed size ({self.size})")
         if isinstance(self.assoc, str):

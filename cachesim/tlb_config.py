@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import require_int, require_number, require_power_of_two
 
 TLB_POLICIES = ("nlu", "lru", "fifo")
 
@@ -46,8 +46,7 @@ class Tlb:
     def __post_init__(self):
         object.__setattr__(self, "entries", require_int("Tlb.entries", self.entries, 1, 4096))
         object.__setattr__(self, "page_size", require_int("Tlb.page_size", self.page_size, 512))
-        if self.page_size & (self.page_size - 1):
-            raise ValueError(f"Tlb.page_size must be a power of two, got {self.page_size}")
+        require_power_of_two("Tlb.page_size", self.page_size)
         object.__setattr__(self, "miss_cycles", require_number("Tlb.miss_cycles", self.miss_cycles, 0, "cycles"))
         if not isinstance(self.policy, str) or self.policy.lower() not in TLB_POLICIES:
             raise ValueError(f"Tlb.policy must be one of {', '.join(TLB_POLICIES)}; got {self.policy!r}")

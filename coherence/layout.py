@@ -298,10 +298,8 @@ class PlacedLayout:
     def addresses(self, records, line_size: int) -> np.ndarray:
         """Byte addresses (uint64, (M,)) of the ``line_size`` lines each record touches, in order."""
         records = np.ascontiguousarray(records, dtype=np.uint32)
-        if line_size < 1 or line_size & (line_size - 1):
-            raise ValueError(f"line_size must be a power of two, got {line_size}")
+        shift = require_power_of_two("line_size", line_size).bit_length() - 1
         self.check_records(records)
-        shift = line_size.bit_length() - 1
         # an empty buffer is replaced by one of exactly the lines needed
         out, n_lines = record_lines(records, 0, records.shape[0], self.placement, shift, np.empty(0, dtype=np.uint64))
         return out[:n_lines]

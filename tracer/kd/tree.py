@@ -55,6 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from rtcommon.validate import require_int, require_number
 from tracer.rendering.geometry import check_coordinates, element_bounds, element_clip_shapes
 from tracer.kd.build import _build_median
 from tracer.kd.sah import _build_sah
@@ -123,15 +124,12 @@ class KdTreeConfig:
         if self.builder not in BUILDERS:
             raise ValueError(f"KdTreeConfig.builder must be one of {BUILDERS}, got {self.builder!r}")
         if self.tree_depth is not None:
-            if int(self.tree_depth) != self.tree_depth or not 1 <= self.tree_depth <= MAX_TREE_DEPTH:
-                raise ValueError(f"KdTreeConfig.tree_depth must be an int in 1..{MAX_TREE_DEPTH} or None, got {self.tree_depth!r}")
-            object.__setattr__(self, "tree_depth", int(self.tree_depth))
-        if int(self.leaf_size) != self.leaf_size or self.leaf_size < 1:
-            raise ValueError(f"KdTreeConfig.leaf_size must be an int >= 1, got {self.leaf_size!r}")
-        object.__setattr__(self, "leaf_size", int(self.leaf_size))
+            object.__setattr__(self, "tree_depth",
+                               require_int("KdTreeConfig.tree_depth", self.tree_depth, 1, MAX_TREE_DEPTH))
+        object.__setattr__(self, "leaf_size", require_int("KdTreeConfig.leaf_size", self.leaf_size, 1))
         for name in ("traversal_cost", "intersection_cost"):
-            value = float(getattr(self, name))
-            if not (math.isfinite(value) and value > 0.0):
+            value = require_number(f"KdTreeConfig.{name}", getattr(self, name), 0)
+            if value == 0.0:
                 raise ValueError(f"KdTreeConfig.{name} must be a finite number > 0, got {getattr(self, name)!r}")
             object.__setattr__(self, name, value)
         eb = float(self.empty_bonus)
@@ -139,9 +137,8 @@ class KdTreeConfig:
             raise ValueError(f"KdTreeConfig.empty_bonus must be in [0, 1), got {self.empty_bonus!r}")
         object.__setattr__(self, "empty_bonus", eb)
         object.__setattr__(self, "clip", bool(self.clip))
-        if int(self.force_split) != self.force_split or self.force_split < 0:
-            raise ValueError(f"KdTreeConfig.force_split must be an int >= 0, got {self.force_split!r}")
-        object.__setattr__(self, "force_split", int(self.force_split) if self.force_split else 2**62)
+        force_split = require_int("KdTreeConfig.force_split", self.force_split, 0)
+        object.__setattr__(self, "force_split", force_split if force_split else 2**62)
         if self.axis_rule not in AXIS_RULES:
             raise ValueError(f"KdTreeConfig.axis_rule must be one of {AXIS_RULES}, got {self.axis_rule!r}")
         object.__setattr__(self, "split_to_depth", bool(self.split_to_depth))
