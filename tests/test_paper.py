@@ -8,7 +8,6 @@ import os
 import re
 import threading
 import weakref
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -59,10 +58,13 @@ def written(tmp_path_factory, cache):
     return outs
 
 
-def test_study_table_is_design_md_verbatim():
-    design = Path(__file__).resolve().parents[1].parent / "shared" / "DESIGN.md"
+def test_study_table_holds_the_published_figures():
+    """The study's scene table as published (Havran & Zara), typed here from the paper, against
+    its one home in the code. Fails when one figure changes, e.g. Shell's 403.0 s -> 430.0 s."""
     expected = pd.DataFrame({
         "scene": ["balls", "tetra", "shell", "room", "fluid"],
+        "geometry": ["spheres (SPD sphereflake)", "triangles (SPD tetra)", "spheres (SPD shells)",
+                     "polygon meshes (CAAD interior)", "spheres (fluid-dynamics visualisation)"],
         "elements": [7382, 4096, 5761, 7786, 2899],
         "lights": [3, 1, 1, 3, 2],
         "tests_1e6": [193.0, 7.6, 212.2, 114.4, 29.3],
@@ -70,15 +72,6 @@ def test_study_table_is_design_md_verbatim():
         "sequential_seconds": [345.8, 28.8, 403.0, 365.7, 97.5],
     })
     pd.testing.assert_frame_equal(paper.STUDY_TABLE[list(expected.columns)], expected)
-    if design.is_file():  # parse the table in the design notes themselves
-        text = design.read_text()
-        for row in paper.STUDY_TABLE.itertuples():
-            line = next(l for l in text.splitlines() if l.startswith(f"| {row.scene.capitalize()} |"))
-            cells = [c.strip() for c in line.strip("|").split("|")]
-            assert cells[1] == row.geometry
-            assert int(cells[2]) == row.elements and int(cells[3]) == row.lights
-            assert float(cells[4]) == row.tests_1e6 and int(cells[5]) == row.max_depth
-            assert re.search(rf"{row.scene.capitalize()} {row.sequential_seconds}", text.replace("\n", " "))
 
 
 def test_side_by_side_table(result):

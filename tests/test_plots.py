@@ -49,8 +49,17 @@ def test_speedup_lines_per_mapping_and_ideal():
 
 
 def test_speedup_creates_axes_when_none_given():
-    ax = plots.plot_speedup(_runs(), column="speedup_real")
-    assert ax is not None and ax.figure is not None
+    """Without ``ax`` the plot draws on a new pyplot figure exactly what it draws on given axes.
+    Fails when ``_axes`` returns a fresh ``Figure().subplots()`` (not pyplot's: a notebook shows
+    nothing) or when the drawing depends on where it goes."""
+    runs = _runs()
+    ax = plots.plot_speedup(runs, column="speedup_real")
+    assert ax.figure in [plt.figure(number) for number in plt.get_fignums()]
+    given = plots.plot_speedup(runs, Figure().subplots(), column="speedup_real")
+    drawn = [(line.get_label(), list(line.get_xdata()), list(line.get_ydata())) for line in ax.get_lines()]
+    assert drawn == [(line.get_label(), list(line.get_xdata()), list(line.get_ydata())) for line in given.get_lines()]
+    db = [line for line in ax.get_lines() if line.get_label() == "DB"][0]
+    assert np.allclose(db.get_ydata(), runs[runs["mapping"] == "DB"]["speedup_real"])
 
 
 def test_speedup_panels_one_per_scene_with_the_legend_in_the_spare_panel():

@@ -160,8 +160,22 @@ def test_summary_records_parameters_versions_and_headline(reports):
     assert parameters["background_load"] == 4 and parameters["n_processes"] == [1, 2, 8]
     assert "numpy" in summary["versions"] and "raytrace-coherence" in summary["versions"]
     assert set(summary["headline"]["8"]) == {"S", "P", "B", "DB"}
-    assert summary["verdict"]["decided_by"] in ("load balance", "coherence", "dispatch overhead")
     assert parameters["workload"] == "modern" and parameters["kd"] == "sah"
+
+
+def test_the_verdict_names_the_largest_worst_case_loss_in_results_csv(reports):
+    """The verdict's rule restated over results.csv: at the verdict's process count, the loss whose
+    worst case over the mappings is largest decides. Fails when verdict() ranks the losses in
+    ascending order (``key=lambda item: item[1][0]``)."""
+    summary = json.loads((reports[0] / "summary.json").read_text())
+    n = summary["verdict"]["n_processes"]
+    table = pd.read_csv(reports[0] / "results.csv")
+    runs = table[(table["section"] == "runs") & (table["n_processes"] == n)]
+    worst = {label: runs[runs["metric"] == column]["value"].astype(float).max()
+             for column, label in (("imbalance_loss", "load balance"), ("coherence_loss", "coherence"),
+                                   ("dispatch_loss", "dispatch overhead"))}
+    expected = max(worst, key=worst.get) if max(worst.values()) > 0 else "nothing"
+    assert summary["verdict"]["decided_by"] == expected
 
 
 def test_report_with_the_study_workload(tmp_path):
