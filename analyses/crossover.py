@@ -28,7 +28,7 @@ import pandas as pd
 
 from rtcommon.validate import require_int
 
-#: Default grid: record bytes x1 .. x64, memory latency x1 .. x64.
+#: Default grid: record bytes x1 .. x64, memory latency x1 .. x64; the fine mappings held against S.
 RECORD_SCALES = (1, 4, 16, 64)
 LATENCY_SCALES = (1, 4, 16, 64)
 FINE_MAPPINGS = ("P", "R")
@@ -43,8 +43,8 @@ def _scales(name: str, values) -> list:
 
 def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", scene=None, n_processes: int = 8,
                     machine=None, record_scales=RECORD_SCALES, latency_scales=LATENCY_SCALES,
-                    fine_mappings=FINE_MAPPINGS, executor=None, trace_folder=None) -> pd.DataFrame:
-    """Losses of S and the fine mappings at every (record scale, latency scale).
+                    execution=None) -> pd.DataFrame:
+    """Losses of S and the fine mappings (:data:`FINE_MAPPINGS`) at every (record scale, latency scale).
 
     Parameters
     ----------
@@ -61,10 +61,8 @@ def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", sc
         Factors ``k`` on every record's bytes, increasing, >= 1.
     latency_scales : sequence of float
         Factors ``m`` on the memory latency, increasing, >= 1.
-    fine_mappings : sequence of str
-        The mappings held against S.
-    executor, trace_folder : optional
-        Simulate the runs there (see :func:`coherence.studies.study`).
+    execution : coherence.studies.Execution, optional
+        Where the runs are simulated (see :func:`coherence.studies.study`).
 
     Returns
     -------
@@ -82,15 +80,14 @@ def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", sc
     latency_scales = _scales("latency_scales", latency_scales)
     hierarchy = get_hierarchy(hierarchy)
     layout = get_layout(layout)
-    mappings = ["S", *[m for m in fine_mappings if m != "S"]]
+    mappings = ["S", *FINE_MAPPINGS]
     frames = []
     for k in record_scales:
         scaled = layout.scaled(k)
         for m in latency_scales:
             slower = replace(hierarchy, memory_latency=hierarchy.memory_latency * m)
             result = study(trace, mappings, [n_processes], hierarchy=slower, layout=scaled, cost=cost,
-                           machine=machine, scene=scene, progress=False, executor=executor,
-                           trace_folder=trace_folder)
+                           machine=machine, scene=scene, progress=False, execution=execution)
             runs = result.runs[result.runs["n_processes"] == n_processes]
             frames.append(runs[["mapping", "n_processes", "speedup_user", "imbalance_loss", "coherence_loss"]]
                           .assign(record_scale=k, latency_scale=m, memory_latency=slower.memory_latency))

@@ -46,6 +46,7 @@ from __future__ import annotations
 import os
 import sys
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -53,15 +54,15 @@ import pandas as pd
 
 from analyses.cluster import dask_executor
 from analyses.output import check_output_folder
-from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, memory_shares, runs_at_once, trace_pages_limited
+from analyses.experiment import Experiment
+from analyses.memory_budget import memory_shares, runs_at_once, trace_pages_limited
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
-from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, N_CPUS, STUDY_SIZE,
-                                  STUDY_TABLE, PaperResult, check_background, check_process_counts, check_scenes,
-                                  check_size)
+from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, PAPER_EXPERIMENT,
+                                  STUDY_SIZE, STUDY_TABLE, PaperResult, check_process_counts, check_scenes)
 from analyses.verdict import LOSSES, format_speedup, verdict
 from coherence.cost import OPERATIONS
 
-__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
+__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "PAPER_EXPERIMENT",
            "PaperResult", "reproduce", "sequential_predictions", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
            "paper_summary", "paper_html", "check_scenes", "check_process_counts", "check_output_folder"]
 
@@ -74,56 +75,38 @@ _TESTS = ("tests_sphere", "tests_triangle", "tests_polygon", "tests_patch", "tes
 # the reproduction
 
 
-def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None, mappings=DEFAULT_MAPPINGS,
-              background: int = DEFAULT_BACKGROUND, cache_dir=None, progress: bool = True, *,
-              hierarchy="alpha21164", layout="alpha1997", costs=None, n_cpus: int = N_CPUS,
-              crossover: bool = False, workload: str = "study1997", dask=None,
-              memory_budget: int = DEFAULT_MEMORY_BUDGET) -> PaperResult:
+def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=None, crossover: bool = False,
+              **choices) -> PaperResult:
     """Calibrate the cost model to the study's times and simulate its runs for every scene.
 
     Parameters
     ----------
-    size : int
-        Image width and height (the study's is 512).
-    n_processes : sequence of int
-        Process counts (1 is always added).
+    experiment : analyses.experiment.Experiment
+        Image size (the study's is 512), workload, mappings, process counts
+        (1 is always added), CPUs, background load, caches, memory layout,
+        base cost model (its clock and the sequential runs' cycles), trace
+        cache, Dask scheduler, memory budget and progress bars. Default
+        :data:`analyses.paper_study.PAPER_EXPERIMENT`: the study's machine
+        and tracer (the 21164 as its manuals describe it, a 1990s C tracer's
+        structs, the study-era workload whose tests per ray are what the
+        calibration's costs multiply, 8 CPUs, background
+        :data:`DEFAULT_BACKGROUND`). Its ``scene`` is replaced by each of
+        ``scenes`` in turn. The results are the same on a Dask scheduler as
+        locally, and do not depend on the memory budget.
     scenes : sequence of str, optional
         Study scenes (default all five, :data:`tracer.scenes.catalog.PAPER_SCENES`).
-    mappings : sequence of str
-        Mappings (default S, P, R, B, DB).
-    background : int
-        Always-runnable processes of other users, for real time
-        (default :data:`DEFAULT_BACKGROUND`).
-    cache_dir : path, optional
-        Trace cache folder (see :func:`analyses.traces.cached_trace`).
-    progress : bool
-        Progress bars on stderr.
-    hierarchy, layout : preset name or object
-        The machine's caches and the memory image (default the 21164 as its
-        manuals describe it, and a 1990s C tracer's structs).
-    workload : str
-        The tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`; default the
-        study's: its tests per ray are what the calibration's costs multiply).
     costs : coherence.calibration.CostStructure, optional
         Which cycles per operation are fitted and how the rest follow
         (default :data:`coherence.calibration.STUDY1997_COSTS`: per test,
         per ray and per node visit, bounded).
-    n_cpus : int
-        Simulated CPUs (the study's machine had 8).
     crossover : bool
         Also run :func:`analyses.crossover.crossover_study` per scene at the
         verdict's process count with the calibrated model: where would
         coherence have mattered more than balance? (16 more runs of S, P
         and R per scene.)
-    dask : str or distributed.Client, optional
-        Simulate the runs of step 4 (and the crossover's) on that Dask
-        scheduler (:mod:`analyses.cluster`); every worker must read the trace
-        cache under the same path. The results are the same as a local run's.
-    memory_budget : int
-        Bytes the whole process may take: what it and its runs need per
-        pixel is set aside and the rest goes to the traces
-        (:func:`analyses.memory_budget.memory_shares`); the results do not
-        depend on it.
+    **choices
+        Fields of ``experiment`` to replace (``size=128``,
+        ``cache_dir=...``), a shorthand for :func:`dataclasses.replace`.
 
     Returns
     -------
@@ -132,34 +115,31 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     from tqdm.auto import tqdm
 
     from analyses.traces import cached_trace
-    from cachesim import get_hierarchy
-    from coherence import Machine, get_layout, get_mapping, study
+    from coherence import study
     from coherence.calibration import STUDY1997_COSTS, CostStructure
-    from coherence.cost import alpha8400
+    from coherence.studies import Execution
     from tracer.scenes.catalog import PAPER_SCENES
     from tracer.trace.access import AccessTrace
-    from tracer.rendering.workload import get_workload
 
     # every argument is checked before rendering anything
+    if not isinstance(experiment, Experiment):
+        raise ValueError(f"reproduce needs an analyses.experiment.Experiment, got {type(experiment).__name__}")
+    experiment = replace(experiment, **choices) if choices else experiment
     scenes = check_scenes(PAPER_SCENES if scenes is None else scenes)
-    counts = check_process_counts(n_processes)
-    size = check_size(size)
-    background = check_background(background)
-    # step 4 runs one run per CPU, step 1 two scenes at once; the same with --dask: same outputs
-    n_jobs = runs_at_once(memory_budget, size * size, os.cpu_count() or 1)
-    shares = memory_shares(memory_budget, size * size, max(2, n_jobs))
-    mapping_objects = [get_mapping(m) for m in mappings]
+    counts = sorted({1, *experiment.n_processes})
+    size, background, progress = experiment.size, experiment.background, experiment.progress
+    # step 4 runs one run per CPU, step 1 two scenes at once; the same with dask: same outputs
+    n_jobs = runs_at_once(experiment.memory_budget, size * size, os.cpu_count() or 1)
+    shares = memory_shares(experiment.memory_budget, size * size, max(2, n_jobs))
+    mapping_objects = experiment.mapping_objects()
     names = [m.name for m in mapping_objects]
-    if not names or len(set(names)) != len(names):
-        raise ValueError(f"give at least one mapping, each once; got {names}")
-    get_workload(workload)
     costs = STUDY1997_COSTS if costs is None else costs
     if not isinstance(costs, CostStructure):
         raise ValueError(f"costs must be a coherence.calibration.CostStructure, got {type(costs).__name__}")
-    hierarchy = get_hierarchy(hierarchy)
-    layout = get_layout(layout)
-    machine = Machine(n_cpus=n_cpus, background_load=background)
-    base = alpha8400()
+    hierarchy = experiment.hierarchy_object()
+    layout = experiment.layout_object()
+    machine = experiment.machine()
+    base = experiment.cost_model()
 
     # 1-2: traces, and counters and memory cycles of the sequential S run. A trace is memory-mapped and
     # every page a run touched stays resident while it is mapped (all five are about 4 GB at 512x512), so
@@ -169,7 +149,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     def sequential_run(name, scene, trace):
         with trace_pages_limited(trace, shares):
             sequential = study(trace, ["S"], [1], hierarchy=hierarchy, layout=layout, cost=base, machine=machine,
-                               scene=scene, progress=False, n_jobs=1)
+                               scene=scene, progress=False, execution=Execution(n_jobs=1))
         run = sequential.runs.iloc[0]
         counters = sequential.processes[list(_COUNTERS)].sum()
         return {"scene": name, "memory_cycles": float(run["memory_cycles"]),
@@ -183,8 +163,10 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     with ThreadPoolExecutor(max_workers=2) as pool:
         for name in bar:
             bar.set_postfix_str(name)
-            scene, trace, info = cached_trace(name, size, cache_dir=cache_dir, progress=progress,
-                                              workload=workload, memory_budget=shares["render_records"])
+            one = replace(experiment, scene=name)
+            scene, trace, info = cached_trace(one.scene, one.size, cache_dir=one.cache_dir, kd=one.kd,
+                                              max_depth=one.max_depth, progress=progress, workload=one.workload,
+                                              memory_budget=shares["render_records"])
             loaded[name] = (scene, None, info)
             info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}
             runs_of_scenes.append(pool.submit(sequential_run, name, scene, trace))
@@ -202,7 +184,7 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     frames = []
     crossings = []
     verdict_n = 8 if 8 in counts else max(counts)
-    with dask_executor(dask) as executor:
+    with dask_executor(experiment.dask) as executor:
         for name in scenes:
             scene, _, info = loaded[name]
             if progress:
@@ -210,16 +192,18 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
             folder = Path(info["path"]) / "trace"
             trace = AccessTrace.load(folder, mmap=True)  # the entry of step 1
             with trace_pages_limited(trace, shares):
+                execution = Execution(n_jobs=n_jobs, executor=executor, trace_folder=folder,
+                                      shared_lines_budget=shares["shared_lines"])
                 result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
-                               machine=machine, scene=scene, progress=progress, executor=executor, n_jobs=n_jobs,
-                               trace_folder=folder, shared_lines_budget=shares["shared_lines"])
+                               machine=machine, scene=scene, progress=progress, execution=execution)
                 frames.append(result.runs.assign(scene=name))
                 if crossover and verdict_n > 1:
                     from analyses.crossover import crossover_study
 
                     crossings.append(crossover_study(trace, cost=model, hierarchy=hierarchy, layout=layout,
                                                      scene=scene, machine=machine, n_processes=verdict_n,
-                                                     executor=executor, trace_folder=folder).assign(scene=name))
+                                                     execution=Execution(executor=executor, trace_folder=folder))
+                                     .assign(scene=name))
             del trace
     runs = pd.concat(frames, ignore_index=True)
     runs = runs[["scene"] + [c for c in runs.columns if c != "scene"]]
@@ -228,13 +212,15 @@ def reproduce(size: int = STUDY_SIZE, n_processes=DEFAULT_PROCESSES, scenes=None
     predictions = sequential_predictions(runs, size, order=names)
     crossings = pd.concat(crossings, ignore_index=True) if crossings else None
     verdicts, numbers = scene_verdicts(runs, verdict_n, order=names)
+    # the experiment's record (one per scene: "scenes" for "scene"), with what this run resolved
+    recorded = {key: value for key, value in experiment.as_parameters().items() if key != "scene"}
     parameters = {
-        "size": size, "scenes": scenes, "mappings": names, "n_processes": counts, "n_cpus": int(n_cpus),
-        "background_load": background, "verdict_n_processes": int(verdict_n), "hierarchy": hierarchy.to_dict(),
+        **recorded, "size": size, "scenes": scenes, "mappings": names, "n_processes": counts,
+        "n_cpus": int(machine.n_cpus), "background_load": background, "verdict_n_processes": int(verdict_n), "hierarchy": hierarchy.to_dict(),
         "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
-        "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE, "workload": workload,
-        "crossover": bool(crossover), "memory_shares": shares, "runs_at_once": n_jobs,
+        "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE,
+        "workload": experiment.workload,        "crossover": bool(crossover), "memory_shares": shares, "runs_at_once": n_jobs,
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
                        verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,

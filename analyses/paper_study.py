@@ -11,13 +11,15 @@ from dataclasses import asdict, dataclass, field
 
 import pandas as pd
 
+from analyses.experiment import Experiment
+from coherence.cost import CLOCK_HZ
 from coherence.mappings import DEFAULT_MAPPINGS
+from coherence.simulation import STUDY_CPUS
 from rtcommon.validate import require_int
 from tracer.scenes.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
-           "N_CPUS", "CLOCK_HZ", "PaperResult", "check_scenes", "check_process_counts",
-           "check_size", "check_background"]
+           "N_CPUS", "CLOCK_HZ", "PAPER_EXPERIMENT", "PaperResult", "check_scenes", "check_process_counts"]
 
 #: The study's scene table and sequential S times (:data:`tracer.scenes.study.STUDY_SCENES`), verbatim.
 STUDY_TABLE = pd.DataFrame([asdict(scene) for scene in STUDY_SCENES.values()]).rename(columns={"name": "scene"})
@@ -42,8 +44,16 @@ DEFAULT_BACKGROUND = 2
 
 DEFAULT_PROCESSES = (1, 2, 4, 6, 8, 10, 12, 14, 16)
 
-N_CPUS = 8
-CLOCK_HZ = 300e6
+N_CPUS = STUDY_CPUS
+
+#: What :func:`analyses.paper.reproduce` runs unless told otherwise: the study's
+#: image size, process counts and machine (the 21164's caches as its manuals
+#: describe them, 8 CPUs, :data:`DEFAULT_BACKGROUND`), traced with the
+#: study-era workload and laid out as a 1990s C tracer's structs. The scene is
+#: replaced by each of the study's in turn.
+PAPER_EXPERIMENT = Experiment(scene=PAPER_SCENES[0], size=STUDY_SIZE, workload="study1997",
+                              n_processes=DEFAULT_PROCESSES, layout="alpha1997", n_cpus=N_CPUS,
+                              background=DEFAULT_BACKGROUND)
 
 
 @dataclass
@@ -124,11 +134,3 @@ def check_scenes(scenes) -> list[str]:
 def check_process_counts(n_processes) -> list[int]:
     """Sorted distinct process counts with 1 added (speed-ups need it)."""
     return sorted({1, *(require_int("process counts", n, 1) for n in n_processes)})
-
-
-def check_size(size) -> int:
-    return require_int("size", size, 1)
-
-
-def check_background(background) -> int:
-    return require_int("background", background, 0)

@@ -35,24 +35,32 @@ def miss_map_png(misses) -> bytes:
     return figure_png(fig)
 
 
-def report_html(scene, info, parameters, scene_summary, tree, totals, runs, processes, curves, cost_map, scene_bytes,
-                caches, verdict, verdict_n, top_n, names, hierarchy, mapping_objects, trace, progress, miss_png,
-                miss_totals, *, texture=None) -> str:
+def report_html(inputs, miss_png: bytes) -> str:
     """The report page as HTML text, figures embedded as PNG.
 
     Draws on bare :class:`matplotlib.figure.Figure` objects, so it needs no
-    pyplot and picks no backend. The arguments are the pieces
-    :func:`analyses.report.build_report` computed; ``miss_png`` is the miss
-    map's figure (:func:`miss_map_png`), ``miss_totals`` its
-    :meth:`~coherence.missmap.MissMap.totals`; ``texture`` the tables of
-    :func:`analyses.report_texture.texture_section` for a textured scene.
+    pyplot and picks no backend.
+
+    Parameters
+    ----------
+    inputs : analyses.report_tables.ReportInputs
+        The pieces :func:`analyses.report.build_report` computed (a
+        textured scene's tables in ``inputs.texture``).
+    miss_png : bytes
+        The miss map's figure (:func:`miss_map_png`).
     """
     from matplotlib.figure import Figure
     from tqdm.auto import tqdm
 
     from analyses import plots
 
-    bar = tqdm(total=8, desc="figures", unit="figure", disable=not progress, leave=False, file=sys.stderr)
+    scene, info, parameters, scene_summary = inputs.scene, inputs.info, inputs.parameters, inputs.scene_summary
+    tree, totals, runs, processes, curves = inputs.tree, inputs.totals, inputs.runs, inputs.processes, inputs.curves
+    cost_map, scene_bytes, caches, verdict = inputs.cost_map, inputs.scene_bytes, inputs.caches, inputs.verdict
+    verdict_n, top_n, names, hierarchy = inputs.verdict_n, inputs.top_n, inputs.names, inputs.hierarchy
+    mapping_objects, trace, miss_totals, texture = inputs.mappings, inputs.trace, inputs.miss_totals, inputs.texture
+    bar = tqdm(total=8, desc="figures", unit="figure", disable=not inputs.experiment.progress, leave=False,
+               file=sys.stderr)
     figures = {}
 
     def draw(key, figsize, painter, ncols=1, per_column=False):

@@ -163,7 +163,7 @@ def synthetic_trace(folder, width: int = 6, height: int = 5, seed: int = 0):
 def _compile(hierarchy, layout, cost, machine, mappings) -> None:
     """The report's simulation steps on a synthetic trace (see :mod:`analyses.report`)."""
     from coherence.missmap import miss_map
-    from coherence.studies import place_layout, study
+    from coherence.studies import Execution, place_layout, study
     from tracer.trace.access import COUNTER_NAMES
 
     from analyses.report_curves import miss_ratio_curves
@@ -172,7 +172,7 @@ def _compile(hierarchy, layout, cost, machine, mappings) -> None:
         trace = synthetic_trace(folder)
         placed = place_layout(layout, trace)
         study(trace, mappings, (1, 2), hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
-              progress=False, n_jobs=1)
+              progress=False, execution=Execution(n_jobs=1))
         miss_map(trace, mappings[0], 2, hierarchy=hierarchy, layout=layout, cost=cost, machine=machine)
         miss_ratio_curves(trace, placed, mappings, hierarchy, False)
         cost.compute_cycles(trace.counters, COUNTER_NAMES)

@@ -216,7 +216,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 
 def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:
     """Simulate one grid point on a stored trace; one row per mapping at the point's n."""
-    from coherence.studies import study as run_study
+    from coherence.studies import Execution, study as run_study
     from tracer.scenes.catalog import load
     from tracer.trace.access import AccessTrace
 
@@ -226,7 +226,7 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     # other size factors have none.
     scene = load(study.scene) if "scene_size" not in point else None
     result = run_study(trace, study.mappings, [n_processes], hierarchy=hierarchy, layout=layout, cost=cost,
-                       machine=machine, scene=scene, progress=False, n_jobs=1)
+                       machine=machine, scene=scene, progress=False, execution=Execution(n_jobs=1))
     runs = result.runs[result.runs["n_processes"] == n_processes]
     level_columns = [c for c in runs.columns if c.endswith(("_hit_rate", "_misses_per_ray"))]
     table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *level_columns]].copy()

@@ -15,6 +15,7 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 _EXPORTS = {
     "study": "coherence.studies", "StudyResult": "coherence.studies", "place_layout": "coherence.studies",
+    "Execution": "coherence.studies",
     "Machine": "coherence.simulation", "simulate_run": "coherence.simulation", "Run": "coherence.simulation",
     "CostModel": "coherence.cost", "get_cost_model": "coherence.cost",
     "MemoryLayout": "coherence.layout", "RecordLayout": "coherence.layout", "get_layout": "coherence.layout",

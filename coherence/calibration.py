@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from coherence.cost import OPERATIONS, SQUARE_ROOT_CYCLES_21164, CostModel
+from coherence.cost import CLOCK_HZ, OPERATIONS, SQUARE_ROOT_CYCLES_21164, CostModel
 
 #: Floating-point operations (+, -, *, /, sqrt and compares each count one)
 #: on the full path of each routine, counted by hand in this project's code.
@@ -176,7 +176,7 @@ def _operation_totals(measurements: pd.DataFrame) -> dict:
 
 
 def fit_costs(measurements: pd.DataFrame, structure: CostStructure = STUDY1997_COSTS, *,
-              clock_hz: float = 300e6, name: str = "calibrated") -> tuple[CostModel, pd.DataFrame]:
+              clock_hz: float = CLOCK_HZ, name: str = "calibrated") -> tuple[CostModel, pd.DataFrame]:
     """Fit ``structure``'s costs to measured times, by bounded least squares of relative errors.
 
     Parameters
@@ -241,7 +241,7 @@ def _residuals(index, seconds, memory, fixed_cycles, fitted_cycles, clock_hz) ->
 
 
 def leave_one_out(measurements: pd.DataFrame, structure: CostStructure = STUDY1997_COSTS, *,
-                  clock_hz: float = 300e6) -> pd.DataFrame:
+                  clock_hz: float = CLOCK_HZ) -> pd.DataFrame:
     """Fit on every run but one and predict the one left out, for each run.
 
     Returns

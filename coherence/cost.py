@@ -24,6 +24,12 @@ from rtcommon.validate import require_number
 #: rows of counters :meth:`CostModel.compute_cycles` converts at a time (6.5 MB of float64 for 25 counters)
 COMPUTE_ROWS = 1 << 15
 
+#: Clock rate of the study's machine: the AlphaServer 8400's 21164 CPUs ran at 300 MHz.
+CLOCK_HZ = 300e6
+
+#: The cost model every run uses unless told otherwise: the study's machine (:func:`alpha8400`).
+DEFAULT_COST_MODEL = "alpha8400"
+
 # Cost fields and the trace counters each one multiplies.
 OPERATIONS = {
     "ray": ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays"),
@@ -92,7 +98,7 @@ class CostModel:
     shading: float = 1500.0
     light_read: float = 0.0
     test_root: float = 0.0
-    clock_hz: float = 300e6
+    clock_hz: float = CLOCK_HZ
     name: str = "custom"
 
     def __post_init__(self):
@@ -133,7 +139,7 @@ class CostModel:
         return asdict(self)
 
     @classmethod
-    def calibrate(cls, measurements: pd.DataFrame, *, clock_hz: float = 300e6, name: str = "calibrated",
+    def calibrate(cls, measurements: pd.DataFrame, *, clock_hz: float = CLOCK_HZ, name: str = "calibrated",
                   fixed: dict | None = None):
         """Fit cycles per operation to measured times by non-negative least squares.
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from coherence.cost import DEFAULT_COST_MODEL
 from rtcommon.validate import require_int
 
 __all__ = ["MissMap", "miss_map"]
@@ -111,7 +112,7 @@ class MissMap:
         return pd.DataFrame(rows)
 
 
-def miss_map(trace, mapping, n_processes: int, *, hierarchy="alpha21164", layout="compact", cost="alpha8400",
+def miss_map(trace, mapping, n_processes: int, *, hierarchy="alpha21164", layout="compact", cost=DEFAULT_COST_MODEL,
              machine=None, scene=None) -> MissMap:
     """Simulate one run and return its misses per pixel per cache level.
 

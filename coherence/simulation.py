@@ -51,6 +51,9 @@ from rtcommon.validate import require_bool, require_int, require_number
 SCHEDULERS = ("shared-queue", "static")
 PLACEMENTS = ("round-robin", "neighbours")
 
+#: CPUs of the study's AlphaServer 8400, and of a :class:`Machine` unless told otherwise.
+STUDY_CPUS = 8
+
 #: Bytes one background slice reads by default (see :class:`Machine`).
 DEFAULT_BACKGROUND_FOOTPRINT = 1 << 20
 
@@ -106,7 +109,7 @@ class Machine:
         Cycles a CPU spends starting a process other than its last one.
     """
 
-    n_cpus: int = 8
+    n_cpus: int = STUDY_CPUS
     quantum_cycles: float = 3e6
     scheduler: str = "shared-queue"
     placement: str = "round-robin"

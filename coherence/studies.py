@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
-from coherence.cost import CostModel, get_cost_model
+from coherence.cost import DEFAULT_COST_MODEL, CostModel, get_cost_model
 from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_counts_of
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
@@ -68,11 +68,45 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
     return layout.place(counts, vertices, textures)
 
 
+@dataclass(frozen=True)
+class Execution:
+    """Where and how a study's runs are simulated; the results are the same whatever it says.
+
+    Parameters
+    ----------
+    n_jobs : int, optional
+        Runs simulated at once (threads; default: the number of CPUs).
+    executor : concurrent.futures.Executor, optional
+        Simulate the runs there instead (a Dask cluster's
+        ``Client.get_executor()``, say); each run is a task that loads the
+        trace from ``trace_folder`` where it executes.
+    trace_folder : path, optional
+        Where the trace was saved (:meth:`~tracer.trace.access.AccessTrace.save`);
+        needed with ``executor``, and must be readable there.
+    shared_lines_budget : int
+        Bytes the runs may share in line addresses worked out once
+        (:mod:`coherence.pixel_lines`); beyond it each run converts its
+        pixels' records itself. The counts are the same either way.
+    """
+
+    n_jobs: int | None = None
+    executor: object = None
+    trace_folder: object = None
+    shared_lines_budget: int = SHARED_LINES_BUDGET
+
+    def __post_init__(self):
+        if self.n_jobs is not None:
+            require_int("Execution.n_jobs", self.n_jobs, 1)
+        require_int("Execution.shared_lines_budget", self.shared_lines_budget, 0)
+        if self.executor is not None and self.trace_folder is None:
+            raise ValueError("Execution: runs on an executor load the trace where they execute; give "
+                             "trace_folder, the folder the trace was saved in")
+
+
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
           hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
-          cost: CostModel | str = "alpha8400", machine: Machine | None = None, scene=None,
-          progress: bool = True, n_jobs: int | None = None, executor=None, trace_folder=None,
-          shared_lines_budget: int = SHARED_LINES_BUDGET) -> StudyResult:
+          cost: CostModel | str = DEFAULT_COST_MODEL, machine: Machine | None = None, scene=None,
+          progress: bool = True, execution: Execution | None = None) -> StudyResult:
     """Simulate every mapping at every process count on one trace.
 
     Parameters
@@ -91,20 +125,9 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         For exact polygon sizes in the layout.
     progress : bool
         Show a progress bar on stderr.
-    n_jobs : int, optional
-        Runs simulated at once (threads; default: the number of CPUs).
-    executor : concurrent.futures.Executor, optional
-        Simulate the runs there instead (a Dask cluster's
-        ``Client.get_executor()``, say); each run is a task that loads the
-        trace from ``trace_folder`` where it executes. The results are the
-        same as a local study's.
-    trace_folder : path, optional
-        Where ``trace`` was saved (:meth:`~tracer.trace.access.AccessTrace.save`);
-        needed with ``executor``, and must be readable there.
-    shared_lines_budget : int
-        Bytes the runs may share in line addresses worked out once
-        (:mod:`coherence.pixel_lines`); beyond it each run converts its
-        pixels' records itself. The counts are the same either way.
+    execution : Execution, optional
+        Threads, a cluster's executor, and the memory the runs may share
+        (default: one thread per CPU, here). The results are the same.
 
     Returns
     -------
@@ -119,10 +142,10 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     if len(set(names)) != len(names):
         raise ValueError(f"mappings must have distinct names, got {names}")
     counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
-    shared_lines_budget = require_int("shared_lines_budget", shared_lines_budget, 0)
-    if executor is not None and trace_folder is None:
-        raise ValueError("study: runs on an executor load the trace where they execute; give trace_folder, "
-                         "the folder the trace was saved in")
+    execution = execution or Execution()
+    if not isinstance(execution, Execution):
+        raise ValueError(f"study: execution must be a coherence.studies.Execution, got {type(execution).__name__}")
+    executor, trace_folder, n_jobs = execution.executor, execution.trace_folder, execution.n_jobs
     placed = place_layout(layout, trace, scene)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
@@ -160,7 +183,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     else:
         # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
         smallest_line = min(level.line_size for level in hierarchy.levels)
-        lines = pixel_lines(trace, placed, smallest_line, shared_lines_budget) if len(distinct) > 1 else None
+        lines = pixel_lines(trace, placed, smallest_line, execution.shared_lines_budget) if len(distinct) > 1 \
+            else None
 
         def simulate(index):
             return simulate_run(trace, distribution_of(index), hierarchy, placed, cost, machine, compute=compute,

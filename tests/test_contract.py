@@ -25,14 +25,6 @@ MAX_PARAMETERS = 10
 #: who is removing it; the lead empties this list once they have landed.
 #: An entry whose function is back under the limit is ignored.
 OVER_THE_LIMIT_FOR_NOW = {
-    # H5 (one Experiment object for the orchestrators)
-    "analyses/report.py:build_report",
-    "analyses/report.py:_assemble",
-    "analyses/report.py:_results_table",
-    "analyses/report_html.py:report_html",
-    "analyses/paper.py:reproduce",
-    "coherence/studies.py:study",
-    "analyses/crossover.py:crossover_study",
     # H2 (the renderer's options as one object)
     "tracer/rendering/render.py:render",
 }

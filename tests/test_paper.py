@@ -276,7 +276,7 @@ def test_files_written_and_deterministic(written):
 
 @pytest.mark.parametrize("argv, message", [
     (["--scenes", "nosuch"], "unknown scene"),
-    (["--processes", "0", "2"], "process counts"),
+    (["--processes", "0", "2"], "--processes must be >= 1"),
     (["--size", "0"], "--size"),
     (["--background", "-1"], "--background"),
     (["--mappings", "zigzag"], "zigzag"),
@@ -301,7 +301,7 @@ def test_output_path_is_a_file(tmp_path, capsys):
 def test_api_validates_before_rendering(tmp_path):
     with pytest.raises(ValueError, match="unknown scene"):
         paper.reproduce(size=SIZE, scenes=["balls", "teapot"], cache_dir=tmp_path)
-    with pytest.raises(ValueError, match="process counts"):
+    with pytest.raises(ValueError, match="n_processes"):
         paper.reproduce(size=SIZE, n_processes=[2, -1], cache_dir=tmp_path)
     assert not list(tmp_path.iterdir())
 

@@ -10,6 +10,7 @@ import pytest
 
 import tracer.rendering.render
 from analyses import traces
+from analyses.experiment import Experiment
 from analyses.report import RESULT_COLUMNS, SECTIONS, build_report
 from analyses.verdict import format_percent, verdict
 from analyses.cli import main
@@ -245,8 +246,8 @@ def test_budget_too_small_for_the_image_fails_before_rendering(tmp_path, monkeyp
     # The budget is the process's; at 4096^2 the runs alone need more than 1000 MB.
     monkeypatch.setattr(tracer.rendering.render, "render", _no_render)
     with pytest.raises(ValueError, match=r"memory_budget \(--memory-budget\) of 1000 MB is too small.*give at least"):
-        build_report("balls", 4096, memory_budget=1000 << 20, out=tmp_path / "out", cache_dir=tmp_path / "c",
-                     progress=False)
+        build_report(Experiment("balls", 4096, memory_budget=1000 << 20, cache_dir=tmp_path / "c", progress=False),
+                     out=tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
 

@@ -23,9 +23,10 @@ def find_browser():
 def test_report_renders_in_headless_chromium(tmp_path):
     from matplotlib.image import imread
 
+    from analyses.experiment import Experiment
     from analyses.report import build_report, write_report
 
-    report = build_report("tetra", 24, n_processes=[2, 8], cache_dir=tmp_path / "cache", progress=False)
+    report = build_report(Experiment("tetra", 24, n_processes=(1, 2, 8), cache_dir=tmp_path / "cache", progress=False))
     folder = write_report(report, tmp_path / "report")
     shot = tmp_path / "shot.png"
     completed = subprocess.run(

@@ -156,15 +156,15 @@ def test_a_run_takes_at_most_its_bytes_per_pixel(tmp_path):
 
     from analyses.memory_budget import RUN_BYTES_PER_PIXEL
     from coherence.mappings import DEFAULT_MAPPINGS
-    from coherence.studies import study
+    from coherence.studies import Execution, study
 
     peaks = {}
     for size in (128, 384):
         trace = _synthetic_trace(tmp_path / str(size), size)
-        study(trace, ["S"], [2], progress=False, n_jobs=1)  # compiled outside the measure
+        study(trace, ["S"], [2], progress=False, execution=Execution(n_jobs=1))  # compiled outside the measure
         for mapping in DEFAULT_MAPPINGS:
             tracemalloc.start()
-            study(trace, [mapping], [8], progress=False, n_jobs=1)
+            study(trace, [mapping], [8], progress=False, execution=Execution(n_jobs=1))
             peaks[mapping, size] = tracemalloc.get_traced_memory()[1]
             tracemalloc.stop()
         del trace

@@ -6,7 +6,7 @@ from coherence.distribution import Distribution
 from coherence.mappings import Mapping
 from coherence.metrics import DECOMPOSITION_COLUMNS, EFFICIENCY_FACTORS, LOSS_COLUMNS
 from coherence.simulation import Machine
-from coherence.studies import study
+from coherence.studies import Execution, study
 from trace_factory import SMALL, random_trace
 from tracer.trace.access import COUNTER_NAMES
 
@@ -72,11 +72,11 @@ def test_shared_lines_budget_changes_no_result():
     trace = random_trace(width=16, height=8, seed=4)
     machine = Machine(n_cpus=2, quantum_cycles=5000)
     frames = [study(trace, ["S", "P", "B"], [1, 3], hierarchy=SMALL, machine=machine, progress=False,
-                    shared_lines_budget=budget) for budget in (0, 1 << 20)]
+                    execution=Execution(shared_lines_budget=budget)) for budget in (0, 1 << 20)]
     assert frames[0].runs.equals(frames[1].runs)
     assert frames[0].processes.equals(frames[1].processes)
     with pytest.raises(ValueError, match="shared_lines_budget"):
-        study(trace, ["S"], [1], hierarchy=SMALL, progress=False, shared_lines_budget=-1)
+        Execution(shared_lines_budget=-1)
 
 
 def test_factors_multiply_to_efficiency(result):

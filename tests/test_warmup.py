@@ -32,6 +32,7 @@ _SCRIPT = textwrap.dedent("""
     from coherence.layout import get_layout
     from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
     from coherence.simulation import Machine
+    from analyses.experiment import Experiment
     from analyses.report import build_report
     from analyses.warmup import _compile
 
@@ -47,7 +48,7 @@ _SCRIPT = textwrap.dedent("""
     _compile(get_hierarchy("alpha21164"), get_layout("compact"), get_cost_model("alpha8400"),
              Machine(n_cpus=8, background_load=4), [get_mapping(m) for m in DEFAULT_MAPPINGS])
     before = signatures()
-    build_report("balls", 8, cache_dir=sys.argv[1], progress=False, max_processes=2)
+    build_report(Experiment("balls", 8, cache_dir=sys.argv[1], progress=False, n_processes=(1, 2)))
     after = signatures()
     print(json.dumps({name: sorted(sigs - before.get(name, set())) for name, sigs in after.items()
                       if sigs - before.get(name, set())}))

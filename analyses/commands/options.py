@@ -23,7 +23,7 @@ from importlib import import_module
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
            "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS",
-           "WORKLOADS", "workload_options"]
+           "WORKLOADS", "workload_options", "EXPERIMENT_OPTIONS", "experiment_from_args"]
 
 
 class RegistryNames(Sequence):
@@ -246,6 +246,41 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
     if not smallest <= args.memory_budget <= 2.0 ** 40:
         raise ValueError(f"--memory-budget must be at least {smallest} MB, got {args.memory_budget}")
     return int(args.memory_budget * 2**20)
+
+
+#: Option (``args`` attribute) -> :class:`analyses.experiment.Experiment` field it sets.
+EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", "kd": "kd", "max_depth": "max_depth",
+                      "mappings": "mappings", "processes": "n_processes", "hierarchy": "hierarchy", "layout": "layout",
+                      "cost": "cost", "cpus": "n_cpus", "background": "background", "cache": "cache_dir",
+                      "dask": "dask"}
+
+
+def experiment_from_args(args: argparse.Namespace, base=None, **fields):
+    """The :class:`analyses.experiment.Experiment` a subcommand's options ask for.
+
+    Every option of :data:`EXPERIMENT_OPTIONS` (and ``--memory-budget``) the
+    subcommand has and that is not None replaces ``base``'s field (default
+    ``Experiment()``, the report's choices); ``fields`` replace last.
+    Progress bars are shown when stderr is a terminal.
+
+    Raises
+    ------
+    ValueError
+        Naming the field or option that is out of range.
+    """
+    import sys
+    from dataclasses import replace
+
+    from analyses.experiment import Experiment
+
+    choices = {field: getattr(args, option) for option, field in EXPERIMENT_OPTIONS.items()
+               if getattr(args, option, None) is not None}
+    if "mappings" in choices:
+        choices["mappings"] = tuple(choices["mappings"])
+    if getattr(args, "memory_budget", None) is not None:
+        choices["memory_budget"] = memory_budget_bytes(args)
+    choices["progress"] = sys.stderr.isatty()
+    return replace(base if base is not None else Experiment(), **{**choices, **fields})
 
 
 def mappings_options(why: str = "") -> argparse.ArgumentParser:

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
-                                       machine_options, mappings_options, memory_budget_bytes,
+from analyses.commands.options import (HelpFormatter, cache_options, check_at_least, dask_options,
+                                       experiment_from_args, machine_options, mappings_options,
                                        memory_budget_options, size_options, workload_options)
 
 HELP = "the study reproduced: five scenes beside its table, calibrated times, speed-up figures, verdicts"
@@ -77,32 +77,22 @@ def run(args: argparse.Namespace) -> int:
     import json
     import sys
 
-    from analyses.paper import (DEFAULT_PROCESSES, check_output_folder, check_process_counts, check_scenes,
-                                paper_summary, reproduce, write_paper)
-    from coherence import get_mapping
+    from analyses.paper import PAPER_EXPERIMENT, check_output_folder, check_scenes, paper_summary, reproduce, write_paper
     from tracer.scenes.catalog import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
     from analyses.commands.checks import check_memory, require_distributed
     from analyses.traces import check_cache_dir
 
-    check_at_least(args, size=1, background=0)
+    check_at_least(args, size=1, background=0, processes=1)
     if args.dask:
         require_distributed()
     check_memory("--size", args.size)
-    memory_budget = memory_budget_bytes(args)
+    experiment = experiment_from_args(args, PAPER_EXPERIMENT)
     check_cache_dir(args.cache)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
-    counts = check_process_counts(args.processes if args.processes else DEFAULT_PROCESSES)
-    mappings = chosen_mappings(args)
-    for name in mappings:
-        get_mapping(name)
     out = check_output_folder(args.out)
-    progress = sys.stderr.isatty()
-    result = reproduce(size=args.size, n_processes=counts, scenes=scenes, mappings=mappings,
-                       background=args.background, cache_dir=args.cache, progress=progress,
-                       crossover=args.crossover, workload=args.workload, dask=args.dask,
-                       memory_budget=memory_budget)
+    result = reproduce(experiment, scenes=scenes, crossover=args.crossover)
     path = write_paper(result, out)
     print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
           "speedup_user.png", file=sys.stderr)

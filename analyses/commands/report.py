@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, chosen_mappings, check_at_least, dask_options,
-                                       machine_options, mappings_options, memory_budget_bytes,
+from analyses.commands.options import (HelpFormatter, cache_options, check_at_least, dask_options,
+                                       experiment_from_args, machine_options, mappings_options,
                                        memory_budget_options, model_options, scene_options, size_options,
                                        tree_options, workload_options)
 
@@ -89,18 +89,13 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--max-depth", args.max_depth, 1, 64)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
-    memory_budget = memory_budget_bytes(args)
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
     if args.dask:
         checks.require_distributed()
     out = args.out or f"report-{Path(args.scene).stem.lower()}"
-    progress = sys.stderr.isatty()
-    report = build_report(args.scene, args.size, mappings=chosen_mappings(args), max_processes=args.max_processes,
-                          n_processes=args.processes, background=args.background, n_cpus=args.cpus,
-                          hierarchy=args.hierarchy, layout=args.layout, cost=args.cost, kd=args.kd,
-                          max_depth=args.max_depth, cache_dir=args.cache, out=out, progress=progress,
-                          workload=args.workload, miss_map=miss_map, dask=args.dask,
-                          memory_budget=memory_budget)
+    counts = args.processes if args.processes else range(1, args.max_processes + 1)
+    experiment = experiment_from_args(args, n_processes=tuple(counts))
+    report = build_report(experiment, out=out, miss_map=miss_map)
     path = write_report(report, out)
     print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)

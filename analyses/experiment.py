@@ -1,0 +1,228 @@
+"""One run's choices, held together: what ``report``, ``paper`` and ``whatif`` are asked to do.
+
+>>> from dataclasses import replace
+>>> from analyses.experiment import Experiment
+>>> base = Experiment(scene="tetra", size=128)
+>>> busier = replace(base, background=8)         # a study varies one choice
+>>> busier.as_parameters()["background_load"]
+8
+
+An :class:`Experiment` is checked once, when it is made: every field that
+is wrong raises ``ValueError`` naming the field and what it may be, before
+any trace is rendered. Its defaults are the report's; the paper's and the
+what-if studies' bases are replacements of it
+(:data:`analyses.paper_study.PAPER_EXPERIMENT`,
+:data:`analyses.whatif.WHATIF_EXPERIMENT`). Every output records the
+choices its results depend on through :meth:`Experiment.as_parameters`;
+where the results are kept, how many runs share the memory and whether
+progress is shown change no result, so they are left out of it.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, fields
+
+from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, MIN_MEMORY_BUDGET
+from coherence.cost import DEFAULT_COST_MODEL
+from coherence.mappings import DEFAULT_MAPPINGS
+from coherence.simulation import STUDY_CPUS
+from rtcommon.validate import require_int
+
+__all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
+
+#: Process counts of a report unless told otherwise: 1..16, the study's range.
+REPORT_PROCESSES = tuple(range(1, 17))
+
+#: The deepest ray tree a run may ask for.
+MAX_DEPTH_LIMIT = 64
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """The choices of one run of the toolkit, checked once.
+
+    Parameters
+    ----------
+    scene : str or os.PathLike
+        A study scene's name or a .nff/.obj file (a :class:`pathlib.Path` is
+        always a file).
+    size : int
+        Image width and height in pixels, >= 1.
+    workload : str
+        The tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`).
+    kd : str, optional
+        kd-tree builder (:data:`tracer.kd.tree.BUILDERS`); None: the
+        workload's.
+    max_depth : int, optional
+        Ray-tree depth, primary = 1, in [1, :data:`MAX_DEPTH_LIMIT`]; None:
+        the scene's.
+    mappings : tuple of str or coherence.mappings.Mapping
+        Mappings compared, distinct, at least one.
+    n_processes : tuple of int
+        Process counts, each >= 1; kept sorted without repeats.
+    hierarchy : str, path or cachesim.Hierarchy
+        Cache hierarchy: a preset, a .toml/.json file or an object.
+    layout : str or coherence.layout.MemoryLayout
+        Memory layout of the scene's records.
+    cost : str or coherence.cost.CostModel
+        Cycles per operation and clock rate.
+    n_cpus : int
+        CPUs of the simulated machine, >= 1.
+    background : int
+        Always-runnable processes of other users, for real time, >= 0.
+    cache_dir : str or os.PathLike, optional
+        Trace cache folder (:func:`analyses.traces.cached_trace`).
+    dask : str or distributed.Client, optional
+        Simulate the runs on that Dask scheduler (:mod:`analyses.cluster`).
+    memory_budget : int
+        Bytes the whole process may take
+        (:mod:`analyses.memory_budget`), at least
+        :data:`analyses.memory_budget.MIN_MEMORY_BUDGET`.
+    progress : bool
+        Progress bars on stderr.
+
+    Raises
+    ------
+    ValueError
+        Naming the first field that is wrong (``Experiment.size must be an
+        integer >= 1, got 0``).
+    """
+
+    scene: object = "balls"
+    size: int = 512
+    workload: str = "modern"
+    kd: str | None = None
+    max_depth: int | None = None
+    mappings: tuple = tuple(DEFAULT_MAPPINGS)
+    n_processes: tuple = REPORT_PROCESSES
+    hierarchy: object = "alpha21164"
+    layout: object = "compact"
+    cost: object = DEFAULT_COST_MODEL
+    n_cpus: int = STUDY_CPUS
+    background: int = 4
+    cache_dir: object = None
+    dask: object = None
+    memory_budget: int = DEFAULT_MEMORY_BUDGET
+    progress: bool = True
+
+    def __post_init__(self):
+        from coherence.mappings import get_mapping
+        from tracer.kd.tree import BUILDERS
+        from tracer.rendering.workload import WORKLOADS
+
+        if not isinstance(self.scene, (str, os.PathLike)) or not os.fspath(self.scene):
+            raise ValueError(f"Experiment.scene must be a scene name or a .nff/.obj path, got {self.scene!r}")
+        require_int("Experiment.size", self.size, 1)
+        _choose("workload", self.workload, WORKLOADS)
+        if self.kd is not None:
+            _choose("kd", self.kd, BUILDERS)
+        if self.max_depth is not None:
+            require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH_LIMIT)
+        mappings = (self.mappings,) if isinstance(self.mappings, str) else tuple(self.mappings)
+        names = []
+        for mapping in mappings:
+            try:
+                names.append(get_mapping(mapping).name)
+            except ValueError as error:
+                raise ValueError(f"Experiment.mappings: {error}") from None
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"Experiment.mappings must name at least one mapping, each once; got {names}")
+        object.__setattr__(self, "mappings", mappings)
+        counts = (self.n_processes,) if isinstance(self.n_processes, int) else tuple(self.n_processes)
+        counts = tuple(sorted({require_int("Experiment.n_processes", n, 1) for n in counts}))
+        if not counts:
+            raise ValueError("Experiment.n_processes must hold at least one process count >= 1")
+        object.__setattr__(self, "n_processes", counts)
+        for name, resolve in (("hierarchy", _hierarchy), ("layout", _layout), ("cost", _cost)):
+            try:
+                resolve(getattr(self, name))
+            except (ValueError, OSError) as error:
+                raise ValueError(f"Experiment.{name}: {error}") from None
+        require_int("Experiment.n_cpus", self.n_cpus, 1)
+        require_int("Experiment.background", self.background, 0)
+        if self.cache_dir is not None and not isinstance(self.cache_dir, (str, os.PathLike)):
+            raise ValueError(f"Experiment.cache_dir must be a folder path or None, got {self.cache_dir!r}")
+        if isinstance(self.dask, str) and not self.dask.strip():
+            raise ValueError("Experiment.dask must be a scheduler address (tcp://host:8786), a Client or None")
+        require_int("Experiment.memory_budget", self.memory_budget, MIN_MEMORY_BUDGET)
+        if not isinstance(self.progress, bool):
+            raise ValueError(f"Experiment.progress must be True or False, got {self.progress!r}")
+
+    # the choices as the simulation's objects
+
+    def mapping_objects(self) -> list:
+        """The mappings as :class:`coherence.mappings.Mapping` objects, in order."""
+        from coherence.mappings import get_mapping
+
+        return [get_mapping(mapping) for mapping in self.mappings]
+
+    def mapping_names(self) -> list[str]:
+        return [mapping.name for mapping in self.mapping_objects()]
+
+    def hierarchy_object(self):
+        """The :class:`cachesim.Hierarchy` (a preset or file is read again each call)."""
+        return _hierarchy(self.hierarchy)
+
+    def layout_object(self):
+        """The :class:`coherence.layout.MemoryLayout`."""
+        return _layout(self.layout)
+
+    def cost_model(self):
+        """The :class:`coherence.cost.CostModel`."""
+        return _cost(self.cost)
+
+    def machine(self):
+        """The simulated :class:`coherence.simulation.Machine`: ``n_cpus`` CPUs, ``background`` load."""
+        from coherence.simulation import Machine
+
+        return Machine(n_cpus=self.n_cpus, background_load=self.background)
+
+    def kd_builder(self) -> str:
+        """``kd``, else the workload's builder."""
+        from tracer.rendering.workload import get_workload
+
+        return self.kd or get_workload(self.workload).kd_config.builder
+
+    def as_parameters(self) -> dict:
+        """The choices that decide the results, as plain JSON data.
+
+        ``scene`` (as given), ``size``, ``workload``, ``kd`` (the builder
+        used), ``max_depth`` (None: the scene's), ``mappings`` (names),
+        ``n_processes``, ``hierarchy`` and ``cost`` (their fields, so a file
+        or a custom object is recorded too), ``layout`` (its name),
+        ``n_cpus`` and ``background_load``. ``cache_dir``, ``dask``,
+        ``memory_budget`` and ``progress`` are left out: no result depends
+        on them.
+        """
+        return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
+                "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
+                "n_processes": list(self.n_processes), "hierarchy": self.hierarchy_object().to_dict(),
+                "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
+                "n_cpus": int(self.n_cpus), "background_load": int(self.background)}
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(field.name for field in fields(cls))
+
+
+def _choose(name: str, value, allowed) -> None:
+    if not isinstance(value, str) or value not in allowed:
+        raise ValueError(f"Experiment.{name} must be one of {', '.join(allowed)}, got {value!r}")
+
+
+def _hierarchy(value):
+    from cachesim import get_hierarchy
+
+    return get_hierarchy(value)
+
+
+def _layout(value):
+    from coherence.layout import get_layout
+
+    return get_layout(value)
+
+
+def _cost(value):
+    from coherence.cost import get_cost_model
+
+    return get_cost_model(value)
