@@ -73,13 +73,36 @@ def main(argv: list[str] | None = None) -> int:
     141 (128 + SIGPIPE, as a C tool killed by it) without a word when the
     reader of the output went away (a closed pipe: ``| head``).
     """
+    name = "coherence"
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        name = f"coherence {args.command}"
+        status = _run(args, name)
+        if argv is None:
+            _interrupts_end_at_once(name)
+        return status
+    except (UserError, ValueError, OSError) as error:
+        if isinstance(error, BrokenPipeError):
+            return _quiet_broken_pipe()
+        print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"{name}: error: out of memory; try a smaller --size", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        if argv is None:
+            exit_by_sigint(130)
+        return 130
+
+
+def _run(args: argparse.Namespace, name: str) -> int:
     import warnings
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
     # Only the command line picks how figures are drawn: into files, never a window. Library code
     # leaves the backend alone so that a notebook keeps its inline one. Picked after parsing, so
     # that --help does not pay for importing matplotlib.
@@ -87,24 +110,27 @@ def main(argv: list[str] | None = None) -> int:
 
     matplotlib.use("Agg")
     warnings.showwarning = _one_line_warning
-    try:
-        with InterruptsOutsideNumba():
-            status = int(args.func(args) or 0)
-        sys.stdout.flush()  # inside the try: a closed pipe shows up here, not at exit
-        return status
-    except (UserError, ValueError, OSError) as error:
-        if isinstance(error, BrokenPipeError):
-            return _quiet_broken_pipe()
-        print(f"coherence {args.command}: error: {_error_text(error)}", file=sys.stderr)
-        return 2
-    except MemoryError:
-        print(f"coherence {args.command}: error: out of memory; try a smaller --size", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"coherence {args.command}: interrupted", file=sys.stderr)
-        if argv is None:
-            exit_by_sigint(130)
-        return 130
+    with InterruptsOutsideNumba(name):
+        status = int(args.func(args) or 0)
+    sys.stdout.flush()  # inside the caller's try: a closed pipe shows up here, not at exit
+    return status
+
+
+def _interrupts_end_at_once(name: str) -> None:
+    """From now on Ctrl-C ends the process at once, in one line: the work is done, and what is left
+    (Python's exit) would otherwise show a KeyboardInterrupt traceback or drop it."""
+    import os
+    import signal
+
+    def interrupted(signum, frame):
+        try:
+            os.write(2, f"{name}: interrupted\n".encode())
+        except OSError:
+            pass
+        exit_by_sigint(130)
+
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT stays ignored
+        signal.signal(signal.SIGINT, interrupted)
 
 
 def _error_text(error: Exception) -> str:

@@ -595,3 +595,132 @@ def test_obj_usemtl_without_mtllib_warns_once(tmp_path):
     with pytest.warns(UserWarning, match=r"q.obj:1: 'usemtl red' names a material, but no 'mtllib'") as seen:
         scene = read_obj(tmp_path / "q.obj")
     assert len(seen) == 1 and scene.material_color.tolist() == [[0.8, 0.8, 0.8]]
+
+
+# ------------------------------------------------------------- Ctrl-C where Python drops exceptions
+_DROPPED_INTERRUPT = textwrap.dedent('''
+    import signal, sys, time, weakref
+    from analyses.interrupts import InterruptsOutsideNumba
+
+    def interrupt_here():
+        signal.raise_signal(signal.SIGINT)
+        for _ in range(1000):  # Python runs the handler here, inside the callback
+            pass
+
+    class Key:
+        pass
+
+    class Finalized:
+        def __del__(self):
+            interrupt_here()
+
+    def in_weak_key_dictionary_callback():
+        table = weakref.WeakKeyDictionary()
+        key = Key()
+        table[key] = 1
+        watcher = weakref.ref(key, lambda ref: interrupt_here())  # runs beside the table's own clean-up
+        del key
+        return watcher
+
+    def in_del():
+        Finalized()
+
+    def swallowed_by_a_library():
+        try:
+            interrupt_here()
+        except KeyboardInterrupt:
+            pass
+
+    try:
+        with InterruptsOutsideNumba():
+            globals()[sys.argv[1]]()
+            for _ in range(100):  # the run goes on for a second
+                time.sleep(0.01)
+            print("ran on")
+        print("finished")
+    except KeyboardInterrupt:
+        print("interrupted")
+''')
+
+
+def _interruptible():
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # a test run in the background starts with SIGINT ignored
+
+
+def _python(code: str, *argv: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    return subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, env=env,
+                          timeout=120, preexec_fn=_interruptible)
+
+
+@pytest.mark.parametrize("where, said", [("in_weak_key_dictionary_callback", "interrupted\n"),
+                                         ("in_del", "interrupted\n"),
+                                         ("swallowed_by_a_library", "ran on\ninterrupted\n")])
+def test_an_interrupt_python_drops_still_ends_the_run(where, said):
+    """Ctrl-C raised where Python prints "Exception ignored" and runs on (a weakref callback, ``__del__``)
+    interrupts the command at once, without that message; one a library catches, at the latest when the
+    command ends.
+
+    Fails (prints "ran on", "finished" and "Exception ignored") if ``InterruptsOutsideNumba.__enter__`` no
+    longer installs ``_unraisable`` as ``sys.unraisablehook`` (the callback cases) or if ``__exit__`` no
+    longer raises for ``self.received`` (the library case).
+    """
+    done = _python(_DROPPED_INTERRUPT, where)
+    assert (done.stdout, done.stderr) == (said, "")
+
+
+_HELD_IN_NUMBA = textwrap.dedent('''
+    import json, signal, sys, time
+    from analyses.interrupts import InterruptsOutsideNumba
+
+    class Clock:
+        """stderr that notes when each line came."""
+        def __init__(self):
+            self.lines = []
+        def write(self, text):
+            self.lines.append((time.monotonic(), text))
+        def flush(self):
+            pass
+
+    # A function of a numba module: sys.argv[1] is numba.core.compiler (compiling) or numba.core.caching
+    # (loading a compiled function); Ctrl-C comes as it starts, and it runs on for 2 s.
+    namespace = {"__name__": sys.argv[1]}
+    exec("import signal, time\\n"
+         "def work(seconds):\\n"
+         "    sent = time.monotonic()\\n"
+         "    signal.raise_signal(signal.SIGINT)\\n"
+         "    while time.monotonic() < sent + seconds:\\n"
+         "        time.sleep(0.01)\\n"
+         "    return sent\\n", namespace)
+    sys.stderr = clock = Clock()
+    try:
+        with InterruptsOutsideNumba("test"):
+            sent = namespace["work"](2.0)
+            returned = time.monotonic()
+            time.sleep(1.0)
+            print("ran on")
+    except KeyboardInterrupt:
+        stopped = time.monotonic()
+    print(json.dumps({"said": [[at - sent, text] for at, text in clock.lines],
+                      "returned": returned - sent, "stopped": stopped - sent}))
+''')
+
+
+def test_an_interrupt_held_by_a_compilation_is_announced_within_a_second():
+    """Ctrl-C while numba compiles is held until the compilation ends, and one line says so within 1 s;
+    while numba loads a compiled function it is held without a word.
+
+    Fails if ``InterruptsOutsideNumba._hold`` no longer starts the announcer (no line), or if
+    ``_announce`` no longer asks ``self.compiling`` (a line while loading).
+    """
+    for module, lines in (("numba.core.compiler", 1), ("numba.core.caching", 0)):
+        done = _python(_HELD_IN_NUMBA, module)
+        result = json.loads(done.stdout)
+        said = [text for _, text in result["said"] if text.strip()]
+        assert len(said) == lines, result
+        assert result["returned"] >= 2.0 and result["returned"] <= result["stopped"] <= result["returned"] + 0.5
+        if lines:
+            assert said[0].startswith("test: interrupt received; stopping when numba has compiled")
+            assert result["said"][0][0] < 1.0
