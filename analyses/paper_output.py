@@ -59,7 +59,7 @@ def paper_summary(result: PaperResult) -> dict:
         "traces": result.info and {k: {"trace_key": v["trace_key"]} for k, v in result.info.items()},
         "study": STUDY_TABLE,
         "calibration": {
-            "method": "bounded least squares of relative errors of the sequential S times (DESIGN.md section 2) "
+            "method": "bounded least squares of relative errors of the study's sequential S times "
                       "minus simulated memory cycles; targets scaled by (size/512)^2; each scene also predicted "
                       "from a fit to the others (left_out_*)",
             "structure": calibration["structure"],

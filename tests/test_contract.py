@@ -29,12 +29,6 @@ OVER_THE_LIMIT_FOR_NOW = {
     "tracer/rendering/render.py:render",
 }
 
-#: Files allowed a pointer for now, each with the helper who removes it.
-POINTERS_FOR_NOW = {
-    # H6: paper.json's calibration text; changing it changes an output, so it lands with the digest check
-    "analyses/paper_output.py",
-}
-
 # "DESIGN.md", "issue 12", "issues 12 and 13", "issue #12", "§4"
 _OUTSIDE = re.compile(r"DESIGN\.md|\b[Ii]ssues?\s+#?\d+|§")
 # "docs/memory_image.md" or "docs/design.md, "Layers"" (a page and one of its headings)
@@ -113,7 +107,7 @@ def test_no_function_takes_more_than_ten_parameters():
 def test_no_comment_points_outside_the_repository():
     """Fails if a comment ``# see DESIGN.md`` (or ``# issue 12``) is added to
     ``coherence/metrics.py``."""
-    offending = [item for item in pointers_outside() if item.split(":")[0] not in POINTERS_FOR_NOW]
+    offending = pointers_outside()
     assert not offending, "say it in place or point into docs/:\n" + "\n".join(offending)
 
 
