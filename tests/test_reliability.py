@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import tracemalloc
 import warnings
 from pathlib import Path
 
@@ -249,8 +250,10 @@ def test_write_files_atomic_writes_all_or_nothing(tmp_path):
 # its records flipped), trace8-outside (no checksums, a record beyond the scene), addresses.txt,
 # bom.txt (addresses after a UTF-8 byte-order mark), binary.toml (not text), petabyte.toml (a
 # hierarchy whose 4 PB level cannot be allocated),
-# empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses) and huge.nff (a
-# triangle at 1e300, which the renderer refuses).
+# empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses), huge.nff (a
+# triangle at 1e300, which the renderer refuses), bom.nff (after a UTF-8 byte-order mark),
+# depth0.nff ('# max_depth 0'), negative.nff (Kd -0.5), usemtl.obj (usemtl without mtllib), vn.obj
+# (normal 2 of 1), badvt.obj ('f 1/a 2 3') and huge-texture.nff (a 16384 x 16384 PNG header).
 CLI_CASES = [
     (["render", "balls", "--size", "20000"], 2, "needs about"),
     (["render", "tetra", "--size", "0"], 2, "--size must be >= 1"),
@@ -311,6 +314,15 @@ CLI_CASES = [
     (["report", "tetra", "--size", "32", "--mappings", "DB", "--max-processes", "2", "--out", "one-mapping"], 0, ""),
     (["paper", "--size", "8", "--cache", "afile"], 2, "is a file, not a folder"),
     (["paper", "--size", "20000"], 2, "needs about"),
+    (["scene", "bom.nff"], 0, ""),
+    (["scene", "depth0.nff"], 2, "depth0.nff:9:13: expected a max_depth in 1..64, found '0'"),
+    (["render", "depth0.nff", "--size", "4"], 2, "depth0.nff:9:13: expected a max_depth in 1..64"),
+    (["scene", "negative.nff"], 2, "negative.nff:8:9: expected Kd >= 0"),
+    (["scene", "usemtl.obj"], 0, "usemtl.obj:1: 'usemtl red' names a material, but no 'mtllib'"),
+    (["scene", "vn.obj"], 2, "vn.obj:5: expected a normal index in 1..1 or negative, found '1//2'"),
+    (["scene", "badvt.obj"], 2, "badvt.obj:4: expected a texture coordinate index, found '1/a'"),
+    (["scene", "huge-texture.nff"], 2, "huge.png' is 16384 x 16384 (268,435,456 texels); a texture may hold at most"),
+    (["render", "huge-texture.nff", "--size", "4"], 2, "huge.png' is 16384 x 16384"),
 ]
 
 _RUNNER = textwrap.dedent('''
@@ -371,6 +383,15 @@ def scratch(tmp_path_factory):
     view = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\n"
     (folder / "digits.nff").write_text(view + "s 1_0 0 0 1\n")
     (folder / "huge.nff").write_text(view + "p 3 0 0 0 1e300 0 0 0 1e300 0\n")
+    (folder / "bom.nff").write_bytes(b"\xef\xbb\xbf" + (view + "s 0 0 0 1\n").encode())
+    (folder / "depth0.nff").write_text(view + "s 0 0 0 1\n# max_depth 0\n")
+    (folder / "negative.nff").write_text(view + "f 1 1 1 -0.5 0 0 0 1\ns 0 0 0 1\n")
+    triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    (folder / "usemtl.obj").write_text("usemtl red\n" + triangle + "f 1 2 3\n")
+    (folder / "vn.obj").write_text(triangle + "vn 0 0 1\nf 1//2 2//1 3//1\n")
+    (folder / "badvt.obj").write_text(triangle + "f 1/a 2 3\n")
+    (folder / "huge.png").write_bytes(_png_header(16384, 16384))
+    (folder / "huge-texture.nff").write_text(view + "texture big huge.png\nusetexture big\ns 0 0 0 1\n")
     render(load("tetra"), size=8, trace_path=folder / "trace8")
     for name in ("trace8-flipped", "trace8-outside"):
         render(load("tetra"), size=8, trace_path=folder / name)
@@ -724,3 +745,74 @@ def test_an_interrupt_held_by_a_compilation_is_announced_within_a_second():
         if lines:
             assert said[0].startswith("test: interrupt received; stopping when numba has compiled")
             assert result["said"][0][0] < 1.0
+
+
+def _png_header(width, height) -> bytes:
+    """A PNG file's signature, header chunk and end: it opens and states its size, but holds no pixels."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)) \
+        + chunk(b"IEND", b"")
+
+
+def test_a_huge_texture_is_refused_from_its_header(tmp_path):
+    """A 16384 x 16384 PNG gives one ValueError naming the file, its size and the limit, from its header.
+    Fails if read_image lets Pillow judge the size (its DecompressionBombError escapes)."""
+    from tracer.scenes.images import MAX_IMAGE_TEXELS, image_size, read_image
+
+    (tmp_path / "huge.png").write_bytes(_png_header(16384, 16384))
+    (tmp_path / "big.png").write_bytes(_png_header(12000, 12000))  # under Pillow's refusal, over ours
+    (tmp_path / "fits.png").write_bytes(_png_header(4000, 3000))
+    for name, side in (("huge.png", 16384), ("big.png", 12000)):
+        for reader in (read_image, image_size):
+            with pytest.raises(ValueError, match=rf"{name}' is {side} x {side} \({side * side:,} texels\); "
+                                                 rf"a texture may hold at most {MAX_IMAGE_TEXELS:,} texels"):
+                reader(tmp_path / name)
+    assert image_size(tmp_path / "fits.png") == (4000, 3000)
+
+
+def _textured_nff(folder, textures):
+    lines = [f"texture t{k} {spec}" for k, spec in enumerate(textures)]
+    uses = "".join(f"usetexture t{k}\ns {3 * k} 0 0 1\n" for k in range(len(textures)))
+    (folder / "textured.nff").write_text(SCENE_VIEW + "\n".join(lines) + "\nf 1 1 1 1 0 0 0 1\n" + uses)
+    return folder / "textured.nff"
+
+
+def test_a_scene_summary_does_not_make_its_textures(tmp_path, capsys):
+    """'coherence scene' on a file with two 1024^2 procedural textures allocates under 1 MB of texels,
+    and prints their sizes; fails if the command loads the scene with its texels (25 MB and more)."""
+    from analyses.cli import main
+    from tracer.scenes.catalog import load
+
+    path = _textured_nff(tmp_path, ["procedural 1024 1024 1", "procedural 1024 512 2"])
+    full = load(path).summary()
+    assert main(["scene", str(path), "--json"]) == 0  # the command's imports, outside the measurement
+    capsys.readouterr()
+    tracemalloc.start()
+    try:
+        assert main(["scene", str(path), "--json"]) == 0
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert json.loads(capsys.readouterr().out) == full and full["textures"] == [[1024, 1024], [1024, 512]]
+    assert peak < 1 << 20, peak
+
+
+def test_a_scene_read_without_texels_is_not_rendered_or_written(tmp_path):
+    """Fails if a summary-only scene (texels=False) renders or writes its stand-in texels as black."""
+    from tracer.rendering.render import render
+    from tracer.scenes.catalog import load
+    from tracer.scenes.nff import write_nff
+
+    (tmp_path / "fits.png").write_bytes(_png_header(64, 32))
+    scene = load(_textured_nff(tmp_path, ["fits.png", "procedural 16 16 3"]), texels=False)
+    assert not scene.texels_read and scene.summary()["textures"] == [[64, 32], [16, 16]]
+    with pytest.raises(ValueError, match="read without its texels"):
+        render(scene, size=4)
+    with pytest.raises(ValueError, match="read without its texels"):
+        write_nff(scene, tmp_path / "out.nff")
+    assert not (tmp_path / "out.nff").exists()

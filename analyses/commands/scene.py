@@ -83,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
     if args.nff_out is not None:
         checks.check_output_file("--nff-out", args.nff_out)
     checks.check_scene_argument(args.scene)
-    scene = load(args.scene, max_depth=args.max_depth)
+    # a summary needs the textures' sizes, not their texels
+    scene = load(args.scene, max_depth=args.max_depth, texels=args.nff_out is not None)
     summary = scene.summary()
     if args.nff_out is not None:
         from tracer.scenes.nff import write_nff

@@ -94,11 +94,14 @@ def mip_chains(scene) -> MipChains:
     Raises
     ------
     ValueError
-        Texture arrays of the wrong shape, or more than :data:`MAX_TEXELS`
-        texels in all levels.
+        Texture arrays of the wrong shape, more than :data:`MAX_TEXELS`
+        texels in all levels, or a scene read without its texels.
     """
     sizes = np.asarray(scene.texture_size, dtype=np.int64).reshape(-1, 2)
     offsets = np.asarray(scene.texture_offsets, dtype=np.int64)
+    if not scene.texels_read:
+        raise ValueError(f"scene {scene.name!r} was read without its texels (texels=False, for a summary); "
+                         "read it again with texels to render it")
     texels = np.asarray(scene.texture_texels)
     if offsets.shape != (sizes.shape[0] + 1,) or (sizes.size and sizes.min() < 1):
         raise ValueError("Scene.texture_offsets must have one entry per texture plus one, "

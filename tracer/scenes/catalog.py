@@ -37,7 +37,7 @@ NAMED_SCENES = tuple(_GENERATORS)
 _SUFFIXES = (".nff", ".obj")
 
 
-def load(name_or_path, max_depth: int | None = None) -> Scene:
+def load(name_or_path, max_depth: int | None = None, *, texels: bool = True) -> Scene:
     """A paper scene by name, or an NFF/OBJ scene from a file.
 
     Parameters
@@ -50,6 +50,10 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
     max_depth : int, optional
         Maximum recursion depth, 1..64; default the paper's for a named scene and
         the file's (see module docstring) for a path.
+    texels : bool
+        False: a file's textures keep their sizes only, unread (enough for
+        :meth:`Scene.summary`; see :func:`tracer.scenes.nff.parse_nff`).
+        Named scenes always make theirs (they are small).
 
     Returns
     -------
@@ -82,10 +86,10 @@ def load(name_or_path, max_depth: int | None = None) -> Scene:
         if suffix == ".nff":
             from tracer.scenes.nff import read_nff
 
-            return read_nff(path, max_depth=max_depth)
+            return read_nff(path, max_depth=max_depth, texels=texels)
         from tracer.scenes.obj import read_obj
 
-        return read_obj(path, max_depth=5 if max_depth is None else max_depth)
+        return read_obj(path, max_depth=5 if max_depth is None else max_depth, texels=texels)
     if path.exists():
         raise ValueError(f"unsupported scene file {text!r}: expected a .nff or .obj file")
     if path.suffix or os.sep in text or "/" in text:

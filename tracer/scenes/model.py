@@ -158,6 +158,11 @@ class Scene:
         """Number of texture images."""
         return int(self.texture_size.shape[0])
 
+    @property
+    def texels_read(self) -> bool:
+        """False for a scene read without its texels (``texels=False``: sizes only, for a summary)."""
+        return not is_unread(self.texture_texels)
+
     def texture(self, index: int) -> np.ndarray:
         """Texture ``index`` as an image, shape (height, width, 4) uint8 RGBA."""
         width, height = (int(v) for v in self.texture_size[index])
@@ -405,7 +410,7 @@ class SceneBuilder:
                              f"got {image.dtype} {image.shape}")
         if image.shape[2] == 3:
             image = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
-        self._textures.append(np.ascontiguousarray(image))
+        self._textures.append(image if is_unread(image) else np.ascontiguousarray(image))
         return len(self._textures) - 1
 
     def _add(self, kind: ElementKind, index: int) -> int:
@@ -473,11 +478,6 @@ class SceneBuilder:
             return offsets, np.ascontiguousarray(flat, dtype=np.float64)
 
         materials = np.array(list(self._material_rows), dtype=np.float64).reshape(-1, 10)
-        textures = self._textures
-        texture_size = np.array([(t.shape[1], t.shape[0]) for t in textures], dtype=np.int64).reshape(-1, 2)
-        texture_offsets = np.zeros(len(textures) + 1, dtype=np.int64)
-        texture_offsets[1:] = np.cumsum(texture_size[:, 0] * texture_size[:, 1])
-        texels = np.concatenate([t.reshape(-1, 4) for t in textures]) if textures else np.zeros((0, 4), np.uint8)
         spheres = np.array(self._spheres, dtype=np.float64).reshape(-1, 4)
         polygon_offsets, polygon_vertices = csr(self._polygons)
         patch_offsets, patch_vertices = csr(self._patches)
@@ -512,9 +512,7 @@ class SceneBuilder:
             material_ior=np.ascontiguousarray(materials[:, 7]),
             light_position=np.array([p for p, _ in lights], dtype=np.float64).reshape(-1, 3),
             light_color=np.array([c for _, c in lights], dtype=np.float64).reshape(-1, 3),
-            texture_size=texture_size,
-            texture_offsets=texture_offsets,
-            texture_texels=texels,
+            **texture_arrays(self._textures),
             material_texture=materials[:, 8].astype(np.int64),
             material_uv_scale=np.ascontiguousarray(materials[:, 9]),
             triangle_uv=np.array(self._triangle_uv, dtype=np.float64).reshape(-1, 3, 2),
@@ -533,6 +531,43 @@ def vertices_and_uv(scene: Scene, kind: ElementKind, index: int):
                              (scene.patch_offsets, scene.patch_vertices, scene.patch_uv))
     first, stop = int(offsets[index]), int(offsets[index + 1])
     return vertices[first:stop], uv[first:stop] if uv.size else np.full((stop - first, 2), np.nan)
+
+
+#: The one texel every unread texture shows (views of it are the stand-ins; no other array shares it).
+_UNREAD_TEXEL = np.zeros(4, dtype=np.uint8)
+_UNREAD_TEXEL.flags.writeable = False
+
+
+def unread_texture(width: int, height: int) -> np.ndarray:
+    """A stand-in for a ``width x height`` texture whose texels were not read: shape (height, width, 4)
+    uint8, every texel 0, read-only, taking no memory (a summary needs only the size)."""
+    return np.broadcast_to(_UNREAD_TEXEL, (int(height), int(width), 4))
+
+
+def is_unread(texels: np.ndarray) -> bool:
+    """Whether ``texels`` (an image (H, W, 4) or the scene's (N, 4)) is a stand-in of :func:`unread_texture`."""
+    return texels.size > 0 and np.may_share_memory(texels, _UNREAD_TEXEL)
+
+
+def texture_arrays(images) -> dict:
+    """The :class:`Scene` fields ``texture_size``, ``texture_offsets`` and ``texture_texels`` of ``images``.
+
+    Parameters
+    ----------
+    images : sequence of ndarray, shape (H, W, 4) uint8
+        In texture order. If any is an :func:`unread_texture` stand-in,
+        every texel is (the scene keeps its sizes only).
+    """
+    size = np.array([(image.shape[1], image.shape[0]) for image in images], dtype=np.int64).reshape(-1, 2)
+    offsets = np.zeros(len(images) + 1, dtype=np.int64)
+    np.cumsum(size[:, 0] * size[:, 1], out=offsets[1:])
+    if any(is_unread(image) for image in images):
+        texels = np.broadcast_to(_UNREAD_TEXEL, (int(offsets[-1]), 4))
+    elif images:
+        texels = np.concatenate([image.reshape(-1, 4) for image in images])
+    else:
+        texels = np.zeros((0, 4), dtype=np.uint8)
+    return {"texture_size": size, "texture_offsets": offsets, "texture_texels": texels}
 
 
 def untextured(n_materials: int, n_triangles: int, n_polygon_vertices: int, n_patch_vertices: int) -> dict:

@@ -90,7 +90,7 @@ from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PR
                                     MATERIAL_FIELDS, OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS,
                                     Fallback, SceneParts, assemble, parse_fast, polygon_measures,
                                     view_direction_problem)
-from tracer.scenes.model import Camera, ElementKind, Scene
+from tracer.scenes.model import Camera, ElementKind, Scene, unread_texture
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
 
@@ -204,10 +204,12 @@ _VERTEX_FIELDS = {"p": (3, "x y z"), "pp": (6, "x y z nx ny nz"), "tp": (5, "x y
                   "tpp": (8, "x y z nx ny nz u v")}
 
 
-def _texture_image(tokens: _Tokens, folder: Path | None) -> np.ndarray:
+def _texture_image(tokens: _Tokens, folder: Path | None, texels: bool) -> np.ndarray:
     """The image of a ``texture NAME ...`` line, read from the tokens after its name:
-    a PNG or JPEG file, or ``procedural WIDTH HEIGHT SEED [CELLS]``; shape (H, W, 4) uint8."""
-    from tracer.scenes.images import read_image
+    a PNG or JPEG file, or ``procedural WIDTH HEIGHT SEED [CELLS]``; shape (H, W, 4) uint8.
+    Without ``texels``, an :func:`~tracer.scenes.model.unread_texture` of its size (a file's
+    header is read, a procedural image is not made)."""
+    from tracer.scenes.images import image_size, read_image
     from tracer.rendering.texture import MAX_TEXELS, procedural_texture
 
     at = tokens.pos
@@ -229,21 +231,22 @@ def _texture_image(tokens: _Tokens, folder: Path | None) -> np.ndarray:
             cells = tokens.integer("a positive integer (procedural texture cells) or a keyword")
             if cells < 1:
                 raise tokens.error("a positive number of procedural texture cells", tokens.pos - 1)
-        return procedural_texture(width, height, seed=seed, cells=cells)
+        return procedural_texture(width, height, seed=seed, cells=cells) if texels else unread_texture(width, height)
     path = Path(what) if folder is None else folder / what
     try:
-        return read_image(path)
+        return read_image(path) if texels else unread_texture(*image_size(path))
     except (OSError, ValueError) as error:
         raise tokens.error(f"a readable PNG or JPEG image file ({error})", at) from None
 
 
-def _parse_positioned(text: str, source: str, folder: Path | None = None) -> tuple[SceneParts, list[int]]:
+def _parse_positioned(text: str, source: str, folder: Path | None = None,
+                      texels: bool = True) -> tuple[SceneParts, list[int]]:
     """Read NFF token by token, knowing every token's line and column: the reader that says where.
 
     Returns the scene's parts (see :func:`assemble`) and, per element, the
     index of its keyword token. Raises :class:`NFFError` at the first fault.
     Relative texture files are looked up in ``folder`` (default: the
-    current folder).
+    current folder); without ``texels`` textures are sized, not read.
     """
     tokens = _Tokens(text, source)
     parts = SceneParts()
@@ -345,7 +348,7 @@ def _parse_positioned(text: str, source: str, folder: Path | None = None) -> tup
             if texture_name == "none" or texture_name in texture_numbers:
                 what = "reserved" if texture_name == "none" else "already defined"
                 raise tokens.error(f"a new texture name ({texture_name!r} is {what})", name_at)
-            texture_numbers[texture_name] = parts.add_texture(_texture_image(tokens, folder))
+            texture_numbers[texture_name] = parts.add_texture(_texture_image(tokens, folder, texels))
         elif keyword == "usetexture":
             name_at = tokens.pos
             texture_name = tokens.next("a texture name or 'none' after 'usetexture'")
@@ -409,7 +412,7 @@ def _warn_about(scene: Scene, element_tokens: list, text: str, source: str) -> N
 
 
 def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
-              max_depth: int | None = None, folder=None) -> Scene:
+              max_depth: int | None = None, folder=None, texels: bool = True) -> Scene:
     """Parse NFF text into a :class:`~tracer.scenes.model.Scene`.
 
     Parameters
@@ -425,6 +428,11 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     folder : str or os.PathLike, optional
         Where relative ``texture`` files are; default the folder of
         ``source`` when it names a file, else the current folder.
+    texels : bool
+        Read the textures' texels (default). False keeps their sizes only
+        (image files' headers are read, procedural images are not made):
+        enough for :meth:`~tracer.scenes.model.Scene.summary`; such a scene
+        (``Scene.texels_read`` False) cannot be rendered or written.
 
     Returns
     -------
@@ -456,13 +464,13 @@ def parse_nff(text: str, source: str = "<string>", *, name: str | None = None,
     except Fallback:  # a fault, or the texture extension
         if folder is None and not source.startswith("<"):
             folder = Path(source).parent
-        parts, _ = _parse_positioned(text, source, None if folder is None else Path(folder))
+        parts, _ = _parse_positioned(text, source, None if folder is None else Path(folder), texels)
         scene = assemble(parts, name, depth)
     _warn_about(scene, parts.tokens, text, source)
     return scene
 
 
-def read_nff(path, *, max_depth: int | None = None) -> Scene:
+def read_nff(path, *, max_depth: int | None = None, texels: bool = True) -> Scene:
     """Read an NFF file.
 
     Parameters
@@ -473,6 +481,8 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
         Recursion depth; default the file's ``# max_depth N`` comment, else 5
         (the SPD procedure's depth, not the paper's 2; use
         :func:`tracer.scenes.catalog.load` for the paper's depths).
+    texels : bool
+        False: textures keep their sizes only (see :func:`parse_nff`).
 
     Raises
     ------
@@ -485,7 +495,7 @@ def read_nff(path, *, max_depth: int | None = None) -> Scene:
     """
     path = regular_file(path, "an NFF file")
     text = path.read_bytes().decode("utf-8", errors="replace")
-    return parse_nff(text, str(path), name=path.stem, max_depth=max_depth, folder=path.parent)
+    return parse_nff(text, str(path), name=path.stem, max_depth=max_depth, folder=path.parent, texels=texels)
 
 
 # the writer lives in its own module; these names stay importable from here

@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from tracer.scenes.model import Camera, ElementKind, Material, Scene, untextured
+from tracer.scenes.model import Camera, ElementKind, Material, Scene, is_unread, texture_arrays, untextured
 
 TOKEN = re.compile(r"\S+")
 DEPTH_PRAGMA = re.compile(r"^[ \t]*#[ \t]*max_depth[ \t]+([0-9]+)[ \t]*$", re.MULTILINE)
@@ -185,8 +185,8 @@ class SceneParts:
             self.polygon_uv.extend(uv)
 
     def add_texture(self, image) -> int:
-        """Add a texture image (height, width, 4) uint8; returns its number."""
-        self.textures.append(np.ascontiguousarray(image, dtype=np.uint8))
+        """Add a texture image (height, width, 4) uint8, or an unread stand-in; returns its number."""
+        self.textures.append(image if is_unread(image) else np.ascontiguousarray(image, dtype=np.uint8))
         return len(self.textures) - 1
 
 
@@ -386,13 +386,7 @@ def _texture_fields(parts: SceneParts, keys: list, n_triangles: int, n_polygon_v
             if len(values) != count:
                 raise ValueError(f"{name}: {len(values)} values for {count} coordinates")
             fields[name] = np.array(values, dtype=np.float64).reshape(fields[name].shape)
-    images = parts.textures
-    size = np.array([(image.shape[1], image.shape[0]) for image in images], dtype=np.int64).reshape(-1, 2)
-    offsets = np.zeros(len(images) + 1, dtype=np.int64)
-    np.cumsum(size[:, 0] * size[:, 1], out=offsets[1:])
-    fields.update(texture_size=size, texture_offsets=offsets,
-                  texture_texels=np.concatenate([image.reshape(-1, 4) for image in images]) if images
-                  else np.zeros((0, 4), dtype=np.uint8))
+    fields.update(texture_arrays(parts.textures))
     return fields
 
 

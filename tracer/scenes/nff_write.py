@@ -166,10 +166,14 @@ def write_nff(scene: Scene, path) -> Path:
     FileNotFoundError
         The destination's folder does not exist.
     ValueError
-        The scene has an element NFF cannot express (see :func:`format_nff`).
+        The scene has an element NFF cannot express (see :func:`format_nff`),
+        or was read without its texels.
     """
     from tracer.scenes.images import png_bytes
 
+    if not scene.texels_read:
+        raise ValueError(f"write_nff: scene {scene.name!r} was read without its texels (texels=False); "
+                         "read it again with texels to write it")
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
+from tracer.scenes.model import Camera, Material, Scene, SceneBuilder, unread_texture
 
 __all__ = ["OBJError", "read_obj", "read_mtl", "frame_mesh"]
 
@@ -170,7 +170,7 @@ def read_mtl(path, materials: dict | None = None) -> dict:
     return materials
 
 
-def read_obj(path, *, max_depth: int = 5) -> Scene:
+def read_obj(path, *, max_depth: int = 5, texels: bool = True) -> Scene:
     """Read the triangles of an OBJ file, with its MTL colours and textures.
 
     Parameters
@@ -178,6 +178,9 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
     path : str or os.PathLike
     max_depth : int
         Recursion depth of the scene.
+    texels : bool
+        False: ``map_Kd`` images keep their sizes only (headers are read;
+        see :func:`tracer.scenes.nff.parse_nff`).
 
     Returns
     -------
@@ -206,7 +209,7 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
         coordinates before any ``vt`` line (those indices are ignored); a
         ``usemtl`` before any ``mtllib`` (its faces get the default material).
     """
-    from tracer.scenes.images import read_image
+    from tracer.scenes.images import image_size, read_image
 
     path = Path(path)
     if not path.is_file():
@@ -325,7 +328,8 @@ def read_obj(path, *, max_depth: int = 5) -> Scene:
             key = mtl.image.resolve()
             if key not in textures:
                 try:
-                    textures[key] = builder.texture(read_image(mtl.image))
+                    textures[key] = builder.texture(read_image(mtl.image) if texels
+                                                    else unread_texture(*image_size(mtl.image)))
                 except (OSError, ValueError) as error:
                     raise OBJError(mtl.image_at[0], mtl.image_at[1],
                                    f"a readable PNG or JPEG image after 'map_Kd' ({error})", mtl.image_at[2]) \
