@@ -73,7 +73,11 @@ def main(argv: list[str] | None = None) -> int:
     141 (128 + SIGPIPE, as a C tool killed by it) without a word when the
     reader of the output went away (a closed pipe: ``| head``).
     """
-    name = "coherence"
+    words = sys.argv[1:] if argv is None else argv
+    commands = {module.rpartition(".")[2] for module in COMMAND_MODULES}
+    # named before parsing: a Ctrl-C during start-up says "coherence report: interrupted" too
+    name = f"coherence {words[0]}" if words and words[0] in commands else "coherence"
+    args = None
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -91,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
         return 2
     except MemoryError:
-        print(f"{name}: error: out of memory; try a smaller --size", file=sys.stderr)
+        hint = "; try a smaller --size" if getattr(args, "size", None) is not None else ""
+        print(f"{name}: error: out of memory{hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)

@@ -64,19 +64,26 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
     """
     from coherence.pixel_lines import SHARED_LINES_BUDGET
 
-    n_pixels = require_int("n_pixels", n_pixels, 0)
-    n_jobs = require_int("n_jobs", n_jobs, 1)
-    reserved = PROCESS_BYTES + n_jobs * n_pixels * RUN_BYTES_PER_PIXEL
     budget = require_int("memory_budget", memory_budget, 0)
-    if budget - reserved < MIN_TRACE_BYTES:
+    least = least_memory_budget(n_pixels, n_jobs)
+    if budget < least:
         raise ValueError(
             f"memory_budget (--memory-budget) of {budget / 2**20:.0f} MB is too small: the process takes about "
             f"{PROCESS_BYTES >> 20} MB and {n_jobs} run{'s' if n_jobs != 1 else ''} at once over {n_pixels:,} "
             f"pixels about {n_jobs * n_pixels * RUN_BYTES_PER_PIXEL / 2**20:.0f} MB, and the trace needs at least "
-            f"{MIN_TRACE_BYTES >> 20} MB; give at least {-(-(reserved + MIN_TRACE_BYTES) >> 20)} MB")
-    available = budget - reserved
+            f"{MIN_TRACE_BYTES >> 20} MB; give at least {-(-least >> 20)} MB")
+    available = budget - least + MIN_TRACE_BYTES
     return {"render_records": available // 2, "shared_lines": min(SHARED_LINES_BUDGET, available - available // 4),
             "trace_pages": available // 4}
+
+
+def least_memory_budget(n_pixels: int, n_jobs: int = 1) -> int:
+    """The smallest budget, in bytes, that :func:`memory_shares` accepts for ``n_jobs`` runs at once over
+    ``n_pixels`` pixels: :data:`PROCESS_BYTES`, the runs' :data:`RUN_BYTES_PER_PIXEL` and
+    :data:`MIN_TRACE_BYTES`."""
+    n_pixels = require_int("n_pixels", n_pixels, 0)
+    n_jobs = require_int("n_jobs", n_jobs, 1)
+    return PROCESS_BYTES + n_jobs * n_pixels * RUN_BYTES_PER_PIXEL + MIN_TRACE_BYTES
 
 
 def runs_at_once(memory_budget: int, n_pixels: int, n_cpus: int) -> int:

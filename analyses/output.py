@@ -7,6 +7,15 @@ from pathlib import Path
 from rtcommon.files import check_writable_ancestor
 
 
+def size_text(n_bytes: float) -> str:
+    """``n_bytes`` in the largest unit it fills at least once, one decimal: ``"31.2 GB"``, ``"9.8 kB"``,
+    ``"12 bytes"`` (units of 1024)."""
+    for unit, scale in (("GB", 2**30), ("MB", 2**20), ("kB", 2**10)):
+        if abs(n_bytes) >= scale:
+            return f"{n_bytes / scale:.1f} {unit}"
+    return f"{n_bytes:.0f} bytes"
+
+
 def check_free_space(what: str, folder, needed: int) -> None:
     """Refuse when ``needed`` bytes will not fit on the file system holding ``folder`` (or its nearest parent).
 
@@ -25,8 +34,8 @@ def check_free_space(what: str, folder, needed: int) -> None:
     except OSError:
         return
     if needed > free:
-        raise ValueError(f"{what} needs about {needed / 2**30:.1f} GB of disk space in {str(probe)!r}, "
-                         f"{free / 2**30:.1f} GB free")
+        raise ValueError(f"{what} needs about {size_text(needed)} of disk space in {str(probe)!r}, "
+                         f"{size_text(free)} free")
 
 
 def check_output_folder(out) -> Path:

@@ -492,8 +492,8 @@ def test_a_trace_that_will_not_fit_on_disk_is_refused_before_rendering(tmp_path,
 
     usage = shutil.disk_usage(tmp_path)
     monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=10_000))
-    with pytest.raises(ValueError, match=r"the trace of tetra at 64x64 needs about .* GB of disk space in .*, "
-                                         r"0\.0 GB free"):
+    with pytest.raises(ValueError, match=r"the trace of tetra at 64x64 needs about [\d.]+ kB of disk space in .*, "
+                                         r"9\.8 kB free"):
         traces.cached_trace("tetra", 64, cache_dir=tmp_path, progress=False)
     assert not list((tmp_path / "traces").iterdir())
     output.check_free_space("small", tmp_path, 5_000)  # what fits passes
@@ -816,3 +816,74 @@ def test_a_scene_read_without_texels_is_not_rendered_or_written(tmp_path):
     with pytest.raises(ValueError, match="read without its texels"):
         write_nff(scene, tmp_path / "out.nff")
     assert not (tmp_path / "out.nff").exists()
+
+
+@pytest.mark.parametrize("command, runs_at_once", [("report", 1), ("paper", 2)])  # the paper maps two scenes at once
+def test_the_least_memory_budget_named_is_the_one_the_run_needs(command, runs_at_once):
+    """The least --memory-budget the command line names passes both its own check and the run's
+    (``memory_shares``), one MB less is refused by the command line, and a budget too big is not told
+    to be "at least" anything.
+
+    Fails if ``memory_budget_bytes`` checks against ``MIN_MEMORY_BUDGET`` alone again (it then passes
+    704 MB, which the run refuses for any image).
+    """
+    import re
+
+    from analyses.cli import build_parser
+    from analyses.commands.options import memory_budget_bytes
+    from analyses.memory_budget import memory_shares
+
+    parser = build_parser()
+    for size in (64, 700):
+        args = parser.parse_args([command, "--size", str(size), "--memory-budget", "704"])
+        with pytest.raises(ValueError, match="--memory-budget must be at least") as refused:
+            memory_budget_bytes(args)
+        least = int(re.search(r"at least (\d+) MB", str(refused.value)).group(1))
+        args.memory_budget = float(least)
+        memory_shares(memory_budget_bytes(args), size * size, runs_at_once)
+        args.memory_budget = least - 1.0
+        with pytest.raises(ValueError, match=f"at least {least} MB"):
+            memory_budget_bytes(args)
+    for value, said in ((2e12, "at most"), (float("nan"), "a number")):
+        args.memory_budget = value
+        with pytest.raises(ValueError, match=f"--memory-budget must be {said}"):
+            memory_budget_bytes(args)
+
+
+def test_small_sizes_are_not_told_as_zero_gigabytes(tmp_path, monkeypatch):
+    """The disk check names sizes in a unit that shows them: 50,000 bytes needed, 10,000 free.
+
+    Fails if ``check_free_space`` formats both sizes in GB again ("0.0 GB ... 0.0 GB free").
+    """
+    import re
+    import shutil
+
+    from analyses import output
+
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=10_000))
+    with pytest.raises(ValueError) as refused:
+        output.check_free_space("the file", tmp_path, 50_000)
+    units = {"bytes": 1, "kB": 2**10, "MB": 2**20, "GB": 2**30}
+    sizes = [float(number) * units[unit] for number, unit in re.findall(r"([\d.]+) (bytes|kB|MB|GB)", str(refused.value))]
+    assert len(sizes) == 2 and abs(sizes[0] - 50_000) < 0.01 * 50_000 and abs(sizes[1] - 10_000) < 0.01 * 10_000
+
+
+@pytest.mark.parametrize("argv, hint", [(["cachesim", "addresses.txt"], False),
+                                        (["report", "tetra", "--size", "8"], True)])
+def test_out_of_memory_names_size_only_where_there_is_one(monkeypatch, capsys, argv, hint):
+    """A MemoryError suggests a smaller --size only in a command that has --size.
+
+    Fails if the command line's MemoryError message names --size whatever the command again.
+    """
+    import importlib
+
+    from analyses.cli import main
+
+    def run(args):
+        raise MemoryError
+
+    monkeypatch.setattr(importlib.import_module(f"analyses.commands.{argv[0]}"), "run", run)
+    assert main(argv) == 2
+    said = capsys.readouterr().err.strip().splitlines()
+    assert len(said) == 1 and "out of memory" in said[0] and ("--size" in said[0]) == hint

@@ -24,11 +24,6 @@ RENDER_BYTES_PER_PIXEL = 256
 REPLAY_BYTES_PER_PIXEL = 512
 #: Image size of the pilot render that estimates a trace's bytes per pixel.
 PILOT_SIZE = 32
-GIB = 2 ** 30
-
-
-def _gb(value: float) -> str:
-    return f"{value / GIB:.1f} GB"
 
 
 def available_memory() -> int | None:
@@ -68,10 +63,13 @@ def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_
     ValueError
         ``"--size 20000 needs about 190.7 GB of memory, 21.6 GB available"``.
     """
+    from analyses.output import size_text
+
     needed = images * size * size * bytes_per_pixel + extra_bytes
     available = available_memory()
     if available is not None and needed > available:
-        raise ValueError(f"{option} {size} needs about {_gb(needed)} of memory, {_gb(available)} available")
+        raise ValueError(f"{option} {size} needs about {size_text(needed)} of memory, {size_text(available)} "
+                         "available")
 
 
 def check_scene_argument(scene, option: str = "SCENE") -> None:

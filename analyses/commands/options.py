@@ -225,8 +225,12 @@ def dask_options(what: str = "the runs") -> argparse.ArgumentParser:
     return parent
 
 
-def memory_budget_options() -> argparse.ArgumentParser:
-    """``--memory-budget MB``: what the process may take in memory (:mod:`analyses.memory_budget`)."""
+def memory_budget_options(runs_at_once: int = 1) -> argparse.ArgumentParser:
+    """``--memory-budget MB``: what the process may take in memory (:mod:`analyses.memory_budget`).
+
+    ``runs_at_once`` is the fewest runs the subcommand holds at once, which
+    the least budget it accepts (:func:`memory_budget_bytes`) sets aside.
+    """
     parent = _parent()
     parent.add_argument("--memory-budget", type=float, metavar="MB", default=2048.0,
                         help="memory the whole process may take, in MB (default 2048). About 640 MB for the "
@@ -235,17 +239,38 @@ def memory_budget_options() -> argparse.ArgumentParser:
                              "(at most 1 GiB) the line addresses the runs share and a quarter the trace's pages "
                              "resident while runs read it, so a trace of any length streams from disk. Results "
                              "do not depend on it")
+    parent.set_defaults(memory_budget_runs=runs_at_once)
     return parent
 
 
-def memory_budget_bytes(args: argparse.Namespace) -> int:
-    """``--memory-budget`` in bytes; refuses less than :data:`analyses.memory_budget.MIN_MEMORY_BUDGET` (and NaN)."""
-    from analyses.memory_budget import MIN_MEMORY_BUDGET
+#: The largest ``--memory-budget``, in MB (an exbibyte: more than any machine has).
+MAX_MEMORY_BUDGET_MB = 2 ** 40
 
-    smallest = MIN_MEMORY_BUDGET >> 20
-    if not smallest <= args.memory_budget <= 2.0 ** 40:
-        raise ValueError(f"--memory-budget must be at least {smallest} MB, got {args.memory_budget}")
-    return int(args.memory_budget * 2**20)
+
+def memory_budget_bytes(args: argparse.Namespace) -> int:
+    """``--memory-budget`` in bytes.
+
+    Raises
+    ------
+    ValueError
+        NaN; above :data:`MAX_MEMORY_BUDGET_MB`; or below the least budget
+        (:func:`analyses.memory_budget.least_memory_budget`) for the image of
+        ``--size`` and the runs the subcommand holds at once, naming it in
+        whole MB.
+    """
+    from analyses.memory_budget import least_memory_budget
+
+    value = args.memory_budget
+    if value != value:
+        raise ValueError(f"--memory-budget must be a number of MB, got {value}")
+    if value > MAX_MEMORY_BUDGET_MB:
+        raise ValueError(f"--memory-budget must be at most {MAX_MEMORY_BUDGET_MB} MB, got {value:g}")
+    size = getattr(args, "size", None) or 0
+    least = -(-least_memory_budget(size * size, getattr(args, "memory_budget_runs", 1)) >> 20)
+    if value < least:
+        raise ValueError(f"--memory-budget must be at least {least} MB{f' at --size {size}' if size else ''}, "
+                         f"got {value:g}")
+    return int(value * 2**20)
 
 
 #: Option (``args`` attribute) -> :class:`analyses.experiment.Experiment` field it sets.

@@ -59,7 +59,7 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("paper", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter,
                                    parents=[size_options(), mappings_options(), machine, cache_options(), dask_options(),
-                                            memory_budget_options(),
+                                            memory_budget_options(runs_at_once=2),  # two scenes' runs at once
                                             workload_options("study1997", "the study's tracer, whose test counts "
                                                              "and memory image the calibration needs")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
