@@ -20,7 +20,16 @@ from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
-__all__ = ["speedup_figure", "crossover_figure", "paper_summary", "paper_html", "write_paper"]
+__all__ = ["speedup_figure", "crossover_figure", "paper_summary", "paper_html", "write_paper", "PAPER_FILES",
+           "CROSSOVER_FILES"]
+
+#: The files :func:`write_paper` always writes, by what they hold: the names readers, tests and
+#: ``--help`` use. The two speed-up figures are keyed by the column they plot.
+PAPER_FILES = {"runs": "paper.csv", "scenes": "scenes.csv", "predictions": "predictions.csv",
+               "summary": "paper.json", "speedup_real": "speedup_real.png", "speedup_user": "speedup_user.png",
+               "page": "index.html"}
+#: The files it adds when the result holds a crossover study.
+CROSSOVER_FILES = {"crossover_table": "crossover.csv", "crossover": "crossover.png"}
 
 
 # --------------------------------------------------------------------------
@@ -140,12 +149,13 @@ def write_paper(result: PaperResult, out="paper") -> Path:
         pngs["crossover"] = figure_png(crossover_figure(boundary))
     summary = paper_summary(result)
     # one unit: every file is made before any is renamed into place (an interrupt leaves the old set)
-    files = {path / "paper.csv": _csv(result.runs).encode(), path / "scenes.csv": _csv(result.table).encode(),
-             path / "predictions.csv": _csv(result.predictions).encode()}
+    names = {**PAPER_FILES, **CROSSOVER_FILES}
+    files = {path / names["runs"]: _csv(result.runs).encode(), path / names["scenes"]: _csv(result.table).encode(),
+             path / names["predictions"]: _csv(result.predictions).encode()}
     if boundary is not None:
-        files[path / "crossover.csv"] = _csv(result.crossover).encode()
-    files[path / "paper.json"] = (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()
-    files.update({path / f"{name}.png": data for name, data in pngs.items()})
-    files[path / "index.html"] = paper_html(result, pngs).encode("utf-8")
+        files[path / names["crossover_table"]] = _csv(result.crossover).encode()
+    files[path / names["summary"]] = (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()
+    files.update({path / names[name]: data for name, data in pngs.items()})
+    files[path / names["page"]] = paper_html(result, pngs).encode("utf-8")
     write_files_atomic(files)
     return path

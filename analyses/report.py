@@ -58,7 +58,8 @@ from rtcommon.files import write_files_atomic
 from rtcommon.validate import require_int
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
-           "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "MISS_MAP_FILES", "Experiment"]
+           "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "REPORT_FILES", "MISS_MAP_FILES",
+           "Experiment"]
 
 
 @dataclass
@@ -291,13 +292,19 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
 # writing
 
 
+#: The files :func:`write_report` always writes, by what they hold (with a miss map
+#: also :data:`MISS_MAP_FILES`): the names readers, tests and ``--help`` use.
+REPORT_FILES = {"page": "index.html", "results": "results.csv", "summary": "summary.json"}
+
+
 def write_report(report: Report, out) -> Path:
-    """Write ``index.html``, ``results.csv``, ``summary.json`` and, with a miss map, ``miss_map.npy`` and
-    ``miss_map.png`` into ``out`` as one unit (see :func:`rtcommon.files.write_files_atomic`)."""
+    """Write ``index.html``, ``results.csv``, ``summary.json`` (:data:`REPORT_FILES`) and, with a miss map,
+    ``miss_map.npy`` and ``miss_map.png`` (:data:`MISS_MAP_FILES`) into ``out`` as one unit (see
+    :func:`rtcommon.files.write_files_atomic`)."""
     path = prepare_output_folder(out)
-    files = {path / "results.csv": report.results.to_csv(index=False, lineterminator="\n"),
-             path / "summary.json": json.dumps(report.summary, indent=2, allow_nan=False) + "\n",
-             path / "index.html": report.html}
+    files = {path / REPORT_FILES["results"]: report.results.to_csv(index=False, lineterminator="\n"),
+             path / REPORT_FILES["summary"]: json.dumps(report.summary, indent=2, allow_nan=False) + "\n",
+             path / REPORT_FILES["page"]: report.html}
     if report.miss_map is not None:
         buffer = io.BytesIO()
         np.save(buffer, report.miss_map.misses.astype(miss_map_dtype(report.miss_map)), allow_pickle=False)

@@ -2,6 +2,7 @@
 page of docs/), the copy is read from its home or checked against it here."""
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -11,11 +12,15 @@ from tracer.scenes.study import STUDY_SCENES
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _help(*command: str) -> str:
+def _help_text(*command: str) -> str:
     """``coherence COMMAND --help`` as printed, in a subprocess (the help is built when printed)."""
-    done = subprocess.run([sys.executable, "-m", "analyses", *command, "--help"], capture_output=True, text=True,
-                          check=True, cwd=ROOT)
-    return " ".join(done.stdout.split())
+    return subprocess.run([sys.executable, "-m", "analyses", *command, "--help"], capture_output=True, text=True,
+                          check=True, cwd=ROOT).stdout
+
+
+def _help(*command: str) -> str:
+    """The help with its line breaks and indents folded into single spaces."""
+    return " ".join(_help_text(*command).split())
 
 
 def test_paper_help_quotes_the_study_table():
@@ -53,3 +58,23 @@ def test_memory_image_page_shows_the_layout_table():
     compact, alpha1997 = get_layout("compact"), get_layout("alpha1997")
     for kind in kinds:
         assert rows[kind] == (_size_text(compact.record(kind)), _size_text(alpha1997.record(kind))), kind
+
+
+def _listed_outputs(text: str) -> list[str]:
+    """File names an epilog's "Output folder" block lists, one at the start of each entry."""
+    block = text.split("Output folder", 1)[1].split("\n\n", 1)[0]
+    return re.findall(r"^  (\S+\.[a-z]+) ", block, flags=re.M)
+
+
+def test_help_lists_the_files_the_writers_name():
+    """``coherence report --help`` and ``coherence paper --help`` list exactly the
+    files of ``REPORT_FILES`` (with ``MISS_MAP_FILES``) and ``PAPER_FILES``; paper's
+    --crossover names ``CROSSOVER_FILES``. Fails if ``REPORT_FILES["summary"]``
+    becomes ``"report.json"``."""
+    from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
+    from analyses.report import MISS_MAP_FILES, REPORT_FILES
+
+    report, paper = _help_text("report"), _help_text("paper")
+    assert sorted(_listed_outputs(report)) == sorted([*REPORT_FILES.values(), *MISS_MAP_FILES])
+    assert sorted(_listed_outputs(paper)) == sorted(PAPER_FILES.values())
+    assert all(name in " ".join(paper.split()) for name in CROSSOVER_FILES.values())

@@ -17,6 +17,7 @@ from analyses import paper
 from analyses import verdict as verdict_module
 from analyses.verdict import format_percent
 from analyses.cli import main
+from analyses.paper_output import PAPER_FILES
 from coherence.calibration import OPERATION_FLOPS
 from coherence.cost import OPERATIONS
 
@@ -25,7 +26,7 @@ COUNTS = [1, 2, 4]
 # As plain Python (the no-JIT coverage run) the study-era traces replay slowly: a smaller image
 # keeps every line covered (DB then has one block, which the tests allow).
 SIZE = 8 if os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0") else 24
-FILES = ("paper.csv", "scenes.csv", "predictions.csv", "paper.json", "speedup_real.png", "speedup_user.png", "index.html")
+FILES = tuple(PAPER_FILES.values())
 
 
 @pytest.fixture(scope="module")
@@ -255,7 +256,10 @@ def test_at_most_two_traces_mapped_at_once(cache, monkeypatch):
 
 
 def test_files_written_and_deterministic(written):
+    """Exactly the files ``PAPER_FILES`` names, the same bytes twice. Fails if
+    ``write_paper`` writes ``paper.json`` under a name of its own."""
     first, second = written
+    assert sorted(path.name for path in first.iterdir()) == sorted(FILES)
     for name in FILES:
         assert (first / name).is_file(), name
         assert (first / name).read_bytes() == (second / name).read_bytes(), name

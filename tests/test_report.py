@@ -11,7 +11,7 @@ import pytest
 import tracer.rendering.render
 from analyses import traces
 from analyses.experiment import Experiment
-from analyses.report import RESULT_COLUMNS, SECTIONS, build_report
+from analyses.report import MISS_MAP_FILES, REPORT_FILES, RESULT_COLUMNS, SECTIONS, build_report
 from analyses.verdict import format_percent, verdict
 from analyses.cli import main
 
@@ -40,10 +40,12 @@ def reports(tmp_path_factory):
 
 
 def test_writes_its_files(reports):
+    """Exactly the files ``REPORT_FILES`` and ``MISS_MAP_FILES`` name, none empty, no temporaries
+    left. Fails if ``write_report`` writes ``summary.json`` under a name of its own."""
     first, _ = reports
-    for name in ("index.html", "results.csv", "summary.json", "miss_map.npy", "miss_map.png"):
-        assert (first / name).is_file() and (first / name).stat().st_size > 0
-    assert not [p for p in first.iterdir() if p.name.startswith(".")], "temporary files left behind"
+    assert sorted(path.name for path in first.iterdir()) == sorted([*REPORT_FILES.values(), *MISS_MAP_FILES])
+    for name in (*REPORT_FILES.values(), *MISS_MAP_FILES):
+        assert (first / name).stat().st_size > 0
 
 
 def test_html_is_self_contained(reports):
@@ -60,7 +62,7 @@ def test_html_is_self_contained(reports):
 
 def test_outputs_are_deterministic(reports):
     first, second = reports
-    for name in ("results.csv", "summary.json", "index.html", "miss_map.npy", "miss_map.png"):
+    for name in (*REPORT_FILES.values(), *MISS_MAP_FILES):
         assert (first / name).read_bytes() == (second / name).read_bytes(), name
 
 

@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from analyses.paper import PAPER_EXPERIMENT, check_output_folder, check_scenes, paper_summary, reproduce, write_paper
+    from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
     from tracer.scenes.catalog import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
@@ -94,8 +95,9 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_folder(args.out)
     result = reproduce(experiment, scenes=scenes, crossover=args.crossover)
     path = write_paper(result, out)
-    print(f"wrote {path / 'index.html'}, paper.csv, scenes.csv, predictions.csv, paper.json, speedup_real.png, "
-          "speedup_user.png", file=sys.stderr)
+    others = [name for role, name in PAPER_FILES.items() if role != "page"]
+    others += list(CROSSOVER_FILES.values()) if result.crossover is not None else []
+    print(f"wrote {path / PAPER_FILES['page']}, {', '.join(others)}", file=sys.stderr)
     if args.json:
         print(json.dumps(paper_summary(result), indent=2, allow_nan=False))
     else:

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from analyses.report import build_report, parse_miss_map, write_report
+    from analyses.report import MISS_MAP_FILES, REPORT_FILES, build_report, parse_miss_map, write_report
 
     from analyses.commands import checks
 
@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
     experiment = experiment_from_args(args, n_processes=tuple(counts))
     report = build_report(experiment, out=out, miss_map=miss_map)
     path = write_report(report, out)
-    print(f"wrote {path / 'index.html'}, results.csv, summary.json, miss_map.npy, miss_map.png"
+    others = [REPORT_FILES["results"], REPORT_FILES["summary"], *(MISS_MAP_FILES if report.miss_map is not None else ())]
+    print(f"wrote {path / REPORT_FILES['page']}, {', '.join(others)}"
           f"{' (trace from cache)' if report.render_info.get('cached') else ''}", file=sys.stderr)
     if args.json:
         print(json.dumps(report.summary, indent=2))
