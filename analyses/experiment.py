@@ -26,7 +26,7 @@ from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, MIN_MEMORY_BUDGET
 from coherence.cost import DEFAULT_COST_MODEL
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.simulation import STUDY_CPUS
-from rtcommon.validate import require_int
+from rtcommon.validate import require_bool, require_int
 
 __all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
 
@@ -145,8 +145,7 @@ class Experiment:
         if isinstance(self.dask, str) and not self.dask.strip():
             raise ValueError("Experiment.dask must be a scheduler address (tcp://host:8786), a Client or None")
         require_int("Experiment.memory_budget", self.memory_budget, MIN_MEMORY_BUDGET)
-        if not isinstance(self.progress, bool):
-            raise ValueError(f"Experiment.progress must be True or False, got {self.progress!r}")
+        require_bool("Experiment.progress", self.progress)
 
     # the choices as the simulation's objects
 
