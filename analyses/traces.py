@@ -19,18 +19,21 @@ the ``COHERENCE_CACHE`` environment variable, else
 
     <cache>/traces/<scene>-<size>[-<workload>]-<kd>-d<depth>-<hash>/   (workload left out for "modern")
         trace/         the AccessTrace (pixel_offsets.npy, records.npy, ...,
-                       meta.json with a checksum of every array)
+                       meta.json with a checksum of every array and header,
+                       meta.json.xxh3 with meta.json's)
         image.png      the rendered image
         render.json    tree statistics, kd-tree config, counter totals,
-                       timings of the render, the key's ingredients and the
-                       image's checksum
+                       timings of the render, the key's ingredients, the
+                       image's checksum and the trace's meta.json.xxh3
+        render.json.xxh3   the checksum of render.json
     <cache>/scenes/    NFF files generated for what-if scene sizes
 
+So one digest, ``render.json.xxh3``, covers every byte of an entry.
 An entry is written into a temporary sibling folder and renamed into place,
 so readers never see half an entry; two processes racing for one key both
 render, and the first rename wins. Every load verifies the checksums: a
-damaged entry is reported in one line (a warning), evicted and rendered
-again. Temporary folders of runs that died are removed by the next run. A
+damaged entry, or one missing any checksum, is reported in one line (a
+warning), evicted and rendered again. Temporary folders of runs that died are removed by the next run. A
 cache folder that cannot be written is read from, and new traces are
 rendered into a temporary folder for this process only, with a warning.
 
@@ -63,6 +66,8 @@ __all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir",
 CACHE_ENV = "COHERENCE_CACHE"
 
 _INFO = "render.json"
+_INFO_DIGEST = "render.json.xxh3"  # XXH3-64 of render.json's bytes, beside it
+_TRACE_DIGEST = "meta.json.xxh3"  # the trace's own digest, which covers all of its files
 _KD_BUILDERS = ("sah", "median")
 _PRIVATE_CACHES: dict = {}
 _PILOT_SIZE = 32  # image size of the render that estimates a trace's bytes per pixel  # read-only cache root -> this process's temporary stand-in
@@ -246,16 +251,17 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload)
     entry = root / "traces" / key
     remove_stale_temporaries(entry.parent)  # on a hit too: a killed run's leftovers go at the next run
-    info = _read_entry(entry)
-    if info is not None:
-        try:
+    try:
+        info = _read_entry(entry)
+        if info is not None:
             trace = AccessTrace.load(entry / "trace", mmap=True)
-            _check_image(entry, info)
-        except (FileNotFoundError, TraceIntegrityError) as error:  # damaged entry: evict, render again
-            warnings.warn(f"damaged trace cache entry {key}: {str(error).rsplit(': ', 1)[-1]}; "
-                          "evicting it and rendering again", stacklevel=2)
-            shutil.rmtree(entry, ignore_errors=True)
-            info = None
+            _check_entry(entry, key, info, trace)
+    except (FileNotFoundError, NotADirectoryError, TraceIntegrityError) as error:  # damaged: evict, render again
+        warnings.warn(f"damaged trace cache entry {key}: {getattr(error, 'detail', error)}; "
+                      "evicting it and rendering again", stacklevel=2)
+        trace = None
+        _remove(entry)
+        info = None
     if info is None:
         folder = _writable_traces_folder(root)
         entry = folder / key
@@ -287,24 +293,68 @@ def _remove(path: Path) -> None:
             pass
 
 
-def _check_image(entry: Path, info: dict) -> None:
+def _check_entry(entry: Path, key: str, info: dict, trace) -> None:
+    """The rest of an entry against its verified ``render.json``: the image's checksum, the trace's digest
+    (the entry's own trace, not another's) and the trace's size.
+
+    Raises
+    ------
+    TraceIntegrityError
+    """
     from tracer.trace.access import TraceIntegrityError
 
-    expected = info.get("image_checksum")
-    if expected is not None and xxhash.xxh3_64_hexdigest((entry / "image.png").read_bytes()) != expected:
+    try:
+        image = xxhash.xxh3_64_hexdigest((entry / "image.png").read_bytes())
+    except (FileNotFoundError, NotADirectoryError):
+        raise TraceIntegrityError("image.png is missing") from None
+    if image != info.get("image_checksum"):
         raise TraceIntegrityError("image.png does not match its checksum")
+    if (entry / "trace" / _TRACE_DIGEST).read_text(encoding="ascii", errors="replace").strip() != \
+            info.get("trace_digest"):
+        raise TraceIntegrityError(f"the trace is not the one {_INFO} was written with")
+    size = info.get("size")
+    if info.get("key") != key or (trace.width, trace.height) != (size, size):
+        raise TraceIntegrityError(f"{_INFO} (key {info.get('key')}, size {size}) does not describe its "
+                                  f"{trace.width}x{trace.height} trace")
 
 
 def _read_entry(entry: Path) -> dict | None:
+    """The entry's ``render.json``, verified against ``render.json.xxh3``; None when there is no entry.
+
+    Raises
+    ------
+    TraceIntegrityError
+        The digest is missing or differs, or the file is not a JSON object.
+    """
+    from tracer.trace.access import TraceIntegrityError
+
     try:
-        info = json.loads((entry / _INFO).read_text())
-    except (FileNotFoundError, NotADirectoryError, UnicodeDecodeError, json.JSONDecodeError):
+        data = (entry / _INFO).read_bytes()
+    except (FileNotFoundError, NotADirectoryError):
         return None
+    try:
+        recorded = (entry / _INFO_DIGEST).read_text(encoding="ascii", errors="replace").strip()
+    except (FileNotFoundError, NotADirectoryError):
+        raise TraceIntegrityError(f"{_INFO_DIGEST} is missing") from None
+    if recorded != xxhash.xxh3_64_hexdigest(data):
+        raise TraceIntegrityError(f"{_INFO} does not match its checksum")
+    try:
+        info = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        info = None
     if not isinstance(info, dict):
-        return None
-    if not (entry / "image.png").is_file() or not (entry / "trace" / "meta.json").is_file():
-        return None
+        raise TraceIntegrityError(f"{_INFO} is damaged (not a JSON object)")
     return info
+
+
+def _complete(entry: Path) -> bool:
+    """Whether ``entry`` holds an entry with a verified ``render.json`` (a concurrent run's)."""
+    from tracer.trace.access import TraceIntegrityError
+
+    try:
+        return _read_entry(entry) is not None
+    except TraceIntegrityError:
+        return False
 
 
 def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: str, entry: Path,
@@ -344,13 +394,16 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
             "image_checksum": xxhash.xxh3_64_hexdigest((tmp / "image.png").read_bytes()),
+            "trace_digest": (tmp / "trace" / _TRACE_DIGEST).read_text(encoding="ascii").strip(),
         }
-        (tmp / _INFO).write_text(json.dumps(info, indent=1, default=json_default) + "\n")
+        data = (json.dumps(info, indent=1, default=json_default) + "\n").encode("utf-8")
+        (tmp / _INFO).write_bytes(data)
+        (tmp / _INFO_DIGEST).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
         del result
         try:
             os.replace(tmp, entry)
         except OSError:
-            if _read_entry(entry) is None:  # not a concurrent writer's complete entry: replace it
+            if not _complete(entry):  # not a concurrent writer's complete entry: replace it
                 _remove(entry)
                 os.replace(tmp, entry)
     finally:

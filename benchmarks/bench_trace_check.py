@@ -25,7 +25,8 @@ from coherence.studies import study
 from timing import best_of
 from tracer.rendering.render import render
 from tracer.scenes.catalog import load
-from tracer.trace.access import AccessTrace, _read_meta, verify_trace
+from tracer.trace.access import AccessTrace, verify_trace
+from tracer.trace.check import read_meta
 
 
 def main():
@@ -41,7 +42,7 @@ def main():
         render(scene, size=args.size, trace_path=path)
         print(f"rendered {args.scene} {args.size}x{args.size} in {time.perf_counter() - start:.1f} s", file=sys.stderr)
     trace = AccessTrace.load(path)
-    checksums = _read_meta(path)["checksums"]
+    checksums = read_meta(path)["checksums"]
     size_mb = (trace.records.nbytes + trace.pixel_offsets.nbytes + trace.counters.nbytes) / 1e6
 
     check, _ = best_of(3, lambda: verify_trace(trace, checksums))

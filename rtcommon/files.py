@@ -14,6 +14,7 @@ import signal
 import socket
 import tempfile
 from pathlib import Path
+from typing import NamedTuple
 
 #: What every temporary name ends with.
 TEMP_SUFFIX = ".tmp"
@@ -216,3 +217,43 @@ def regular_file(path: str | os.PathLike, what: str) -> Path:
     if not stat.S_ISREG(mode):
         raise ValueError(f"not {what}: {str(path)!r} is not a regular file")
     return path
+
+
+class NpyHeader(NamedTuple):
+    """What a ``.npy`` file's header says, and its bytes (:func:`read_npy_header`)."""
+
+    raw: bytes            #: the header's bytes, magic string included; the data follow them
+    dtype: object         #: numpy.dtype as written (byte order included)
+    shape: tuple
+    fortran_order: bool
+
+
+def read_npy_header(path: str | os.PathLike) -> NpyHeader:
+    """The header of the ``.npy`` file at ``path``, read without numpy's advice about pickles.
+
+    Raises
+    ------
+    ValueError
+        One line saying what is wrong: not a ``.npy`` file (its first bytes
+        are not the magic string), an unknown format version, or a header
+        numpy cannot parse.
+    OSError
+        The file cannot be read.
+    """
+    import numpy as np
+
+    readers = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+    with open(path, "rb") as stream:
+        start = stream.read(len(np.lib.format.MAGIC_PREFIX) + 2)
+        if not start.startswith(np.lib.format.MAGIC_PREFIX) or len(start) < len(np.lib.format.MAGIC_PREFIX) + 2:
+            raise ValueError("not a .npy file: it does not begin with the .npy magic string")
+        version = (start[-2], start[-1])
+        if version not in readers:
+            raise ValueError(f"unsupported .npy format version {version[0]}.{version[1]}")
+        try:
+            shape, fortran_order, dtype = readers[version](stream)
+        except (ValueError, SyntaxError, TypeError, EOFError) as error:
+            raise ValueError(f"unreadable .npy header ({str(error).splitlines()[0]})") from None
+        size = stream.tell()
+        stream.seek(0)
+        return NpyHeader(stream.read(size), dtype, tuple(shape), bool(fortran_order))

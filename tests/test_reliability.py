@@ -21,11 +21,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xxhash
 
 from analyses import traces
-from rtcommon.files import remove_stale_temporaries, temp_prefix, write_files_atomic
+from rtcommon.files import read_npy_header, remove_stale_temporaries, temp_prefix, write_files_atomic
 from tracer.trace.records import INDEX_MASK, KIND_SHIFT, RecordKind, pack
-from tracer.trace.access import AccessTrace, TraceIntegrityError, _first_record_out_of_range, _index_limits
+from tracer.trace.access import AccessTrace, TraceIntegrityError
+from tracer.trace.check import _first_fall, _first_negative, first_record_out_of_range, index_limits
 from trace_factory import random_trace
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,49 +55,223 @@ def test_a_flipped_byte_in_any_array_is_caught(tmp_path, name):
         AccessTrace.load(folder)
 
 
+def _recorded_anew(folder: Path, meta_edit=None, **arrays) -> None:
+    """Write ``arrays`` into the trace at ``folder`` and record every digest anew (``meta_edit`` changes
+    meta.json first): a writer that hashes correctly what it wrongly wrote, so only the format's rules
+    can catch it."""
+    for name, array in arrays.items():
+        np.save(folder / f"{name}.npy", array)
+    meta = json.loads((folder / "meta.json").read_text())
+    if meta_edit is not None:
+        meta_edit(meta)
+    for name in ("pixel_offsets", "records", "counters"):
+        meta["checksums"][name] = xxhash.xxh3_64_hexdigest(np.load(folder / f"{name}.npy").tobytes())
+        meta["checksums"]["headers"][name] = xxhash.xxh3_64_hexdigest(read_npy_header(folder / f"{name}.npy").raw)
+    data = json.dumps(meta).encode()
+    (folder / "meta.json").write_bytes(data)
+    (folder / "meta.json.xxh3").write_text(xxhash.xxh3_64_hexdigest(data))
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """A rendered tetra trace of 8x4 samples (its metadata records scene and image size)."""
+    from tracer.rendering.render import render
+    from tracer.scenes.catalog import load
+
+    folder = tmp_path_factory.mktemp("rendered") / "tetra"
+    render(load("tetra"), size=(8, 4), trace_path=folder)
+    return folder
+
+
+def _copy(folder: Path, tmp_path: Path) -> Path:
+    return Path(shutil.copytree(folder, tmp_path / folder.name))
+
+
+def test_a_changed_npy_header_is_caught(tmp_path):
+    """Counters' dtype <i8 -> <f8 in the header alone (rays became 0, misses per ray NaN). Fails if the
+    headers' checksums are not compared, and then (digests recorded anew) if the dtype is not checked
+    against the format."""
+    _, folder = _saved(tmp_path)
+    data = (folder / "counters.npy").read_bytes()
+    (folder / "counters.npy").write_bytes(data.replace(b"'<i8'", b"'<f8'", 1))
+    with pytest.raises(TraceIntegrityError, match=r"counters\.npy's header does not match its checksum"):
+        AccessTrace.load(folder)
+    _recorded_anew(folder)
+    with pytest.raises(TraceIntegrityError, match=r"counters\.npy holds <f8 \(48, 25\), expected <i8 \(48, 25\)"):
+        AccessTrace.load(folder)
+
+
+def test_a_damaged_npy_magic_is_named_without_numpys_pickle_advice(tmp_path):
+    """Fails if the loader lets np.load read the header (its message advises allow_pickle)."""
+    _, folder = _saved(tmp_path)
+    data = bytearray((folder / "records.npy").read_bytes())
+    data[1] ^= 0x01
+    (folder / "records.npy").write_bytes(bytes(data))
+    with pytest.raises(TraceIntegrityError, match=r"t': records\.npy is damaged \(not a \.npy file") as caught:
+        AccessTrace.load(folder)
+    assert "pickle" not in str(caught.value)
+
+
+def test_bytes_after_an_arrays_data_are_caught(tmp_path):
+    """np.load ignores them. Fails if the file's size is not compared with its header's."""
+    _, folder = _saved(tmp_path)
+    with open(folder / "records.npy", "ab") as stream:
+        stream.write(b"\0" * 4)
+    with pytest.raises(TraceIntegrityError, match=r"records\.npy has \d+ bytes, expected \d+"):
+        AccessTrace.load(folder)
+
+
 def test_a_damaged_meta_json_is_caught(tmp_path):
+    """Fails if meta.json is not compared with meta.json.xxh3, or if undecodable bytes pass."""
     _, folder = _saved(tmp_path)
     meta = json.loads((folder / "meta.json").read_text())
     meta["width"], meta["height"] = meta["height"], meta["width"]  # still valid JSON, still consistent shapes
     (folder / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(TraceIntegrityError, match="meta.json does not match its checksum"):
         AccessTrace.load(folder)
-    (folder / "meta.json.xxh3").unlink()  # as written before checksums existed
     (folder / "meta.json").write_bytes(b"\xff{")
+    (folder / "meta.json.xxh3").write_text(xxhash.xxh3_64_hexdigest(b"\xff{"))
     with pytest.raises(TraceIntegrityError, match="meta.json is damaged"):
         AccessTrace.load(folder)
 
 
-def test_records_beyond_the_scene_are_refused_without_checksums(tmp_path):
-    counts = {kind.name.lower(): 60 for kind in RecordKind}
-    trace, folder = _saved(tmp_path, {"record_counts": counts})
-    meta = json.loads((folder / "meta.json").read_text())
-    del meta["checksums"]  # a trace written before checksums existed
-    (folder / "meta.json").write_text(json.dumps(meta))
-    (folder / "meta.json.xxh3").unlink()
-    AccessTrace.load(folder)
-    records = np.load(folder / "records.npy")
-    records[5] = pack(RecordKind.SPHERE, 60)
-    np.save(folder / "records.npy", records)
-    with pytest.raises(TraceIntegrityError, match="record 5 reads sphere 60, beyond the 60 records"):
+def _drop_checksums(meta):
+    del meta["checksums"]
+
+
+def _drop_a_header_checksum(meta):
+    del meta["checksums"]["headers"]["counters"]
+
+
+@pytest.mark.parametrize("damage", ["no meta.json.xxh3", "no checksums", "no header checksum"])
+def test_a_trace_without_its_digests_is_refused_with_the_command_that_writes_it_again(rendered, tmp_path,
+                                                                                       damage):
+    """A trace written before checksums existed, or whose digest was deleted, is never taken unverified
+    (64x64 was then simulated as 32x128, a flipped counter accepted). Fails if any missing digest skips
+    its check."""
+    folder = _copy(rendered, tmp_path)
+    if damage == "no meta.json.xxh3":
+        (folder / "meta.json.xxh3").unlink()
+    else:
+        meta = json.loads((folder / "meta.json").read_text())
+        (_drop_checksums if damage == "no checksums" else _drop_a_header_checksum)(meta)
+        data = json.dumps(meta).encode()
+        (folder / "meta.json").write_bytes(data)
+        (folder / "meta.json.xxh3").write_text(xxhash.xxh3_64_hexdigest(data))
+    with pytest.raises(TraceIntegrityError, match="cannot be verified; re-render it with "
+                                                  f"`coherence render tetra --size N --trace {folder}`"):
         AccessTrace.load(folder)
-    records[5] = np.uint32(15 << KIND_SHIFT)
-    np.save(folder / "records.npy", records)
-    with pytest.raises(TraceIntegrityError, match="record 5 reads unknown kind 15"):
+
+
+def test_dimensions_are_cross_checked(rendered, tmp_path):
+    """Fails if a negative width and height whose product fits the arrays pass (they did, naming no trace),
+    or if width and height swapped in meta.json, digests recorded anew, are not compared with the
+    render's image size."""
+    folder = _copy(rendered, tmp_path)
+    _recorded_anew(folder, lambda meta: meta.update(width=-8, height=-4))
+    with pytest.raises(TraceIntegrityError, match=rf"trace '{folder}': meta.json: width must be an integer >= 1, "
+                                                  "got -8"):
+        AccessTrace.load(folder)
+    _recorded_anew(folder, lambda meta: meta.update(width=4, height=8))
+    with pytest.raises(TraceIntegrityError, match=r"width x height = 4x8 disagrees with the render's record"):
+        AccessTrace.load(folder)
+    _recorded_anew(folder, lambda meta: meta.update(width=8, height=4))
+    assert AccessTrace.load(folder).counter("primary_rays").shape == (4, 8)
+
+
+def _random_parts(seed=3):
+    trace = random_trace(8, 6, seed=seed)
+    return [np.array(trace.pixel_offsets), np.array(trace.records), np.array(trace.counters), 8, 6,
+            {"record_counts": {kind.name.lower(): 60 for kind in RecordKind}}]
+
+
+def test_records_beyond_the_scene_are_refused(tmp_path):
+    """In memory and in a file whose digests were recorded anew. Fails if the constructor or the loader
+    skips the records' kind and index check."""
+    parts = _random_parts()
+    AccessTrace(*parts)
+    parts[1][5] = pack(RecordKind.SPHERE, 60)
+    with pytest.raises(ValueError, match="AccessTrace: records: record 5 reads sphere 60, beyond the 60 records"):
+        AccessTrace(*parts)
+    parts[1][5] = np.uint32(15 << KIND_SHIFT)
+    with pytest.raises(ValueError, match="record 5 reads unknown kind 15"):
+        AccessTrace(*parts)
+    _, folder = _saved(tmp_path, parts[5])
+    _recorded_anew(folder, records=parts[1])
+    with pytest.raises(TraceIntegrityError, match=r"records\.npy: record 5 reads unknown kind 15"):
         AccessTrace.load(folder)
 
 
 def test_offsets_that_fall_are_refused(tmp_path):
-    trace, folder = _saved(tmp_path)
-    meta = json.loads((folder / "meta.json").read_text())
-    del meta["checksums"]
-    (folder / "meta.json").write_text(json.dumps(meta))
-    (folder / "meta.json.xxh3").unlink()
-    offsets = np.load(folder / "pixel_offsets.npy")
-    offsets[3], offsets[4] = offsets[4] + 5, offsets[3]
-    np.save(folder / "pixel_offsets.npy", offsets)
-    with pytest.raises(TraceIntegrityError, match="pixel_offsets must rise"):
+    """In memory and in a file whose digests were recorded anew. Fails if either skips the offsets'
+    check."""
+    parts = _random_parts()
+    parts[0][3], parts[0][4] = parts[0][4] + 5, parts[0][3]
+    with pytest.raises(ValueError, match=r"AccessTrace: pixel_offsets must rise from 0 to the record count; "
+                                         r"entry 4 \(\d+\) is below entry 3"):
+        AccessTrace(*parts)
+    _, folder = _saved(tmp_path)
+    _recorded_anew(folder, pixel_offsets=parts[0])
+    with pytest.raises(TraceIntegrityError, match=r"pixel_offsets\.npy must rise"):
         AccessTrace.load(folder)
+
+
+def _negative_counter(parts):
+    parts[2][7, 3] = -4
+
+
+def _float_counters(parts):
+    parts[2] = parts[2].astype(np.float64)
+
+
+def _int32_offsets(parts):
+    parts[0] = parts[0].astype(np.int32)
+
+
+def _offsets_not_from_zero(parts):
+    parts[0] = parts[0] + 1
+
+
+def _no_pixels(parts):
+    parts[3:5] = [0, 6]
+
+
+def _list_records(parts):
+    parts[1] = list(parts[1])
+
+
+@pytest.mark.parametrize("damage, message", [
+    (_negative_counter, r"counters must not be negative; pixel 7's \w+ is -4"),
+    (_float_counters, "counters must have dtype int64, got float64"),
+    (_int32_offsets, "pixel_offsets must have dtype int64, got int32"),
+    (_offsets_not_from_zero, "pixel_offsets must run from 0 to the record count 894, got 1 to 895"),
+    (_no_pixels, "AccessTrace.width must be >= 1, got 0"),
+    (_list_records, "records must be a numpy array, got list"),
+])
+def test_an_access_trace_built_in_memory_is_checked_as_a_loaded_one(damage, message):
+    """A negative counter gave speedup_user = -4.99e8. Fails if the constructor drops the matching check."""
+    parts = _random_parts()
+    damage(parts)
+    with pytest.raises(ValueError, match=message):
+        AccessTrace(*parts)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_offset_and_counter_kernels_match_python_loops(seed):
+    """Fails if a kernel's comparison is off by one (``<=`` for ``<``) or it returns the wrong position."""
+    rng = np.random.default_rng(seed)
+    offsets = np.cumsum(rng.integers(0, 3, 200)).astype(np.int64)
+    values = rng.integers(0, 9, 300).astype(np.int64)
+    if seed % 2:
+        offsets[rng.integers(1, 200)] -= 1 + seed
+        values[rng.integers(0, 300, 3)] = -1
+    falls = [i for i in range(offsets.size - 1) if offsets[i + 1] < offsets[i]]
+    negatives = [i for i in range(values.size) if values[i] < 0]
+    assert _first_fall(offsets) == (falls[0] if falls else -1)
+    assert _first_negative(values) == (negatives[0] if negatives else -1)
+    assert _first_fall(np.array([0, 2, 2, 1, 0], np.int64)) == 2
+    assert _first_fall(np.array([0], np.int64)) == -1
+    assert _first_negative(np.array([0, 3, -1, -2], np.int64)) == 2
 
 
 def _first_out_of_range_reference(records, limits):
@@ -108,13 +284,13 @@ def _first_out_of_range_reference(records, limits):
 @pytest.mark.parametrize("seed", range(6))
 def test_range_kernel_matches_a_python_loop(seed):
     rng = np.random.default_rng(seed)
-    limits = _index_limits({"record_counts": {kind.name.lower(): int(rng.integers(0, 50))
+    limits = index_limits({"record_counts": {kind.name.lower(): int(rng.integers(0, 50))
                                               for kind in RecordKind}})
     records = pack(rng.integers(0, len(RecordKind), 300), rng.integers(0, 40, 300))
     if seed % 2:
         records[rng.integers(0, 300)] = np.uint32(rng.integers(len(RecordKind), 16)) << np.uint32(KIND_SHIFT)
-    assert _first_record_out_of_range(records, limits) == _first_out_of_range_reference(records, limits)
-    assert _first_record_out_of_range(records[:0], limits) == -1
+    assert first_record_out_of_range(records, limits) == _first_out_of_range_reference(records, limits)
+    assert first_record_out_of_range(records[:0], limits) == -1
 
 
 # ----------------------------------------------------------------- trace cache
@@ -134,6 +310,66 @@ def test_cache_entry_with_a_flipped_byte_is_evicted_and_rebuilt(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert traces.cached_trace("tetra", 12, cache_dir=tmp_path, progress=False)[2]["cached"]
+
+
+def _rewrite_render_json(entry: Path, edit) -> None:
+    info = json.loads((entry / "render.json").read_text())
+    edit(info)
+    data = json.dumps(info).encode()
+    (entry / "render.json").write_bytes(data)
+    (entry / "render.json.xxh3").write_text(xxhash.xxh3_64_hexdigest(data))
+
+
+def _digit_flipped_in_render_json(entry, other):
+    text = (entry / "render.json").read_text()
+    tests = json.loads(text)["totals"]["tests_triangle"]
+    (entry / "render.json").write_text(text.replace(f'"tests_triangle": {tests}', f'"tests_triangle": {tests - 1}'))
+
+
+def _render_json_digest_gone(entry, other):
+    (entry / "render.json.xxh3").unlink()
+
+
+def _image_checksum_gone(entry, other):
+    _rewrite_render_json(entry, lambda info: info.pop("image_checksum"))
+
+
+def _counters_header_says_float(entry, other):
+    counters = entry / "trace" / "counters.npy"
+    counters.write_bytes(counters.read_bytes().replace(b"'<i8'", b"'<f8'", 1))
+
+
+def _another_entrys_trace(entry, other):
+    shutil.rmtree(entry / "trace")
+    shutil.copytree(other / "trace", entry / "trace")
+
+
+def _size_edited_with_digest(entry, other):
+    _rewrite_render_json(entry, lambda info: info.update(size=4))
+
+
+@pytest.mark.parametrize("damage, warning", [
+    (_digit_flipped_in_render_json, r"render\.json does not match its checksum"),
+    (_render_json_digest_gone, r"render\.json\.xxh3 is missing"),
+    (_image_checksum_gone, r"image\.png does not match its checksum"),
+    (_counters_header_says_float, r"counters\.npy's header does not match its checksum"),
+    (_another_entrys_trace, "the trace is not the one render.json was written with"),
+    (_size_edited_with_digest, r"render\.json \(key .*, size 4\) does not describe its 8x8 trace"),
+])
+def test_a_damaged_or_unverifiable_cache_entry_is_evicted_and_rebuilt(tmp_path, damage, warning):
+    """Every byte of an entry is under render.json.xxh3 (a flipped digit of render.json went into results.csv;
+    a counters header saying float64 failed every run, never evicted). Fails if the check the warning
+    names is skipped."""
+    _, _, info = traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)
+    _, _, other = traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False, max_depth=3)
+    entry = Path(info["path"])
+    damage(entry, Path(other["path"]))
+    with pytest.warns(UserWarning, match=rf"damaged trace cache entry {info['key']}: {warning}.*; evicting it"):
+        _, _, again = traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)
+    assert not again["cached"] and again["totals"] == info["totals"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)[2]["cached"]
 
 
 def test_cache_layout_is_the_same_from_argument_and_environment(tmp_path, monkeypatch):
@@ -247,7 +483,9 @@ def test_write_files_atomic_writes_all_or_nothing(tmp_path):
 # Each case: (argv, expected exit status, a fragment of stderr), optionally a dict of environment
 # variables. Paths are relative to a scratch folder that holds: afile (a regular file), adir (a
 # folder), pipe.nff and pipe.txt (FIFOs), trace8 (a tetra 8x8 trace), trace8-flipped (one byte of
-# its records flipped), trace8-outside (no checksums, a record beyond the scene), addresses.txt,
+# its records flipped), trace8-outside (a record beyond the scene, digests recorded anew), trace8-old
+# (no meta.json.xxh3), trace8-f8 (counters' header says float64), trace8-magic (records.npy's magic
+# string damaged), addresses.txt,
 # bom.txt (addresses after a UTF-8 byte-order mark), binary.toml (not text), petabyte.toml (a
 # hierarchy whose 4 PB level cannot be allocated),
 # empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses), huge.nff (a
@@ -286,6 +524,9 @@ CLI_CASES = [
     (["simulate", "trace8", "--background-footprint", "-1"], 2, "--background-footprint must be >= 0"),
     (["simulate", "trace8-flipped"], 2, "damaged"),
     (["simulate", "trace8-outside"], 2, "beyond the"),
+    (["simulate", "trace8-old"], 2, "re-render it with `coherence render tetra --size 8 --trace trace8-old`"),
+    (["simulate", "trace8-f8"], 2, "counters.npy's header does not match its checksum"),
+    (["simulate", "trace8-magic"], 2, "records.npy is damaged (not a .npy file"),
     (["simulate", "trace8", "--mapping", "S", "--processes", "2", "--csv", "runs.csv"], 0, ""),
     (["cachesim", "pipe.txt"], 2, "not a regular file"),
     (["cachesim", "adir"], 2, "is a folder"),
@@ -393,17 +634,18 @@ def scratch(tmp_path_factory):
     (folder / "huge.png").write_bytes(_png_header(16384, 16384))
     (folder / "huge-texture.nff").write_text(view + "texture big huge.png\nusetexture big\ns 0 0 0 1\n")
     render(load("tetra"), size=8, trace_path=folder / "trace8")
-    for name in ("trace8-flipped", "trace8-outside"):
-        render(load("tetra"), size=8, trace_path=folder / name)
+    for name in ("trace8-flipped", "trace8-outside", "trace8-old", "trace8-f8", "trace8-magic"):
+        shutil.copytree(folder / "trace8", folder / name)
     _flip(folder / "trace8-flipped" / "records.npy", 9)
     outside = folder / "trace8-outside"
-    meta = json.loads((outside / "meta.json").read_text())
-    del meta["checksums"]
-    (outside / "meta.json").write_text(json.dumps(meta))
-    (outside / "meta.json.xxh3").unlink()
     records = np.load(outside / "records.npy")
-    records[3] = pack(RecordKind.TRIANGLE, meta["metadata"]["record_counts"]["triangle"])
-    np.save(outside / "records.npy", records)
+    triangles = json.loads((outside / "meta.json").read_text())["metadata"]["record_counts"]["triangle"]
+    records[3] = pack(RecordKind.TRIANGLE, triangles)
+    _recorded_anew(outside, records=records)
+    (folder / "trace8-old" / "meta.json.xxh3").unlink()
+    counters = folder / "trace8-f8" / "counters.npy"
+    counters.write_bytes(counters.read_bytes().replace(b"'<i8'", b"'<f8'", 1))
+    (folder / "trace8-magic" / "records.npy").write_bytes(b"\x93NUMPX" + (folder / "trace8" / "records.npy").read_bytes()[6:])
     return folder
 
 

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 import xxhash
-from numba import njit
 
 from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
 from rtcommon.resident import drop_pages, mapping_of
@@ -37,24 +36,26 @@ from tracer.trace.records import (  # noqa: F401  (re-exported: the format's nam
     COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
     Counter, RecordKind, pack, record_id, record_kind, unpack,
 )
+from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityError, array_checksum)
+    CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, TraceIntegrityError,
+    array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
+)
 
-#: The hash recorded for each array in ``meta.json`` (xxHash's XXH3, 64 bits).
-CHECKSUM_ALGORITHM = "xxh3_64"
-_ARRAYS = ("pixel_offsets", "records", "counters")
-_CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
+_ARRAYS = tuple(DTYPES)
 #: Arrays a loaded trace reads through a memory map (mmap=True): the two that grow with it. The records
 #: grow with the trace's length, the counters with the image (200 bytes a pixel).
 _MAPPED = ("records", "counters")
-_META_CHECKSUM = "meta.json.xxh3"  # XXH3-64 of meta.json's bytes
-
-
-class TraceIntegrityError(ValueError):
-    """A trace's files are damaged: a checksum differs, or the arrays break the format's rules."""
 
 
 @dataclass(eq=False)
 class AccessTrace:
     """Ordered per-pixel access logs of one render, CSR style.
+
+    Constructed in memory, a trace is checked as :meth:`load` checks one
+    (hashes aside): dtypes and shapes, offsets rising from 0 to the record
+    count, counters not negative, every record of a known kind with an index
+    below its kind's ``metadata["record_counts"]`` (where given); a
+    ValueError names the first rule broken.
 
     Attributes
     ----------
@@ -68,6 +69,7 @@ class AccessTrace:
         Per-pixel counters, columns :data:`COUNTER_NAMES`; a read-only
         memmap when loaded with ``mmap=True``.
     width, height : int
+        At least 1 each; P = width * height.
     metadata : dict
         JSON-serialisable: scene, resolution, tree config and stats, render
         options, package versions.
@@ -81,15 +83,21 @@ class AccessTrace:
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        p = int(self.width) * int(self.height)
-        if self.pixel_offsets.shape != (p + 1,):
-            raise ValueError(f"AccessTrace.pixel_offsets must have shape ({p + 1},), got {self.pixel_offsets.shape}")
-        if self.counters.shape != (p, len(COUNTER_NAMES)):
-            raise ValueError(f"AccessTrace.counters must have shape ({p}, {len(COUNTER_NAMES)}), got {self.counters.shape}")
-        if self.records.ndim != 1 or self.records.dtype != np.uint32:
-            raise ValueError("AccessTrace.records must be a 1-D uint32 array")
-        if int(self.pixel_offsets[-1]) != len(self.records):
-            raise ValueError("AccessTrace.pixel_offsets[-1] must equal len(records)")
+        self._check_layout()
+        check_values(self, None, "AccessTrace")
+
+    @classmethod
+    def _checked_by_caller(cls, arrays: dict, width: int, height: int, metadata: dict) -> "AccessTrace":
+        """A trace whose values the caller checks itself (:meth:`load`, in the pass that hashes them)."""
+        trace = cls.__new__(cls)
+        trace.pixel_offsets, trace.records, trace.counters = (arrays[name] for name in _ARRAYS)
+        trace.width, trace.height, trace.metadata = width, height, metadata
+        trace._check_layout()
+        return trace
+
+    def _check_layout(self) -> None:
+        arrays = {name: getattr(self, name) for name in _ARRAYS}
+        self.width, self.height = check_layout(arrays, self.width, self.height, self.metadata)
         # Kept as read-only views, whether loaded (a read-only memmap) or just rendered: numba
         # compiles a kernel once per array type, and writeable and read-only arrays are two types.
         for name in ("pixel_offsets", "records"):
@@ -136,8 +144,9 @@ class AccessTrace:
         """Write the trace to ``directory`` atomically.
 
         Files: ``pixel_offsets.npy``, ``records.npy``, ``counters.npy``,
-        ``meta.json`` (which holds a checksum of each array) and
-        ``meta.json.xxh3`` (the checksum of ``meta.json``). They are
+        ``meta.json`` (which holds a checksum of each array's data and of
+        each ``.npy`` header) and ``meta.json.xxh3`` (the checksum of
+        ``meta.json``). They are
         written to a temporary sibling directory that is renamed into place,
         so a reader never sees a half-written trace. Records are copied in
         chunks (a memmapped trace is not loaded).
@@ -176,12 +185,17 @@ class AccessTrace:
         """Read a trace written by :meth:`save`, checking every byte (records and counters memory-mapped by
         default).
 
-        Each array is hashed and compared with the checksum in ``meta.json``;
-        the offsets must rise from 0 to the record count, and every record
-        must name a known kind and an index below that kind's record count
-        (``metadata["record_counts"]``, the scene's and tree's sizes), so no
-        later kernel can index out of range. Traces written before
-        checksums existed get the structural checks only.
+        ``meta.json`` must match ``meta.json.xxh3``; each ``.npy`` header
+        must match its checksum in ``meta.json`` and give the format's dtype
+        and the shape that ``meta.json``'s width, height and record count
+        imply (which must agree with the render's own record of its image
+        size); each array's data must match its checksum. Then the offsets
+        must rise from 0 to the record count, no counter may be negative, and
+        every record must name a known kind and an index below that kind's
+        record count (``metadata["record_counts"]``, the scene's and tree's
+        sizes), so no later kernel can index out of range. A trace without
+        these checksums (written before they existed) is refused: the
+        message gives the command that writes it again.
 
         Raises
         ------
@@ -199,41 +213,17 @@ class AccessTrace:
         for name in ("meta.json", "pixel_offsets.npy", "records.npy", "counters.npy"):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"trace {str(directory)!r} lacks {name}")
-        meta = _read_meta(directory)
-        arrays = {}
-        for name in _ARRAYS:
-            try:
-                arrays[name] = np.load(directory / f"{name}.npy",
-                                       mmap_mode="r" if (mmap and name in _MAPPED) else None,
-                                       allow_pickle=False)
-            except (ValueError, OSError, EOFError) as error:
-                raise TraceIntegrityError(f"trace {str(directory)!r}: {name}.npy is damaged ({error})") from None
+        meta = read_meta(directory)
         where = f"trace {str(directory)!r}"
-        checksums = meta.get("checksums")
-        _check_small_arrays(arrays, checksums, where)  # before the shape checks, so the message names the file
+        shapes = dimensions(meta, where)
+        arrays = {name: load_array(directory, name, shapes[name], meta["checksums"], mmap and name in _MAPPED)
+                  for name in _ARRAYS}
         try:
-            width, height = int(meta["width"]), int(meta["height"])
-            trace = cls(pixel_offsets=arrays["pixel_offsets"], records=arrays["records"],
-                        counters=arrays["counters"], width=width, height=height,
-                        metadata=meta.get("metadata", {}))
-        except (KeyError, TypeError, ValueError) as error:
-            raise TraceIntegrityError(f"trace {str(directory)!r}: inconsistent files ({error})") from None
-        _verify_records(trace, checksums, where)
+            trace = cls._checked_by_caller(arrays, meta["width"], meta["height"], meta.get("metadata", {}))
+        except ValueError as error:
+            raise TraceIntegrityError(f"{where}: inconsistent files ({error})", str(error)) from None
+        check_values(trace, meta["checksums"], where, files=True)
         return trace
-
-
-def array_checksum(array: np.ndarray) -> str:
-    """XXH3-64 of an array's bytes in C order, as 16 hex digits (streamed in chunks; the pages of a
-    memory-mapped array leave the resident set as they are hashed)."""
-    hasher = xxhash.xxh3_64()
-    flat = array.reshape(-1) if array.flags.c_contiguous else np.ascontiguousarray(array).reshape(-1)
-    mapped = mapping_of(array)
-    step = _CHUNK * 4 // max(flat.itemsize, 1)
-    for a in range(0, flat.size, step):
-        if mapped is not None:
-            drop_pages(mapped)
-        hasher.update(np.ascontiguousarray(flat[a:a + step]))
-    return hasher.hexdigest()
 
 
 def column_sums(counters: np.ndarray) -> np.ndarray:
@@ -250,110 +240,30 @@ def column_sums(counters: np.ndarray) -> np.ndarray:
 
 
 def verify_trace(trace: AccessTrace, checksums: dict | None = None, *, where: str = "trace") -> None:
-    """Check a trace's arrays against their checksums and the format's rules, in one pass over the records.
+    """Check a trace's arrays against their checksums and the format's rules, in one pass over each array.
 
     Parameters
     ----------
     trace : AccessTrace
     checksums : dict, optional
         ``{"algorithm": "xxh3_64", "pixel_offsets": hex, "records": hex,
-        "counters": hex}`` as stored in ``meta.json``; None skips the hashes.
+        "counters": hex, ...}`` as stored in ``meta.json``; None checks the
+        rules only (what constructing the trace checked already).
     where : str
         How messages name the trace.
 
     Raises
     ------
     TraceIntegrityError
-        Naming the first rule broken: a checksum, the offsets, a record's
-        kind or index, a negative counter.
+        Naming the first rule broken: a checksum, the offsets, a negative
+        counter, a record's kind or index.
     """
-    _check_small_arrays({name: getattr(trace, name) for name in ("pixel_offsets", "counters")}, checksums, where)
-    _verify_records(trace, checksums, where)
-
-
-def _check_small_arrays(arrays: dict, checksums: dict | None, where: str) -> None:
-    if checksums is None:
-        return
-    if not isinstance(checksums, dict) or checksums.get("algorithm") != CHECKSUM_ALGORITHM:
-        raise TraceIntegrityError(f"{where}: unknown checksum algorithm in meta.json")
-    for name in ("pixel_offsets", "counters"):
-        if array_checksum(np.asarray(arrays[name])) != checksums.get(name):
-            raise TraceIntegrityError(f"{where}: {name}.npy does not match its checksum (file damaged)")
-
-
-def _verify_records(trace: AccessTrace, checksums: dict | None, where: str) -> None:
-    """The offsets' and counters' rules, and one pass over the records: hash, kinds and indices."""
-    offsets = np.asarray(trace.pixel_offsets)
-    if offsets[0] != 0 or np.any(offsets[1:] < offsets[:-1]):
-        raise TraceIntegrityError(f"{where}: pixel_offsets must rise from 0 to the record count")
-    if np.any(np.asarray(trace.counters) < 0):
-        raise TraceIntegrityError(f"{where}: counters must not be negative")
-    counters_map = mapping_of(trace.counters)
-    if counters_map is not None:  # checked: out of the resident set until they are read again
-        drop_pages(counters_map)
-    limits = _index_limits(trace.metadata)
-    hasher = xxhash.xxh3_64()
-    records = trace.records
-    mapped = mapping_of(records)
-    for a in range(0, trace.n_records, _CHUNK):
-        piece = np.ascontiguousarray(records[a:a + _CHUNK])
-        if mapped is not None:  # checked pages leave the resident set: a long trace never sits in it whole
-            drop_pages(mapped)
-        hasher.update(piece)
-        bad = _first_record_out_of_range(piece, limits)
-        if bad >= 0:
-            record = int(piece[bad])
-            kind, index = record >> KIND_SHIFT, record & INDEX_MASK
-            what = RecordKind(kind).name.lower() if kind < N_KINDS else f"unknown kind {kind}"
-            raise TraceIntegrityError(f"{where}: record {a + bad} reads {what} {index}, "
-                                      f"beyond the {int(limits[kind])} records the scene holds (file damaged?)")
-    if checksums is not None and hasher.hexdigest() != checksums.get("records"):
-        raise TraceIntegrityError(f"{where}: records.npy does not match its checksum (file damaged)")
-
-
-@njit(cache=True, nogil=True)
-def _first_record_out_of_range(records, index_limits):
-    """Position of the first record whose index is not below its kind's limit, or -1.
-
-    Parameters
-    ----------
-    records : ndarray of uint32, shape (N,)
-    index_limits : ndarray of int64, shape (16,)
-        One past the largest valid index of each kind (0: no such kind).
-    """
-    for position in range(records.shape[0]):
-        record = records[position]
-        if record_id(record) >= index_limits[record_kind(record)]:
-            return position
-    return -1
-
-
-def _index_limits(metadata: dict) -> np.ndarray:
-    """Per kind (16 slots), one past the largest valid record index; 0 for kinds that do not exist."""
-    limits = np.zeros(1 << (32 - KIND_SHIFT), dtype=np.int64)
-    counts = metadata.get("record_counts") or {}
-    for kind in RecordKind:
-        count = counts.get(kind.name.lower())
-        limits[kind] = INDEX_MASK + 1 if count is None else min(int(count), INDEX_MASK + 1)
-    return limits
-
-
-def _read_meta(directory: Path) -> dict:
-    where = f"trace {str(directory)!r}"
-    data = (directory / "meta.json").read_bytes()
-    if (directory / _META_CHECKSUM).is_file():
-        if (directory / _META_CHECKSUM).read_text(encoding="ascii", errors="replace").strip() != \
-                xxhash.xxh3_64_hexdigest(data):
-            raise TraceIntegrityError(f"{where}: meta.json does not match its checksum (file damaged)")
-    try:
-        meta = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise TraceIntegrityError(f"{where}: meta.json is damaged ({error})") from None
-    if not isinstance(meta, dict):
-        raise TraceIntegrityError(f"{where}: meta.json is damaged (not an object)")
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise TraceIntegrityError(f"{where}: unsupported format_version {meta.get('format_version')!r}")
-    return meta
+    if checksums is not None and (not isinstance(checksums, dict) or
+                                  checksums.get("algorithm") != CHECKSUM_ALGORITHM or
+                                  not all(isinstance(checksums.get(name), str) for name in _ARRAYS)):
+        raise TraceIntegrityError(f"{where}: checksums must give an {CHECKSUM_ALGORITHM} digest of each of "
+                                  f"{', '.join(_ARRAYS)}")
+    check_values(trace, checksums, where)
 
 
 def _temp_sibling(directory: Path) -> Path:
@@ -367,7 +277,7 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
     meta = {"format_version": FORMAT_VERSION, "width": int(width), "height": int(height),
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
-            "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums}}
+            "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums, "headers": header_checksums(tmp)}}
     data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
     (tmp / "meta.json").write_bytes(data)
     # beside it rather than inside, so meta.json stays a plain, comparable record of the render
