@@ -18,6 +18,7 @@ import importlib
 import sys
 
 from analyses.interrupts import InterruptsOutsideNumba, exit_by_sigint
+from rtcommon.validate import InputError
 
 # Subcommand modules, in the order ``--help`` lists them.
 COMMAND_MODULES = (
@@ -31,8 +32,8 @@ COMMAND_MODULES = (
 )
 
 
-class UserError(Exception):
-    """An error caused by the user's input; printed without a traceback."""
+class UserError(InputError):
+    """An error caused by the user's input; printed without a traceback (an :class:`InputError`)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -67,11 +68,14 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; return its exit status.
 
-    2 for a user error (printed in one line), 130 after Ctrl-C (one line; a
-    real command line, ``argv`` None, then dies by SIGINT at once, which its
-    shell reports as 130),
-    141 (128 + SIGPIPE, as a C tool killed by it) without a word when the
-    reader of the output went away (a closed pipe: ``| head``).
+    2 for a user error, printed in one line: an :class:`InputError` (the
+    toolkit's checks of what it was given), an ``OSError`` (a file it could
+    not read or write), or running out of memory. 1 for any other exception:
+    a bug, printed as its traceback and a line that says "internal error".
+    130 after Ctrl-C (one line; a real command line, ``argv`` None, then
+    dies by SIGINT at once, which its shell reports as 130). 141 (128 +
+    SIGPIPE, as a C tool killed by it) without a word when the reader of the
+    output went away (a closed pipe: ``| head``).
     """
     words = sys.argv[1:] if argv is None else argv
     commands = {module.rpartition(".")[2] for module in COMMAND_MODULES}
@@ -89,9 +93,13 @@ def main(argv: list[str] | None = None) -> int:
         if argv is None:
             _interrupts_end_at_once(name)
         return status
-    except (UserError, ValueError, OSError) as error:
+    except (InputError, OSError) as error:
         if isinstance(error, BrokenPipeError):
             return _quiet_broken_pipe()
+        print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
+        return 2
+    except ValueError as error:
+        # Until every check of the toolkit raises InputError, a bare ValueError is still taken for one.
         print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
         return 2
     except MemoryError:
@@ -103,6 +111,13 @@ def main(argv: list[str] | None = None) -> int:
         if argv is None:
             exit_by_sigint(130)
         return 130
+    except Exception as error:  # noqa: BLE001 - anything else is a bug: say so, with where it happened
+        import traceback
+
+        traceback.print_exc()
+        print(f"{name}: internal error (a bug in the toolkit, not in what it was given): "
+              f"{type(error).__name__}: {_error_text(error)}", file=sys.stderr)
+        return 1
 
 
 def _run(args: argparse.Namespace, name: str) -> int:

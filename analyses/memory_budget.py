@@ -12,7 +12,7 @@ budget: only where the trace's bytes wait differs.
 from __future__ import annotations
 
 from rtcommon.resident import ResidentLimit, resident_file_bytes
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 #: Default memory budget of a report or the paper, in bytes (2 GiB).
 DEFAULT_MEMORY_BUDGET = 2 << 30
@@ -58,7 +58,7 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
 
     Raises
     ------
-    ValueError
+    InputError
         If less than :data:`MIN_TRACE_BYTES` would be left, naming the
         budget that would do.
     """
@@ -67,7 +67,7 @@ def memory_shares(memory_budget: int, n_pixels: int = 0, n_jobs: int = 1) -> dic
     budget = require_int("memory_budget", memory_budget, 0)
     least = least_memory_budget(n_pixels, n_jobs)
     if budget < least:
-        raise ValueError(
+        raise InputError(
             f"memory_budget (--memory-budget) of {budget / 2**20:.0f} MB is too small: the process takes about "
             f"{PROCESS_BYTES >> 20} MB and {n_jobs} run{'s' if n_jobs != 1 else ''} at once over {n_pixels:,} "
             f"pixels about {n_jobs * n_pixels * RUN_BYTES_PER_PIXEL / 2**20:.0f} MB, and the trace needs at least "

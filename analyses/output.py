@@ -5,6 +5,7 @@ import os
 from pathlib import Path
 
 from rtcommon.files import check_writable_ancestor
+from rtcommon.validate import InputError
 
 
 def size_text(n_bytes: float) -> str:
@@ -21,7 +22,7 @@ def check_free_space(what: str, folder, needed: int) -> None:
 
     Raises
     ------
-    ValueError
+    InputError
         ``"<what> needs about 31.2 GB of disk space in '/data', 12.0 GB free"``.
     """
     import shutil
@@ -34,7 +35,7 @@ def check_free_space(what: str, folder, needed: int) -> None:
     except OSError:
         return
     if needed > free:
-        raise ValueError(f"{what} needs about {size_text(needed)} of disk space in {str(probe)!r}, "
+        raise InputError(f"{what} needs about {size_text(needed)} of disk space in {str(probe)!r}, "
                          f"{size_text(free)} free")
 
 
@@ -43,7 +44,7 @@ def check_output_folder(out) -> Path:
 
     Raises
     ------
-    ValueError
+    InputError
         ``out`` is an existing file.
     NotADirectoryError
         A parent on its path is a file.
@@ -52,7 +53,7 @@ def check_output_folder(out) -> Path:
     """
     path = Path(out).expanduser()
     if path.exists() and not path.is_dir():
-        raise ValueError(f"output folder {str(out)!r} exists and is not a folder")
+        raise InputError(f"output folder {str(out)!r} exists and is not a folder")
     check_writable_ancestor(path, f"output folder {str(out)!r}")
     return path
 
@@ -62,7 +63,7 @@ def prepare_output_folder(out) -> Path:
 
     Raises
     ------
-    ValueError, PermissionError
+    InputError, PermissionError
         With the folder named, when it cannot be created or written.
     """
     import tempfile
@@ -76,5 +77,5 @@ def prepare_output_folder(out) -> Path:
     except PermissionError as error:
         raise PermissionError(f"output folder {str(out)!r} is not writable: {error.strerror}") from None
     except OSError as error:
-        raise ValueError(f"cannot create output folder {str(out)!r}: {error.strerror}") from None
+        raise InputError(f"cannot create output folder {str(out)!r}: {error.strerror}") from None
     return path

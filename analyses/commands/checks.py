@@ -2,9 +2,10 @@
 
 A run that fails after minutes of rendering, or after filling the disk, is
 worse than one that refuses at once. These functions look at the paths and
-the sizes a command was given and raise ``ValueError`` (or an ``OSError``
-subclass) with a one-line message naming the option, so the command line
-prints ``coherence CMD: error: ...`` and exits with 2 before any work.
+the sizes a command was given and raise
+:class:`rtcommon.validate.InputError` (or an ``OSError`` subclass) with a
+one-line message naming the option, so the command line prints
+``coherence CMD: error: ...`` and exits with 2 before any work.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import os
 from pathlib import Path
 
 from rtcommon.files import check_writable_ancestor, regular_file
+from rtcommon.validate import InputError
 
 #: Bytes a render holds in memory per pixel: the image (3 float64), 18 int64
 #: counters, offsets and record counts, with room for temporaries. Measured:
@@ -60,7 +62,7 @@ def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_
 
     Raises
     ------
-    ValueError
+    InputError
         ``"--size 20000 needs about 190.7 GB of memory, 21.6 GB available"``.
     """
     from analyses.output import size_text
@@ -68,7 +70,7 @@ def check_memory(option: str, size: int, *, bytes_per_pixel: int = REPLAY_BYTES_
     needed = images * size * size * bytes_per_pixel + extra_bytes
     available = available_memory()
     if available is not None and needed > available:
-        raise ValueError(f"{option} {size} needs about {size_text(needed)} of memory, {size_text(available)} "
+        raise InputError(f"{option} {size} needs about {size_text(needed)} of memory, {size_text(available)} "
                          "available")
 
 
@@ -95,7 +97,7 @@ def check_input_file(option: str, path) -> Path:
 
     Raises
     ------
-    FileNotFoundError, IsADirectoryError, ValueError
+    FileNotFoundError, IsADirectoryError, InputError
         :func:`rtcommon.files.regular_file`'s, with ``option`` in front.
     """
     try:
@@ -115,7 +117,7 @@ def check_output_file(option: str, path) -> Path:
         It names an existing folder.
     PermissionError
         Its folder is not writable.
-    ValueError
+    InputError
         It exists and is not a regular file, or its folder is a file.
     """
     path = Path(path).expanduser()
@@ -123,11 +125,11 @@ def check_output_file(option: str, path) -> Path:
     if path.is_dir():
         raise IsADirectoryError(f"{option} {str(path)!r} is a folder, not a file")
     if path.exists() and not path.is_file():
-        raise ValueError(f"{option} {str(path)!r} exists and is not a regular file")
+        raise InputError(f"{option} {str(path)!r} exists and is not a regular file")
     if not parent.exists():
         raise FileNotFoundError(f"{option} {str(path)!r}: folder {str(parent)!r} does not exist")
     if not parent.is_dir():
-        raise ValueError(f"{option} {str(path)!r}: {str(parent)!r} is a file, not a folder")
+        raise InputError(f"{option} {str(path)!r}: {str(parent)!r} is a file, not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise PermissionError(f"{option} {str(path)!r}: folder {str(parent)!r} is not writable")
     return path
@@ -140,13 +142,13 @@ def check_trace_folder(option: str, path) -> Path:
         if not path.is_dir():
             raise NotADirectoryError(f"{option} {str(path)!r} exists and is a file, not a trace folder")
         if not (path / "meta.json").is_file() and any(path.iterdir()):
-            raise ValueError(f"{option} {str(path)!r} exists and is not a trace folder; not overwriting")
+            raise InputError(f"{option} {str(path)!r} exists and is not a trace folder; not overwriting")
     check_writable_ancestor(path.parent, f"{option} {str(path)!r}")
     return path
 
 
 def check_range(option: str, value, minimum=None, maximum=None) -> None:
-    """Raise ValueError naming ``option`` unless every value (one or a list) is in [minimum, maximum]."""
+    """Raise InputError naming ``option`` unless every value (one or a list) is in [minimum, maximum]."""
     for item in value if isinstance(value, (list, tuple)) else [value]:
         if item is None:
             continue
@@ -155,12 +157,12 @@ def check_range(option: str, value, minimum=None, maximum=None) -> None:
                 wanted = f"in [{minimum}, {maximum}]"
             else:
                 wanted = f">= {minimum}" if minimum is not None else f"<= {maximum}"
-            raise ValueError(f"{option} must be {wanted}, got {item}")
+            raise InputError(f"{option} must be {wanted}, got {item}")
 
 
 def require_distributed() -> None:
-    """Raise ValueError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
+    """Raise InputError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
     try:
         import distributed  # noqa: F401
     except ImportError:
-        raise ValueError("--dask needs the 'distributed' package: pip install 'raytrace-coherence[cluster]'") from None
+        raise InputError("--dask needs the 'distributed' package: pip install 'raytrace-coherence[cluster]'") from None

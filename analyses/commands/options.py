@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 from importlib import import_module
+from rtcommon.validate import InputError
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
@@ -126,7 +127,7 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 
 def check_at_least(args: argparse.Namespace, **minimum: int) -> None:
-    """Raise ``ValueError`` naming the option if an integer option is below its minimum.
+    """Raise :class:`rtcommon.validate.InputError` naming the option if an integer option is below its minimum.
 
     Runs inside a subcommand, before any work, so the error is printed as
     ``coherence CMD: error: --size must be >= 1, got 0`` and exits with 2.
@@ -137,7 +138,7 @@ def check_at_least(args: argparse.Namespace, **minimum: int) -> None:
         values = value if isinstance(value, list) else [value]
         for item in values:
             if item is not None and item < low:
-                raise ValueError(f"--{name.replace('_', '-')} must be >= {low}, got {item}")
+                raise InputError(f"--{name.replace('_', '-')} must be >= {low}, got {item}")
 
 
 def _parent() -> argparse.ArgumentParser:
@@ -252,7 +253,7 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
 
     Raises
     ------
-    ValueError
+    InputError
         NaN; above :data:`MAX_MEMORY_BUDGET_MB`; or below the least budget
         (:func:`analyses.memory_budget.least_memory_budget`) for the image of
         ``--size`` and the runs the subcommand holds at once, naming it in
@@ -262,13 +263,13 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
 
     value = args.memory_budget
     if value != value:
-        raise ValueError(f"--memory-budget must be a number of MB, got {value}")
+        raise InputError(f"--memory-budget must be a number of MB, got {value}")
     if value > MAX_MEMORY_BUDGET_MB:
-        raise ValueError(f"--memory-budget must be at most {MAX_MEMORY_BUDGET_MB} MB, got {value:g}")
+        raise InputError(f"--memory-budget must be at most {MAX_MEMORY_BUDGET_MB} MB, got {value:g}")
     size = getattr(args, "size", None) or 0
     least = -(-least_memory_budget(size * size, getattr(args, "memory_budget_runs", 1)) >> 20)
     if value < least:
-        raise ValueError(f"--memory-budget must be at least {least} MB{f' at --size {size}' if size else ''}, "
+        raise InputError(f"--memory-budget must be at least {least} MB{f' at --size {size}' if size else ''}, "
                          f"got {value:g}")
     return int(value * 2**20)
 
@@ -290,7 +291,7 @@ def experiment_from_args(args: argparse.Namespace, base=None, **fields):
 
     Raises
     ------
-    ValueError
+    InputError
         Naming the field or option that is out of range.
     """
     import sys
