@@ -463,7 +463,7 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     """An NFF file of an SPD scene at another size factor (in the cache folder)."""
     from analyses.traces import cache_root
     from tracer.scenes import spd
-    from tracer.scenes.nff import write_nff
+    from tracer.scenes.nff import format_nff, write_nff
     from tracer.scenes.study import PAPER_DEPTH, canonical_scene_name
 
     generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells}
@@ -482,7 +482,9 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
         folder = Path(tempfile.gettempdir()) / f"coherence-scenes-{os.getuid()}"
         folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}-size{size_factor}.nff"
-    if not path.exists():
+    # the generator decides every byte: a file that differs (damaged, edited) is written again, or the
+    # traces keyed by its content would be of another scene
+    if not path.is_file() or path.read_bytes() != format_nff(scene).encode("utf-8"):
         write_nff(scene, path)
     return str(path)
 

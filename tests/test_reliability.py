@@ -372,6 +372,17 @@ def test_a_damaged_or_unverifiable_cache_entry_is_evicted_and_rebuilt(tmp_path, 
         assert traces.cached_trace("tetra", 8, cache_dir=tmp_path, progress=False)[2]["cached"]
 
 
+def test_a_damaged_cached_scene_file_is_written_again(tmp_path):
+    """What-if scene sizes are NFF files in the cache, and traces are keyed by their bytes: a damaged one
+    would be rendered as another scene. Fails if an existing file is used without comparing its bytes."""
+    from analyses.whatif import _sized_scene_file
+
+    path = Path(_sized_scene_file("tetra", 2, tmp_path))
+    fresh = path.read_bytes()
+    path.write_bytes(fresh[:len(fresh) // 2])  # cut short: still a scene, with half its triangles
+    assert Path(_sized_scene_file("tetra", 2, tmp_path)).read_bytes() == fresh
+
+
 def test_cache_layout_is_the_same_from_argument_and_environment(tmp_path, monkeypatch):
     monkeypatch.setenv(traces.CACHE_ENV, str(tmp_path / "env"))
     assert traces.cache_root() == tmp_path / "env"
