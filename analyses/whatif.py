@@ -48,6 +48,7 @@ import pandas as pd
 from cachesim import Hierarchy, get_hierarchy
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.metrics import DECOMPOSITION_COLUMNS
+from rtcommon.files import remove_stale_temporaries
 from rtcommon.validate import require_int
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
@@ -481,6 +482,7 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
 
         folder = Path(tempfile.gettempdir()) / f"coherence-scenes-{os.getuid()}"
         folder.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(folder)  # a killed run's half-written scene files
     path = folder / f"{name}-size{size_factor}.nff"
     # the generator decides every byte: a file that differs (damaged, edited) is written again, or the
     # traces keyed by its content would be of another scene

@@ -374,13 +374,17 @@ def test_a_damaged_or_unverifiable_cache_entry_is_evicted_and_rebuilt(tmp_path, 
 
 def test_a_damaged_cached_scene_file_is_written_again(tmp_path):
     """What-if scene sizes are NFF files in the cache, and traces are keyed by their bytes: a damaged one
-    would be rendered as another scene. Fails if an existing file is used without comparing its bytes."""
+    would be rendered as another scene. Fails if an existing file is used without comparing its bytes, or
+    if a killed run's temporary beside it is not removed."""
     from analyses.whatif import _sized_scene_file
 
     path = Path(_sized_scene_file("tetra", 2, tmp_path))
     fresh = path.read_bytes()
     path.write_bytes(fresh[:len(fresh) // 2])  # cut short: still a scene, with half its triangles
+    left = path.parent / f"{temp_prefix(path.name).rsplit('~', 2)[0]}~{_dead_pid()}~abc.tmp"
+    left.write_text("s 0 0 0 1\n")  # a killed run's temporary
     assert Path(_sized_scene_file("tetra", 2, tmp_path)).read_bytes() == fresh
+    assert not left.exists()
 
 
 def test_cache_layout_is_the_same_from_argument_and_environment(tmp_path, monkeypatch):
