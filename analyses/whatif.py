@@ -46,7 +46,7 @@ import numpy as np
 import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
-from coherence.mappings import DEFAULT_MAPPINGS
+from analyses.experiment import Experiment
 from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import remove_stale_temporaries
 from rtcommon.validate import require_int
@@ -57,53 +57,80 @@ SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "tex
 _UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
 
 
+#: The base of a what-if study unless told otherwise: the report's choices at
+#: 128x128 (every grid point is a full replay), 8 processes on 8 idle CPUs.
+WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
+
+#: Fields of the base :class:`~analyses.experiment.Experiment` a study file or
+#: :meth:`WhatIf.of` may set.
+BASE_FIELDS = ("scene", "size", "workload", "kd", "max_depth", "mappings", "n_processes", "hierarchy", "layout",
+               "cost", "n_cpus", "background", "memory_budget")
+
+
 @dataclass(frozen=True)
 class WhatIf:
-    """A what-if study: a base configuration and a grid over parameters.
+    """A what-if study: a base experiment and a grid over parameters.
 
     Parameters
     ----------
     name : str
-    scene : str
-        Scene name or NFF/OBJ path.
-    size : int
-        Image width and height.
-    mappings : tuple of str
-    n_processes : int
-        Processes of every run (unless the grid varies ``n_processes``).
-    hierarchy, cost, layout : str
-        Base presets (or a hierarchy file).
-    n_cpus, background : int
-        The machine.
+    experiment : analyses.experiment.Experiment
+        The base configuration (scene, size, workload, mappings, one process
+        count, caches, layout, cost model, machine, trace cache, Dask
+        scheduler, memory budget); default :data:`WHATIF_EXPERIMENT`.
+        Every grid point varies it. ``scene``, ``size``, ``mappings``,
+        ``n_processes`` (the one count, an int), ``hierarchy``, ``cost``,
+        ``layout``, ``n_cpus`` and ``background`` read through to it.
     grid : dict of str to list
         Values per parameter; the study runs every combination.
+
+    Raises
+    ------
+    ValueError
+        An empty grid, an unknown parameter, a point that makes no valid
+        configuration, or a base with other than one process count (vary it
+        with ``grid n_processes``).
     """
 
     name: str = "custom"
-    scene: str = "balls"
-    size: int = 128
-    mappings: tuple = DEFAULT_MAPPINGS
-    n_processes: int = 8
-    hierarchy: str = "alpha21164"
-    cost: str = "alpha8400"
-    layout: str = "compact"
-    n_cpus: int = 8
-    background: int = 0
+    experiment: Experiment = WHATIF_EXPERIMENT
     grid: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if not isinstance(self.experiment, Experiment):
+            raise ValueError(f"WhatIf.experiment must be an analyses.experiment.Experiment, got "
+                             f"{type(self.experiment).__name__}")
+        if len(self.experiment.n_processes) != 1:
+            raise ValueError(f"WhatIf.experiment.n_processes must be one process count (vary it with the grid's "
+                             f"n_processes), got {list(self.experiment.n_processes)}")
         if not self.grid:
             raise ValueError("WhatIf.grid must vary at least one parameter")
         for key, values in self.grid.items():
             _check_parameter(key)
             if not isinstance(values, (list, tuple)) or not values:
                 raise ValueError(f"grid[{key!r}] must be a non-empty list of values")
-        if isinstance(self.size, bool) or not isinstance(self.size, int) or self.size < 1:
-            raise ValueError(f"WhatIf.size must be a positive integer, got {self.size!r}")
-        object.__setattr__(self, "mappings", tuple(self.mappings))
         base = self.base_hierarchy()
         for point in self.points():  # every point must make a valid configuration
             configure(self, point, base)
+
+    @classmethod
+    def of(cls, name: str, grid: dict, **choices) -> WhatIf:
+        """A study whose base is :data:`WHATIF_EXPERIMENT` with ``choices`` (fields of :data:`BASE_FIELDS`)."""
+        unknown = sorted(set(choices) - set(BASE_FIELDS))
+        if unknown:
+            raise ValueError(f"unknown what-if base keys {unknown}; allowed: {list(BASE_FIELDS)}")
+        return cls(name=name, experiment=replace(WHATIF_EXPERIMENT, **choices), grid=grid)
+
+    # the base's choices, read through
+    scene = property(lambda self: self.experiment.scene)
+    size = property(lambda self: self.experiment.size)
+    mappings = property(lambda self: self.experiment.mappings)
+    n_processes = property(lambda self: self.experiment.n_processes[0])
+    hierarchy = property(lambda self: self.experiment.hierarchy)
+    cost = property(lambda self: self.experiment.cost)
+    layout = property(lambda self: self.experiment.layout)
+    n_cpus = property(lambda self: self.experiment.n_cpus)
+    background = property(lambda self: self.experiment.background)
 
     def base_hierarchy(self) -> Hierarchy:
         return get_hierarchy(self.hierarchy)
@@ -159,12 +186,14 @@ def load_study_file(path) -> WhatIf:
         raise ValueError(f"{path}: needs a [grid] table of parameter = [values]")
     grid = {key: [parse_value(v) if isinstance(v, str) else v for v in values] if isinstance(values, list)
             else values for key, values in grid.items()}
-    known = set(WhatIf.__dataclass_fields__) - {"grid"}
+    known = {"name", *BASE_FIELDS}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(known)} and [grid]")
+    if isinstance(data.get("mappings"), list):
+        data["mappings"] = tuple(data["mappings"])
     try:
-        return WhatIf(grid=grid, **data)
+        return WhatIf.of(data.pop("name", "custom"), grid, **data)
     except (ValueError, TypeError) as error:
         raise ValueError(f"{path}: {error}") from None
 
@@ -253,23 +282,29 @@ def _texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost
     return texture_summary(misses_by_kind(trace, placed, hierarchy, distribution, owner))
 
 
-def run_whatif(study: WhatIf, *, cache_dir=None, dask: str | None = None, n_jobs: int | None = None,
-               progress: bool = True) -> pd.DataFrame:
+def run_whatif(study: WhatIf, *, n_jobs: int | None = None, **choices) -> pd.DataFrame:
     """Run every grid point; a wide table, one row per (point, mapping).
+
+    The trace cache, the Dask scheduler (default: a local process pool) and
+    the progress bars are the base experiment's.
 
     Parameters
     ----------
     study : WhatIf
-    cache_dir : path, optional
-        Trace cache folder (see :func:`analyses.traces.cached_trace`).
-    dask : str, optional
-        Address of a Dask scheduler (``tcp://host:8786``) or a
-        ``distributed.Client``; default a local process pool.
     n_jobs : int, optional
         Local worker processes (default: CPUs).
+    **choices
+        Fields of ``study.experiment`` to replace (``cache_dir=...``,
+        ``dask=...``, ``progress=False``), a shorthand for
+        :func:`dataclasses.replace`.
     """
     from tqdm.auto import tqdm
 
+    if choices:
+        study = replace(study, experiment=replace(study.experiment, **choices))
+    experiment = study.experiment
+    cache_dir, dask, progress = experiment.cache_dir, experiment.dask, experiment.progress
+    study = replace(study, experiment=replace(experiment, dask=None))  # what travels with each task
     points = study.points()
     folders = _traces_for(study, points, cache_dir, progress)
     tasks = [(study, point, folders[_scene_key(point)]) for point in points]
@@ -291,7 +326,7 @@ def run_whatif(study: WhatIf, *, cache_dir=None, dask: str | None = None, n_jobs
     return pd.concat(frames, ignore_index=True)
 
 
-def exact_lru_curves(study: WhatIf, *, cache_dir=None, progress: bool = False) -> pd.DataFrame | None:
+def exact_lru_curves(study: WhatIf, *, progress: bool = False, **choices) -> pd.DataFrame | None:
     """Exact misses of fully associative LRU caches at the grid's level sizes.
 
     For every ``<level>.size`` in the grid, one reuse-distance pass per
@@ -313,10 +348,12 @@ def exact_lru_curves(study: WhatIf, *, cache_dir=None, progress: bool = False) -
     from coherence.studies import place_layout
     from tracer.trace.access import AccessTrace
 
+    if choices:  # fields of the base experiment to replace, as in run_whatif
+        study = replace(study, experiment=replace(study.experiment, **choices))
     sized = {key.split(".")[0]: values for key, values in study.grid.items() if key.endswith(".size")}
     if not sized or "scene_size" in study.grid:
         return None
-    folder = _traces_for(study, [{}], cache_dir, progress)[None]
+    folder = _traces_for(study, [{}], study.experiment.cache_dir, progress)[None]
     trace = AccessTrace.load(Path(folder))
     from tracer.scenes.catalog import load
 
@@ -363,79 +400,6 @@ def long_form(table: pd.DataFrame, study: WhatIf) -> pd.DataFrame:
     return long.sort_values(keys + ["metric"], kind="stable").reset_index(drop=True)
 
 
-def save_whatif(table: pd.DataFrame, study: WhatIf, folder, curves: pd.DataFrame | None = None) -> tuple[Path, Path]:
-    """Write ``whatif-<name>.csv`` (long form, with .meta.json), a figure and, given ``curves``,
-    ``whatif-<name>-lru.csv`` (with .meta.json), all as one unit.
-
-    Every file's bytes are made first (the figure too) and then renamed into
-    place together (:func:`rtcommon.files.write_files_atomic`), so an
-    interrupted run leaves the previous set or the new one, never a new CSV
-    beside an old figure; temporary names are unique, so concurrent runs into
-    one folder do not collide.
-    """
-    from matplotlib.figure import Figure
-
-    from analyses.html import figure_png
-    from analyses.maps import plot_loss_lines, plot_loss_map, plot_texel_misses
-    from coherence.provenance import provenance
-    from rtcommon.files import write_files_atomic
-
-    folder = Path(folder)
-    csv = folder / f"whatif-{study.name}.csv"
-    files = _table_files(long_form(table, study), csv,
-                         provenance(study=study.name, scene=study.scene, size=study.size,
-                                    mappings=list(study.mappings), n_processes=study.n_processes,
-                                    hierarchy=study.hierarchy, cost=study.cost, layout=study.layout,
-                                    n_cpus=study.n_cpus, background=study.background,
-                                    grid={key: [str(v) for v in values] for key, values in study.grid.items()}))
-    keys = list(study.grid)
-    if "texture_layout" in keys and "texel_L1_misses_per_access" in table.columns:
-        others = [key for key in keys if key != "texture_layout"]
-        panels = list(dict.fromkeys(table[others[0]])) if others else [None]
-        figure = Figure(figsize=(5.5 * len(panels), 4.2))
-        axes = figure.subplots(1, len(panels), squeeze=False)
-        for ax, value in zip(axes[0], panels):
-            rows = table if value is None else table[table[others[0]] == value]
-            if len(others) > 1:
-                rows = rows[(rows[others[1:]] == rows[others[1:]].iloc[0]).all(axis=1)]
-            plot_texel_misses(rows, ax=ax)
-            if value is not None:
-                ax.set_title(f"{others[0]} = {value}", fontsize=10)
-    elif len(keys) >= 2:
-        mappings = list(dict.fromkeys(table["mapping"]))
-        figure = Figure(figsize=(5.5 * len(mappings), 4.5))
-        axes = figure.subplots(1, len(mappings), squeeze=False)
-        rest = keys[2:]
-        rows = table if not rest else table[(table[rest] == table[rest].iloc[0]).all(axis=1)]
-        for ax, mapping in zip(axes[0], mappings):
-            plot_loss_map(rows, keys[0], keys[1], mapping, ax=ax)
-    else:
-        figure = Figure(figsize=(7, 4.5))
-        plot_loss_lines(table, keys[0], ax=figure.subplots())
-    png = folder / f"whatif-{study.name}.png"
-    files[png] = figure_png(figure, dpi=100)
-    if curves is not None:
-        files.update(_table_files(curves, lru_csv_path(study, folder),
-                                  provenance(study=study.name, scene=study.scene, size=study.size,
-                                             layout=study.layout, n_processes=study.n_processes,
-                                             note="fully associative LRU, exact from reuse distances")))
-    write_files_atomic(files)
-    return csv, png
-
-
-def lru_csv_path(study: WhatIf, folder) -> Path:
-    """Where :func:`save_whatif` writes the exact LRU curves."""
-    return Path(folder) / f"whatif-{study.name}-lru.csv"
-
-
-def _table_files(table: pd.DataFrame, path: Path, meta: dict) -> dict:
-    # the same bytes as coherence.provenance.write_csv_atomic writes, to be written with the other files
-    import json
-
-    return {path: table.to_csv(index=False, lineterminator="\n"),
-            path.with_name(path.name + ".meta.json"): json.dumps(meta, indent=2) + "\n"}
-
-
 def _run_dask(tasks, address, progress):
     from analyses.cluster import dask_executor
 
@@ -452,10 +416,15 @@ def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
     """Trace folder per distinct scene of the grid (rendered once each)."""
     from analyses.traces import cached_trace
 
+    from analyses.memory_budget import memory_shares
+
+    base = study.experiment
+    records_budget = memory_shares(base.memory_budget, base.size * base.size)["render_records"]
     folders = {}
     for key in dict.fromkeys(_scene_key(point) for point in points):
         scene = study.scene if key is None else _sized_scene_file(study.scene, key, cache_dir)
-        _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, progress=progress)
+        _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, kd=base.kd, max_depth=base.max_depth,
+                                  progress=progress, workload=base.workload, memory_budget=records_budget)
         folders[key] = str(Path(info["path"]) / "trace")
     return folders
 
@@ -493,16 +462,20 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
 
 # Built-in studies at a small image size: each answers one question.
 BUILTIN = {
-    "latency": WhatIf(name="latency", grid={"memory_latency": [40, 80, 160, 320, 640, 1280],
-                                            "compute_scale": [0.03125, 0.125, 0.5, 1.0]}),
-    "caches": WhatIf(name="caches", grid={"L3.size": [262144, 1048576, 4194304, 16777216],
-                                          "L2.size": [24576, 98304, 393216]}),
-    "lines": WhatIf(name="lines", grid={"line_size": [16, 32, 64, 128]}, hierarchy="alpha21164"),
-    "assoc": WhatIf(name="assoc", grid={"L1.assoc": [1, 2, 4, 8, "full"]}),
-    "scene-size": WhatIf(name="scene-size", grid={"scene_size": [2, 3, 4], "L3.size": [262144, 1048576, 4194304]}),
-    "modern": WhatIf(name="modern", grid={"hierarchy": ["alpha21164", "modern"], "cost": ["alpha8400", "modern"]}),
+    "latency": WhatIf.of("latency", {"memory_latency": [40, 80, 160, 320, 640, 1280],
+                                     "compute_scale": [0.03125, 0.125, 0.5, 1.0]}),
+    "caches": WhatIf.of("caches", {"L3.size": [262144, 1048576, 4194304, 16777216],
+                                   "L2.size": [24576, 98304, 393216]}),
+    "lines": WhatIf.of("lines", {"line_size": [16, 32, 64, 128]}, hierarchy="alpha21164"),
+    "assoc": WhatIf.of("assoc", {"L1.assoc": [1, 2, 4, 8, "full"]}),
+    "scene-size": WhatIf.of("scene-size", {"scene_size": [2, 3, 4], "L3.size": [262144, 1048576, 4194304]}),
+    "modern": WhatIf.of("modern", {"hierarchy": ["alpha21164", "modern"], "cost": ["alpha8400", "modern"]}),
     # the study's future work: texel order x image split x first-level cache size, on a textured scene
-    "texture": WhatIf(name="texture", scene="balls-textured", mappings=("S", "P", "R", "B", "DB", "hilbert"),
-                      grid={"texture_layout": ["linear", "tiled4", "morton", "blocked4x8"],
-                            "L1.size": [8192, 32768, 131072]}),
+    "texture": WhatIf.of("texture", {"texture_layout": ["linear", "tiled4", "morton", "blocked4x8"],
+                                     "L1.size": [8192, 32768, 131072]},
+                         scene="balls-textured", mappings=("S", "P", "R", "B", "DB", "hilbert")),
 }
+
+
+# the writing lives in its own module; its names are importable from here
+from analyses.whatif_output import lru_csv_path, save_whatif  # noqa: E402

@@ -78,3 +78,29 @@ def test_options_replace_the_base():
     assert (built.scene, built.size, built.n_cpus, built.background) == ("tetra", 32, 4, 0)
     assert built.mappings == ("S", "R") and built.n_processes == (2,) and built.memory_budget == 1 << 30
     assert Path(built.cache_dir) == Path("somewhere")
+
+
+def test_a_whatif_study_holds_its_experiment(tmp_path):
+    """A study file and the options reach the base experiment; nothing else is declared twice.
+
+    Fails if the file may not set the workload (mutation: dropping ``"workload"`` from
+    ``whatif.BASE_FIELDS``) or if the options replace the report's choices instead of the study's
+    (mutation: ``experiment_from_args(args)`` without ``study.experiment`` in ``build_study``).
+    """
+    from analyses.commands.whatif import build_study
+    from analyses.whatif import BUILTIN, WHATIF_EXPERIMENT, WhatIf, load_study_file
+
+    path = tmp_path / "study.toml"
+    path.write_text('scene = "tetra"\nworkload = "study1997"\nmemory_budget = 1073741824\nn_processes = 2\n'
+                    '[grid]\nmemory_latency = [40, 80]\n')
+    study = load_study_file(path)
+    assert study.experiment == replace(WHATIF_EXPERIMENT, scene="tetra", workload="study1997",
+                                       memory_budget=1 << 30, n_processes=(2,))
+    assert study.n_processes == 2 and study.size == WHATIF_EXPERIMENT.size
+    with pytest.raises(ValueError, match="one process count"):
+        WhatIf(experiment=replace(WHATIF_EXPERIMENT, n_processes=(2, 4)), grid={"memory_latency": [40]})
+    args = build_parser().parse_args(["whatif", "latency", "--workload", "study1997", "--processes", "3"])
+    built = build_study(args)
+    assert built.grid == BUILTIN["latency"].grid
+    assert built.experiment == replace(WHATIF_EXPERIMENT, workload="study1997", n_processes=(3,),
+                                       progress=built.experiment.progress)

@@ -403,7 +403,8 @@ def test_texture_whatif_runs_on_a_small_image(tmp_path):
 
     from analyses.whatif import BUILTIN, run_whatif, save_whatif
 
-    study = replace(BUILTIN["texture"], size=16, mappings=("S", "DB"),
+    texture = BUILTIN["texture"]
+    study = replace(texture, experiment=replace(texture.experiment, size=16, mappings=("S", "DB")),
                     grid={"texture_layout": ["linear", "morton"], "L1.size": [8192]})
     table = run_whatif(study, cache_dir=tmp_path / "cache", n_jobs=1, progress=False)
     assert len(table) == 4

@@ -12,8 +12,8 @@ from analyses.cli import main
 
 @pytest.fixture
 def small(tmp_path):
-    study = WhatIf(name="t", scene="tetra", size=24, mappings=("S", "R"), n_processes=4,
-                   grid={"memory_latency": [40, 640], "L1.size": [4096, 8192]})
+    study = WhatIf.of("t", {"memory_latency": [40, 640], "L1.size": [4096, 8192]}, scene="tetra", size=24,
+                      mappings=("S", "R"), n_processes=4)
     return study, tmp_path / "cache"
 
 

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import HelpFormatter, cache_options, dask_options, mappings_options, size_options
+from analyses.commands.options import (HelpFormatter, cache_options, dask_options, mappings_options,
+                                       memory_budget_options, size_options, workload_options)
 
 HELP = "what-if studies: where would coherence matter more than load balance?"
 
@@ -25,6 +26,8 @@ your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
   size = 128
   mappings = ["S", "R", "DB"]
   n_processes = 8
+  workload = "modern"        # also kd, max_depth, hierarchy, layout, cost,
+                             # n_cpus, background, memory_budget (bytes)
   [grid]
   memory_latency = [80, 320]
   "L3.size" = ["1MB", "4MB"]
@@ -56,9 +59,11 @@ def register(subparsers) -> None:
     size = size_options(default=None, why="the study's, 128x128, small because every grid point is a "
                                           "full replay")
     mappings = mappings_options(why="the study's, %(default_mappings)s")
+    workload = workload_options(default=None, why="the study's, modern")
     parser = subparsers.add_parser("whatif", help=HELP, description=HELP[0].upper() + HELP[1:],
-                                   epilog=EPILOG, formatter_class=HelpFormatter, parents=[size, mappings, cache_options(),
-                                                                              dask_options("the grid points")])
+                                   epilog=EPILOG, formatter_class=HelpFormatter,
+                                   parents=[size, mappings, workload, cache_options(), dask_options("the grid points"),
+                                            memory_budget_options()])
     parser.add_argument("study", nargs="?", metavar="STUDY", help="a built-in study (see below)")
     parser.add_argument("--grid", action="append", metavar="NAME=V1,V2", help="vary a parameter (repeatable)")
     parser.add_argument("--file", metavar="TOML", help="a study file with a [grid] table")
@@ -75,6 +80,7 @@ def register(subparsers) -> None:
 def build_study(args):
     from dataclasses import replace
 
+    from analyses.commands.options import experiment_from_args
     from analyses.whatif import BUILTIN, WhatIf, load_study_file, parse_grid_flag
 
     sources = sum(bool(source) for source in (args.study, args.grid, args.file))
@@ -97,11 +103,8 @@ def build_study(args):
             raise ValueError(f"--grid {repeated[0]} is given more than once; list every value in one flag "
                              f"({repeated[0]}=V1,V2,...)")
         study = WhatIf(name="grid", grid=dict(pairs))
-    overrides = {key: value for key, value in (("scene", args.scene), ("size", args.size),
-                                               ("n_processes", args.processes)) if value is not None}
-    if args.mappings:
-        overrides["mappings"] = tuple(args.mappings)
-    return replace(study, **overrides) if overrides else study
+    # the options given replace the study's base experiment; the rest stay the study's
+    return replace(study, experiment=experiment_from_args(args, study.experiment))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -123,10 +126,6 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--size", args.size, 1)
     checks.check_scene_argument(args.scene, "--scene")
     study = build_study(args)
-    from coherence.mappings import get_mapping
-
-    for name in study.mappings:
-        get_mapping(name)
     if args.dask:
         checks.require_distributed()
     check_cache_dir(args.cache)
@@ -135,9 +134,8 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     from analyses.whatif import exact_lru_curves, lru_csv_path, run_whatif, save_whatif
 
-    table = run_whatif(study, cache_dir=args.cache, dask=args.dask, n_jobs=args.jobs,
-                       progress=sys.stderr.isatty())
-    curves = exact_lru_curves(study, cache_dir=args.cache)
+    table = run_whatif(study, n_jobs=args.jobs)
+    curves = exact_lru_curves(study)
     csv, png = save_whatif(table, study, out, curves)
     if curves is not None:
         print(f"exact fully associative LRU misses at the grid's sizes: {lru_csv_path(study, out)}")
