@@ -26,6 +26,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
+from analyses.verdict import VERDICT_PROCESSES
 from rtcommon.validate import require_int
 
 #: Default grid: record bytes x1 .. x64, memory latency x1 .. x64; the fine mappings held against S.
@@ -41,7 +42,8 @@ def _scales(name: str, values) -> list:
     return values
 
 
-def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", scene=None, n_processes: int = 8,
+def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", scene=None,
+                    n_processes: int = VERDICT_PROCESSES,
                     machine=None, record_scales=RECORD_SCALES, latency_scales=LATENCY_SCALES,
                     execution=None) -> pd.DataFrame:
     """Losses of S and the fine mappings (:data:`FINE_MAPPINGS`) at every (record scale, latency scale).

@@ -59,11 +59,11 @@ from analyses.memory_budget import memory_shares, runs_at_once, trace_pages_limi
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
 from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, PAPER_EXPERIMENT,
                                   STUDY_SIZE, STUDY_TABLE, PaperResult, check_process_counts, check_scenes)
-from analyses.verdict import LOSSES, format_speedup, verdict
+from analyses.verdict import LOSSES, VERDICT_PROCESSES, format_speedup, verdict, verdict_process_count
 from coherence.cost import OPERATIONS
 
-__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS", "PAPER_EXPERIMENT",
-           "PaperResult", "reproduce", "sequential_predictions", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
+__all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
+           "PAPER_EXPERIMENT", "PaperResult", "reproduce", "sequential_predictions", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
            "paper_summary", "paper_html", "check_scenes", "check_process_counts", "check_output_folder"]
 
 _COUNTERS = tuple(counter for counters in OPERATIONS.values() for counter in counters)
@@ -183,7 +183,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     # 4: every mapping at every count, per scene, with the calibrated model
     frames = []
     crossings = []
-    verdict_n = 8 if 8 in counts else max(counts)
+    verdict_n = verdict_process_count(counts)
     with dask_executor(experiment.dask) as executor:
         for name in scenes:
             scene, _, info = loaded[name]
@@ -216,11 +216,12 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     recorded = {key: value for key, value in experiment.as_parameters().items() if key != "scene"}
     parameters = {
         **recorded, "size": size, "scenes": scenes, "mappings": names, "n_processes": counts,
-        "n_cpus": int(machine.n_cpus), "background_load": background, "verdict_n_processes": int(verdict_n), "hierarchy": hierarchy.to_dict(),
-        "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
+        "n_cpus": int(machine.n_cpus), "background_load": background, "verdict_n_processes": int(verdict_n),
+        "hierarchy": hierarchy.to_dict(), "layout": layout.name, "machine": {k: (v.item() if isinstance(v, np.generic) else v)
                                            for k, v in machine.__dict__.items()},
         "clock_hz": base.clock_hz, "costs": costs.to_dict(), "study_size": STUDY_SIZE,
-        "workload": experiment.workload,        "crossover": bool(crossover), "memory_shares": shares, "runs_at_once": n_jobs,
+        "workload": experiment.workload, "crossover": bool(crossover), "memory_shares": shares,
+        "runs_at_once": n_jobs,
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
                        verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,
@@ -381,7 +382,8 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
 # verdicts
 
 
-def scene_verdicts(runs: pd.DataFrame, n_processes: int = 8, order=None) -> tuple[pd.DataFrame, pd.DataFrame]:
+def scene_verdicts(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES,
+                   order=None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per scene: :func:`analyses.verdict.verdict` on its runs, and its best mappings.
 
     The rule is the report's: the headline names the loss (imbalance,

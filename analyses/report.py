@@ -6,7 +6,8 @@
 
 :func:`build_report` renders the scene once (through the trace cache of
 :mod:`analyses.traces`), simulates every mapping at the
-:class:`~analyses.experiment.Experiment`'s process counts (:func:`coherence.study`), computes miss-ratio curves from reuse
+:class:`~analyses.experiment.Experiment`'s process counts (:func:`coherence.study`),
+computes miss-ratio curves from reuse
 distances, simulates one more run for a per-pixel miss map
 (:func:`coherence.miss_map`), and returns a :class:`Report`;
 :func:`write_report` writes its files into a folder:
@@ -220,7 +221,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     from coherence.studies import Execution, place_layout, study
     from tracer.trace.access import COUNTER_NAMES
 
-    from analyses.verdict import verdict as compute_verdict
+    from analyses.verdict import verdict as compute_verdict, verdict_process_count
 
     experiment, hierarchy, layout, cost, counts = setup.experiment, setup.hierarchy, setup.layout, setup.cost, \
         setup.counts
@@ -232,7 +233,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
                    machine=setup.machine, scene=scene, progress=experiment.progress, execution=execution)
     runs = result.runs
 
-    verdict_n = 8 if 8 in counts else max(counts)
+    verdict_n = verdict_process_count(counts)
     verdict = compute_verdict(runs, verdict_n, order=names)
 
     miss_map_choice = setup.miss_map

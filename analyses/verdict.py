@@ -20,10 +20,20 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from coherence.simulation import STUDY_CPUS
+
 __all__ = ["Verdict", "verdict", "format_percent", "format_speedup", "LOSSES"]
 
 #: A dispatch loss below this (as a fraction) is not worth a clause.
 DISPATCH_SHOWN = 5e-4
+
+#: The process count a verdict judges: the study's machine's CPUs, one process each.
+VERDICT_PROCESSES = STUDY_CPUS
+
+
+def verdict_process_count(counts) -> int:
+    """:data:`VERDICT_PROCESSES` if among ``counts``, else the largest count."""
+    return VERDICT_PROCESSES if VERDICT_PROCESSES in counts else max(counts)
 
 LOSSES = (("imbalance_loss", "load balance", "imbalance"),
           ("coherence_loss", "coherence", "coherence"),
@@ -82,7 +92,7 @@ def format_speedup(speedup: float) -> str:
     return f"{float(speedup):.2f}"
 
 
-def verdict(runs: pd.DataFrame, n_processes: int = 8, order=None) -> Verdict:
+def verdict(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES, order=None) -> Verdict:
     """Compute the verdict from a table of runs at ``n_processes``.
 
     Parameters

@@ -104,3 +104,13 @@ def test_a_whatif_study_holds_its_experiment(tmp_path):
     assert built.grid == BUILTIN["latency"].grid
     assert built.experiment == replace(WHATIF_EXPERIMENT, workload="study1997", n_processes=(3,),
                                        progress=built.experiment.progress)
+
+
+def test_the_verdict_judges_the_study_machines_count_else_the_largest():
+    """Fails if the count is not looked for (mutation: ``return max(counts)``) or is another machine's."""
+    from analyses.verdict import VERDICT_PROCESSES, verdict_process_count
+    from coherence.simulation import Machine
+
+    assert VERDICT_PROCESSES == Machine().n_cpus == 8
+    assert verdict_process_count([1, 2, 8, 16]) == 8
+    assert verdict_process_count([1, 2, 4]) == 4

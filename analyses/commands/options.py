@@ -165,7 +165,12 @@ def hierarchy_options() -> argparse.ArgumentParser:
 
 
 def model_options() -> argparse.ArgumentParser:
-    """The simulated machine's memory: ``--hierarchy``, ``--layout``, ``--cost``."""
+    """The simulated machine's memory: ``--hierarchy``, ``--layout``, ``--cost``.
+
+    Their defaults, like ``--cpus``'s, are :class:`analyses.experiment.Experiment`'s, written out
+    because importing it here would load numba before ``--help``; tests/test_experiment.py ties
+    each to the Experiment's.
+    """
     parent = argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter, parents=[hierarchy_options()])
     parent.add_argument("--layout", default="compact", choices=LAYOUTS, metavar="NAME",
                         help="memory layout of scene records: %(choices)s (default %(default)s)")

@@ -77,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     import json
     import sys
 
-    from analyses.paper import PAPER_EXPERIMENT, check_output_folder, check_scenes, paper_summary, reproduce, write_paper
+    from analyses.paper import (PAPER_EXPERIMENT, check_output_folder, check_scenes, paper_summary, reproduce,
+                                write_paper)
     from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
     from tracer.scenes.catalog import PAPER_SCENES
 
