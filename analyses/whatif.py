@@ -49,7 +49,7 @@ from cachesim import Hierarchy, get_hierarchy
 from analyses.experiment import Experiment
 from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import remove_stale_temporaries
-from rtcommon.validate import require_int
+from rtcommon.validate import require_int, require_number
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
@@ -226,9 +226,9 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
     except ValueError as error:
         raise ValueError(f"what-if point {point}: {error}") from None
     cost = get_cost_model(point.get("cost", study.cost))
-    scale = point.get("compute_scale", 1.0)
-    if not isinstance(scale, (int, float)) or scale <= 0:
-        raise ValueError(f"compute_scale must be a number > 0, got {scale!r}")
+    scale = require_number("compute_scale", point.get("compute_scale", 1.0), 0)
+    if scale == 0:
+        raise ValueError("compute_scale must be a finite number > 0, got 0")
     if scale != 1.0:
         from coherence.cost import OPERATIONS
 

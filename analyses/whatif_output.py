@@ -10,7 +10,17 @@ from pathlib import Path
 
 import pandas as pd
 
-__all__ = ["save_whatif", "lru_csv_path"]
+__all__ = ["save_whatif", "lru_csv_path", "WHATIF_FILES", "whatif_files"]
+
+#: The files :func:`save_whatif` writes for a study called ``{name}``, by what they hold: the
+#: long-form table, its figure and (for grids over level sizes) the exact LRU curves; each CSV
+#: has its sidecar (:func:`coherence.provenance.meta_path`) beside it.
+WHATIF_FILES = {"table": "whatif-{name}.csv", "figure": "whatif-{name}.png", "lru": "whatif-{name}-lru.csv"}
+
+
+def whatif_files(name: str) -> dict[str, str]:
+    """:data:`WHATIF_FILES` for the study called ``name``."""
+    return {role: pattern.format(name=name) for role, pattern in WHATIF_FILES.items()}
 
 
 def save_whatif(table: pd.DataFrame, study, folder, curves: pd.DataFrame | None = None) -> tuple[Path, Path]:
@@ -32,7 +42,7 @@ def save_whatif(table: pd.DataFrame, study, folder, curves: pd.DataFrame | None 
     from rtcommon.files import write_files_atomic
 
     folder = Path(folder)
-    csv = folder / f"whatif-{study.name}.csv"
+    csv = folder / whatif_files(study.name)["table"]
     files = _table_files(long_form(table, study), csv,
                          provenance(study=study.name, scene=study.scene, size=study.size,
                                     mappings=list(study.mappings), n_processes=study.n_processes,
@@ -64,7 +74,7 @@ def save_whatif(table: pd.DataFrame, study, folder, curves: pd.DataFrame | None 
     else:
         figure = Figure(figsize=(7, 4.5))
         plot_loss_lines(table, keys[0], ax=figure.subplots())
-    png = folder / f"whatif-{study.name}.png"
+    png = folder / whatif_files(study.name)["figure"]
     files[png] = figure_png(figure, dpi=100)
     if curves is not None:
         files.update(_table_files(curves, lru_csv_path(study, folder),
@@ -78,12 +88,13 @@ def save_whatif(table: pd.DataFrame, study, folder, curves: pd.DataFrame | None 
 
 def lru_csv_path(study, folder) -> Path:
     """Where :func:`save_whatif` writes the exact LRU curves."""
-    return Path(folder) / f"whatif-{study.name}-lru.csv"
+    return Path(folder) / whatif_files(study.name)["lru"]
 
 
 def _table_files(table: pd.DataFrame, path: Path, meta: dict) -> dict:
     # the same bytes as coherence.provenance.write_csv_atomic writes, to be written with the other files
     import json
 
-    return {path: table.to_csv(index=False, lineterminator="\n"),
-            path.with_name(path.name + ".meta.json"): json.dumps(meta, indent=2) + "\n"}
+    from coherence.provenance import meta_path
+
+    return {path: table.to_csv(index=False, lineterminator="\n"), meta_path(path): json.dumps(meta, indent=2) + "\n"}

@@ -14,6 +14,15 @@ from pathlib import Path
 from rtcommon.files import write_text_atomic
 from rtcommon.versions import package_versions
 
+#: What the sidecar of a result file adds to its name: ``runs.csv`` -> ``runs.csv.meta.json``.
+META_SUFFIX = ".meta.json"
+
+
+def meta_path(path: str | os.PathLike) -> Path:
+    """The sidecar of result file ``path``: the same name with :data:`META_SUFFIX` added."""
+    path = Path(path)
+    return path.with_name(path.name + META_SUFFIX)
+
 
 def provenance(**parameters) -> dict:
     """``{"parameters": ..., "versions": ...}`` for a result file."""
@@ -32,5 +41,5 @@ def write_csv_atomic(table, path: str | os.PathLike, meta: dict) -> Path:
     if not path.parent.is_dir():
         raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
     write_text_atomic(path, table.to_csv(index=False, lineterminator="\n"))
-    write_text_atomic(path.with_name(path.name + ".meta.json"), json.dumps(meta, indent=2) + "\n")
+    write_text_atomic(meta_path(path), json.dumps(meta, indent=2) + "\n")
     return path

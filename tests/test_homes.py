@@ -78,3 +78,16 @@ def test_help_lists_the_files_the_writers_name():
     assert sorted(_listed_outputs(report)) == sorted([*REPORT_FILES.values(), *MISS_MAP_FILES])
     assert sorted(_listed_outputs(paper)) == sorted(PAPER_FILES.values())
     assert all(name in " ".join(paper.split()) for name in CROSSOVER_FILES.values())
+
+
+def test_whatif_help_names_its_files():
+    """``coherence whatif --help`` names each file of ``WHATIF_FILES`` (``<name>`` for
+    the study's name) and the sidecar's suffix. Fails if ``WHATIF_FILES["figure"]``
+    becomes ``"whatif-{name}.svg"``."""
+    from analyses.whatif_output import WHATIF_FILES
+    from coherence.provenance import META_SUFFIX
+
+    text = _help("whatif")
+    for pattern in WHATIF_FILES.values():
+        assert pattern.format(name="<name>") in text
+    assert f"with {META_SUFFIX}" in text

@@ -57,6 +57,11 @@ def test_local_pool_serial_and_dask_agree(small):
 
 
 def test_study_file_and_cli(tmp_path, capsys):
+    """A study file run from the command line writes exactly the files ``whatif_files``
+    names, each CSV with its sidecar. Fails if ``WHATIF_FILES["lru"]`` loses its ``-lru``."""
+    from analyses.whatif_output import whatif_files
+    from coherence.provenance import meta_path
+
     path = tmp_path / "study.toml"
     path.write_text('scene = "tetra"\nsize = 16\nmappings = ["R"]\nn_processes = 2\n'
                     '[grid]\n"L3.size" = ["256KB", "4MB"]\n')
@@ -65,6 +70,9 @@ def test_study_file_and_cli(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["whatif", "--file", str(path), "--out", str(out), "--cache", str(tmp_path / "c"),
                  "--jobs", "1"]) == 0
+    files = whatif_files("custom")
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [*files.values(), meta_path(files["table"]).name, meta_path(files["lru"]).name])
     long = pd.read_csv(out / "whatif-custom.csv")
     assert set(long.columns) == {"L3.size", "mapping", "n_processes", "metric", "value"}
     assert {"coherence_loss", "imbalance_loss", "L1_hit_rate"} <= set(long["metric"])

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
 
     from analyses.commands import checks
     from cachesim import CacheState, get_hierarchy, read_addresses, simulate
-    from coherence.provenance import provenance, write_csv_atomic
+    from coherence.provenance import meta_path, provenance, write_csv_atomic
 
     # every user error surfaces here, before the stream is read
     checks.check_input_file("ADDRESSES", args.addresses)
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     hierarchy = get_hierarchy(args.hierarchy)
     if args.csv:
         checks.check_output_file("--csv", args.csv)
-        checks.check_output_file("--csv", args.csv + ".meta.json")
+        checks.check_output_file("--csv", meta_path(args.csv))
     try:
         state = CacheState(hierarchy)
     except MemoryError as error:
