@@ -165,8 +165,10 @@ def _numba_on_stack(frame) -> bool:
 
 
 def _numba_compiling(frame) -> bool:
-    """Whether ``frame`` or a frame that called it is numba's compiler (not loading a compiled function)."""
-    return any(name.startswith("numba.core.compiler") for name in _module_names(frame))
+    """Whether ``frame`` or a frame that called it is numba's pass manager, which runs every step of a
+    compilation, typing to machine code. Not numba.core.compiler alone: loading a function from numba's
+    cache rebuilds it there too, under numba.core.compiler_lock."""
+    return any(name == "numba.core.compiler_machinery" for name in _module_names(frame))
 
 
 def exit_by_sigint(status: int) -> None:

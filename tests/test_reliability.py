@@ -964,8 +964,8 @@ _HELD_IN_NUMBA = textwrap.dedent('''
         def flush(self):
             pass
 
-    # A function of a numba module: sys.argv[1] is numba.core.compiler (compiling) or numba.core.caching
-    # (loading a compiled function); Ctrl-C comes as it starts, and it runs on for 2 s.
+    # A function of a numba module: sys.argv[1] is numba.core.compiler_machinery (compiling) or one that
+    # loading a compiled function from numba's cache runs; Ctrl-C comes as it starts, and it runs on for 2 s.
     namespace = {"__name__": sys.argv[1]}
     exec("import signal, time\\n"
          "def work(seconds):\\n"
@@ -993,9 +993,11 @@ def test_an_interrupt_held_by_a_compilation_is_announced_within_a_second():
     while numba loads a compiled function it is held without a word.
 
     Fails if ``InterruptsOutsideNumba._hold`` no longer starts the announcer (no line), or if
-    ``_announce`` no longer asks ``self.compiling`` (a line while loading).
+    ``_announce`` no longer asks ``self.compiling``, or ``_numba_compiling`` takes any numba.core.compiler*
+    module for a compilation again (a line while numba loads a function from its cache).
     """
-    for module, lines in (("numba.core.compiler", 1), ("numba.core.caching", 0)):
+    for module, lines in (("numba.core.compiler_machinery", 1), ("numba.core.caching", 0), ("numba.core.compiler", 0),
+                          ("numba.core.compiler_lock", 0)):
         done = _python(_HELD_IN_NUMBA, module)
         result = json.loads(done.stdout)
         said = [text for _, text in result["said"] if text.strip()]
