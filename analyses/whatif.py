@@ -1,7 +1,9 @@
 """What-if studies: where would coherence start to matter more than balance?
 
-A study is a base configuration (scene, image size, mappings, process count,
-hierarchy, layout, cost model, machine) and a grid of parameters to vary.
+A study (:class:`WhatIf`) is a base :class:`~analyses.experiment.Experiment`
+(scene, image size, workload, mappings, one process count, hierarchy, layout,
+cost model, machine, trace cache, Dask scheduler, memory budget) and a grid of
+parameters to vary.
 Every grid point is an independent task: the trace is rendered once (or
 taken from the trace cache) and each task replays it under the point's
 configuration. Tasks run in a local process pool, or on a Dask cluster with

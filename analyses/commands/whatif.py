@@ -108,8 +108,6 @@ def build_study(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     if args.list:
         from analyses.whatif import BUILTIN
 
