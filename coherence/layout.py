@@ -33,6 +33,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from coherence.page_placement import PagePlacement, PageTable, identity_pages, translate_addresses
 from coherence.texture_layout import TextureLayout
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 from rtcommon.validate import require_int, require_power_of_two
@@ -237,12 +238,15 @@ class RecordPlacement(NamedTuple):
     max_size : int
         Bytes of the largest record (bounds the lines any record spans:
         :func:`line_span_bound`).
+    pages : PageTable
+        Physical frames of the records' pages (empty: addresses are physical).
     """
 
     record_start: np.ndarray
     record_size: np.ndarray
     kind_first: np.ndarray
     max_size: int
+    pages: PageTable
 
 
 @dataclass(frozen=True)
@@ -258,6 +262,9 @@ class PlacedLayout:
         Records of kind ``k`` are rows ``kind_first[k]:kind_first[k + 1]``.
     end : int
         First address after the last region.
+    pages : PageTable
+        Physical frames of the pages the regions span; empty (the default)
+        when physical addresses are the virtual ones (:meth:`with_pages`).
     """
 
     layout: MemoryLayout
@@ -265,12 +272,43 @@ class PlacedLayout:
     record_size: np.ndarray
     kind_first: np.ndarray
     end: int
+    pages: PageTable = field(default_factory=identity_pages)
 
     @property
     def placement(self) -> RecordPlacement:
         """The record addresses as one bundle for compiled code (:func:`record_lines`)."""
         return RecordPlacement(self.record_start, self.record_size, self.kind_first,
-                               int(self.record_size.max(initial=0)))
+                               int(self.record_size.max(initial=0)), self.pages)
+
+    def with_pages(self, placement: PagePlacement, hierarchy) -> "PlacedLayout":
+        """This layout with its pages placed in physical memory by ``placement``.
+
+        Every line address it gives from then on (:meth:`addresses`,
+        :func:`record_lines_and_writes`, :func:`coherence.pixel_lines.pixel_lines`)
+        is physical. The page colours are those of ``hierarchy``
+        (:meth:`~coherence.page_placement.PagePlacement.colours`); a data TLB
+        of ``hierarchy`` must use the placement's page size, so that it sees
+        one entry per page as it would on virtual addresses.
+        """
+        if not isinstance(placement, PagePlacement):
+            raise ValueError(f"placement must be a PagePlacement, got {type(placement).__name__}")
+        if not placement.translates:
+            return self
+        tlb = getattr(hierarchy, "tlb", None)
+        if placement.translates and tlb is not None and tlb.page_size != placement.page_size:
+            raise ValueError(f"page placement with {placement.page_size}-byte pages needs a TLB of the same page "
+                             f"size; {tlb.name} has {tlb.page_size}-byte pages")
+        shift = placement.page_size.bit_length() - 1
+        first_page = int(self.layout.base) >> shift
+        n_pages = max(-(-int(self.end) >> shift) - first_page, 1)
+        used = np.zeros(n_pages, dtype=np.int64)
+        held = self.record_size > 0
+        # +1 at each record's first page, -1 after its last: the running sum marks every page that holds data
+        np.add.at(used, (self.record_start[held] >> shift) - first_page, 1)
+        after = ((self.record_start[held] + self.record_size[held] - 1) >> shift) - first_page + 1
+        np.add.at(used, after[after < n_pages], -1)
+        table = placement.table(np.cumsum(used) > 0, first_page, placement.colours(hierarchy))
+        return PlacedLayout(self.layout, self.record_start, self.record_size, self.kind_first, self.end, table)
 
     @property
     def scene_bytes(self) -> int:
@@ -438,6 +476,8 @@ def record_lines_and_writes(records, start, stop, placement, line_shift, buffer,
             if writes.shape[0] > 0:
                 writes = np.empty(size, dtype=np.bool_)
     count, n_writes = _fill_lines(records, start, stop, placement, line_shift, buffer, writes)
+    if placement.pages.frame.shape[0] > 0:
+        translate_addresses(buffer, count, placement.pages)
     return buffer, writes, count, n_writes
 
 

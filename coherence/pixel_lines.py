@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from coherence.layout import FILL_AHEAD, PlacedLayout, _count_lines, _fill_lines
+from coherence.page_placement import translate_addresses
 from rtcommon.validate import require_power_of_two
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
@@ -90,6 +91,8 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     pixel_writes = np.zeros(pixel_offsets.shape[0] - 1, dtype=np.int64)
     _fill_pixel_lines(records, pixel_offsets, placed.placement, line_offsets, line_shift, addresses, writes,
                       pixel_writes)
+    if placed.pages.frame.shape[0] > 0:
+        translate_addresses(addresses, n_lines, placed.pages)
     return PixelLines(line_offsets, addresses[:n_lines], writes[:n_lines], pixel_writes, line_shift)
 
 

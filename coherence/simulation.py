@@ -42,6 +42,7 @@ from cachesim.fresh import skips_exactly
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
+from coherence.page_placement import PagePlacement
 from coherence.pixel_lines import PixelLines, no_pixel_lines
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
@@ -107,6 +108,10 @@ class Machine:
         begins on).
     switch_cycles : float
         Cycles a CPU spends starting a process other than its last one.
+    page_placement : PagePlacement
+        Which physical frames the operating system gives the scene's pages
+        (:mod:`coherence.page_placement`); default ``contiguous``, physical =
+        virtual. Other users' streams are not translated.
     """
 
     n_cpus: int = STUDY_CPUS
@@ -117,8 +122,12 @@ class Machine:
     background_footprint: int = DEFAULT_BACKGROUND_FOOTPRINT
     background_seed: int = 0
     switch_cycles: float = 0.0
+    page_placement: PagePlacement = PagePlacement()
 
     def __post_init__(self):
+        if not isinstance(self.page_placement, PagePlacement):
+            raise ValueError(f"Machine.page_placement must be a PagePlacement, "
+                             f"got {type(self.page_placement).__name__}")
         require_int("Machine.n_cpus", self.n_cpus, 1)
         for name in ("quantum_cycles", "switch_cycles"):
             require_number(f"Machine.{name}", getattr(self, name), 0)
@@ -285,7 +294,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     hierarchy : Hierarchy
         Cache hierarchy of every CPU (latencies included).
     placed : PlacedLayout
-        Record addresses (see :meth:`MemoryLayout.place`).
+        Record addresses (see :meth:`MemoryLayout.place`); placed in physical
+        memory by ``machine.page_placement`` here unless already placed
+        (:meth:`PlacedLayout.with_pages`).
     cost : CostModel
     machine : Machine
         CPUs, scheduler, time slice and background load.
@@ -295,8 +306,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         Precomputed compute cycles per pixel (saves time over many runs).
     lines : coherence.pixel_lines.PixelLines, optional
         Every pixel's line accesses from :func:`~coherence.pixel_lines.pixel_lines`
-        for this trace, layout and the hierarchy's smallest line size (saves
-        time over many runs; the results are the same).
+        for this trace, ``placed`` (with its pages placed, when the machine
+        places pages) and the hierarchy's smallest line size (saves time over
+        many runs; the results are the same).
     pixel_misses : bool
         Also return each pixel's misses per cache level (``Run.pixel_misses``,
         shape (H, W, L); 8 bytes per pixel and level).
@@ -326,6 +338,11 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if compute.shape != (n_pixels,):
         raise ValueError(f"compute must have shape ({n_pixels},), got {compute.shape}")
 
+    if machine.page_placement.translates and placed.pages.frame.shape[0] == 0:
+        if lines is not None and lines.line_offsets.shape[0] > 0:
+            raise ValueError("lines hold virtual addresses but the machine places pages; make them from "
+                             "placed.with_pages(machine.page_placement, hierarchy)")
+        placed = placed.with_pages(machine.page_placement, hierarchy)
     n_processes = distribution.n_processes
     _warn_idle_processes(distribution)
     if distribution.dynamic:

@@ -146,7 +146,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     if not isinstance(execution, Execution):
         raise ValueError(f"study: execution must be a coherence.studies.Execution, got {type(execution).__name__}")
     executor, trace_folder, n_jobs = execution.executor, execution.trace_folder, execution.n_jobs
-    placed = place_layout(layout, trace, scene)
+    placed = place_layout(layout, trace, scene).with_pages(machine.page_placement, hierarchy)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
 

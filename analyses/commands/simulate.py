@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import PLACEMENTS, SCHEDULERS, HelpFormatter, machine_options, model_options
+from analyses.commands.options import (PLACEMENTS, SCHEDULERS, HelpFormatter, RegistryNames, machine_options,
+                                      model_options)
+
+PAGE_PLACEMENTS = RegistryNames("coherence.page_placement", "PAGE_PLACEMENTS")
 
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
 
@@ -26,6 +29,7 @@ examples:
   coherence simulate balls128 --hierarchy modern --layout alpha1997 --json
   coherence simulate balls128 --processes 16 --scheduler static --placement neighbours
   coherence simulate balls128 --background 4 --background-footprint 262144 --hierarchy alpha21164-dtb
+  coherence simulate balls128 --layout alpha1997 --page-placement random --page-seed 3
 """
 
 
@@ -52,6 +56,12 @@ def register(subparsers) -> None:
     parser.add_argument("--background-footprint", type=int, default=None, metavar="BYTES",
                         help="bytes one slice of another user's process streams through its CPU's caches "
                              "(default 1 MiB: about 100 MB/s for a 10 ms slice; see coherence.simulation.Machine)")
+    parser.add_argument("--page-placement", default="contiguous", choices=PAGE_PLACEMENTS, metavar="NAME",
+                        help="which physical pages the operating system gives the scene's 8 KB pages, which decides "
+                             "conflicts in the physically indexed S- and B-cache: %(choices)s (default %(default)s: "
+                             "physical = virtual; see coherence.page_placement)")
+    parser.add_argument("--page-seed", type=int, default=0, metavar="N",
+                        help="seed of bin-hopping's first colour and of random's colours (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON (runs and parameters) instead of a table")
     parser.add_argument("--csv", metavar="PATH", help="write the full per-run table to CSV (+ .meta.json)")
     parser.add_argument("--processes-csv", metavar="PATH", help="write the per-process table to CSV")
@@ -66,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
     from cachesim import get_hierarchy
     from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
+    from coherence.page_placement import PagePlacement
     from coherence.metrics import EFFICIENCY_FACTORS
     from coherence.provenance import provenance, write_csv_atomic
     from coherence.simulation import Machine
@@ -78,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--background", args.background, 0)
     checks.check_range("--quantum", args.quantum, 0, float("inf"))
     checks.check_range("--background-footprint", args.background_footprint, 0)
+    checks.check_range("--page-seed", args.page_seed, 0)
     if args.placement != "round-robin" and args.scheduler != "static":
         raise ValueError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
                          "scheduler moves processes between CPUs)")
@@ -87,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
     footprint = {} if args.background_footprint is None else {"background_footprint": args.background_footprint}
     machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, scheduler=args.scheduler,
-                      placement=args.placement, background_load=args.background, **footprint)
+                      placement=args.placement, background_load=args.background,
+                      page_placement=PagePlacement(args.page_placement, seed=args.page_seed), **footprint)
     for option, path in (("--csv", args.csv), ("--processes-csv", args.processes_csv)):
         if path:
             checks.check_output_file(option, path)
