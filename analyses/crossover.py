@@ -27,6 +27,8 @@ import numpy as np
 import pandas as pd
 
 from analyses.verdict import VERDICT_PROCESSES
+from cachesim.config import DEFAULT_HIERARCHY
+from coherence.layout import DEFAULT_LAYOUT
 from rtcommon.validate import require_int
 
 #: Default grid: record bytes x1 .. x64, memory latency x1 .. x64; the fine mappings held against S.
@@ -42,7 +44,7 @@ def _scales(name: str, values) -> list:
     return values
 
 
-def crossover_study(trace, *, cost, hierarchy="alpha21164", layout="compact", scene=None,
+def crossover_study(trace, *, cost, hierarchy=DEFAULT_HIERARCHY, layout=DEFAULT_LAYOUT, scene=None,
                     n_processes: int = VERDICT_PROCESSES,
                     machine=None, record_scales=RECORD_SCALES, latency_scales=LATENCY_SCALES,
                     execution=None) -> pd.DataFrame:

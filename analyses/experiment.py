@@ -23,7 +23,9 @@ import os
 from dataclasses import dataclass, fields
 
 from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, MIN_MEMORY_BUDGET
+from cachesim.config import DEFAULT_HIERARCHY
 from coherence.cost import DEFAULT_COST_MODEL
+from coherence.layout import DEFAULT_LAYOUT
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.simulation import STUDY_CPUS
 from rtcommon.validate import require_bool, require_int
@@ -95,8 +97,8 @@ class Experiment:
     max_depth: int | None = None
     mappings: tuple = tuple(DEFAULT_MAPPINGS)
     n_processes: tuple = REPORT_PROCESSES
-    hierarchy: object = "alpha21164"
-    layout: object = "compact"
+    hierarchy: object = DEFAULT_HIERARCHY
+    layout: object = DEFAULT_LAYOUT
     cost: object = DEFAULT_COST_MODEL
     n_cpus: int = STUDY_CPUS
     background: int = 4

@@ -396,6 +396,9 @@ def modern() -> Hierarchy:
 PRESETS = {"alpha21164": alpha21164, "alpha21164-noninclusive": alpha21164_noninclusive,
            "alpha21164-dtb": alpha21164_with_dtb, "modern": modern}
 
+#: The hierarchy a run simulates unless told otherwise: the study's Alpha 21164 (:func:`alpha21164`).
+DEFAULT_HIERARCHY = "alpha21164"
+
 
 def get_hierarchy(name_or_path: str | os.PathLike | Hierarchy) -> Hierarchy:
     """A preset by name (``alpha21164``, ``alpha21164-noninclusive``, ``alpha21164-dtb``,

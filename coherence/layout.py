@@ -554,6 +554,9 @@ def _alpha1997() -> MemoryLayout:
 
 LAYOUTS = {"compact": _compact, "alpha1997": _alpha1997}
 
+#: The memory layout a run uses unless told otherwise: today's compact records.
+DEFAULT_LAYOUT = "compact"
+
 
 def get_layout(name_or_layout) -> MemoryLayout:
     """A preset by name (``compact``, ``alpha1997``) or a MemoryLayout."""

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from cachesim.config import DEFAULT_HIERARCHY
 from coherence.cost import DEFAULT_COST_MODEL
+from coherence.layout import DEFAULT_LAYOUT
 from rtcommon.validate import require_int
 
 __all__ = ["MissMap", "miss_map"]
@@ -112,8 +114,8 @@ class MissMap:
         return pd.DataFrame(rows)
 
 
-def miss_map(trace, mapping, n_processes: int, *, hierarchy="alpha21164", layout="compact", cost=DEFAULT_COST_MODEL,
-             machine=None, scene=None) -> MissMap:
+def miss_map(trace, mapping, n_processes: int, *, hierarchy=DEFAULT_HIERARCHY, layout=DEFAULT_LAYOUT,
+             cost=DEFAULT_COST_MODEL, machine=None, scene=None) -> MissMap:
     """Simulate one run and return its misses per pixel per cache level.
 
     Parameters

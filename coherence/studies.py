@@ -15,8 +15,9 @@ import numpy as np
 import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
+from cachesim.config import DEFAULT_HIERARCHY
 from coherence.cost import DEFAULT_COST_MODEL, CostModel, get_cost_model
-from coherence.layout import MemoryLayout, PlacedLayout, get_layout, record_counts_of
+from coherence.layout import DEFAULT_LAYOUT, MemoryLayout, PlacedLayout, get_layout, record_counts_of
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
@@ -104,7 +105,7 @@ class Execution:
 
 
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
-          hierarchy: Hierarchy | str = "alpha21164", layout: MemoryLayout | str = "compact",
+          hierarchy: Hierarchy | str = DEFAULT_HIERARCHY, layout: MemoryLayout | str = DEFAULT_LAYOUT,
           cost: CostModel | str = DEFAULT_COST_MODEL, machine: Machine | None = None, scene=None,
           progress: bool = True, execution: Execution | None = None) -> StudyResult:
     """Simulate every mapping at every process count on one trace.
