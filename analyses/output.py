@@ -45,12 +45,15 @@ def check_output_folder(out) -> Path:
     Raises
     ------
     InputError
-        ``out`` is an existing file.
+        ``out`` is an existing file, or an empty name (``Path('')`` would be
+        the current folder, which the user did not name).
     NotADirectoryError
         A parent on its path is a file.
     PermissionError
         ``out`` (or its nearest existing parent) is not writable.
     """
+    if not str(out).strip():
+        raise InputError(f"output folder {str(out)!r} is an empty name; give a folder ('.' for the current one)")
     path = Path(out).expanduser()
     if path.exists() and not path.is_dir():
         raise InputError(f"output folder {str(out)!r} exists and is not a folder")

@@ -363,15 +363,16 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
     from tqdm.auto import tqdm
 
     from tracer.kd.tree import KdTreeConfig
-    from tracer.rendering.render import DEFAULT_MEMORY_BUDGET, render, save_png
+    from tracer.rendering.render import DEFAULT_MEMORY_BUDGET, RenderOptions, render, save_png
 
     kd_config = KdTreeConfig(builder=explicit_kd) if explicit_kd else None
     tree = None
     if size > _PILOT_SIZE:  # the trace streams to disk: see first that it will fit
         from analyses.output import check_free_space
 
-        pilot = render(scene, size=_PILOT_SIZE, kd_config=kd_config, workload=workload)
-        bytes_per_pixel = 4 * pilot.trace.n_records / pilot.trace.n_pixels
+        pilot = render(scene, options=RenderOptions(size=_PILOT_SIZE, keep_records=False, kd_config=kd_config,
+                                                    workload=workload))
+        bytes_per_pixel = 4 * pilot.n_records / (pilot.width * pilot.height)
         check_free_space(f"the trace of {scene.name} at {size}x{size}", entry.parent,
                          int(1.25 * bytes_per_pixel * size * size))
         tree = pilot.tree  # the same tree the render would build
@@ -381,9 +382,10 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
         bar = tqdm(total=1, desc=f"rendering {scene.name} {size}x{size} (logging accesses)", unit="image",
                    disable=not progress, leave=False, file=sys.stderr)
         start = time.perf_counter()
-        result = render(scene, tree, size=size, kd_config=kd_config, trace_path=tmp / "trace",
-                        metadata={"cache_key": key}, workload=workload,
-                        memory_budget=DEFAULT_MEMORY_BUDGET if memory_budget is None else memory_budget)
+        budget = DEFAULT_MEMORY_BUDGET if memory_budget is None else memory_budget
+        result = render(scene, tree, RenderOptions(size=size, kd_config=kd_config, workload=workload,
+                                                   memory_budget=budget),
+                        trace_path=tmp / "trace", metadata={"cache_key": key})
         seconds = time.perf_counter() - start
         bar.update(1)
         bar.close()

@@ -22,7 +22,7 @@ TARGET_MB = 500.0
 CHILD = """
 import json, resource, sys, time
 import numpy as np
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.model import Camera, SceneBuilder
 
 vertices, size = int(sys.argv[1]), int(sys.argv[2])
@@ -36,7 +36,7 @@ builder.polygon(np.column_stack([radii * np.cos(angles), radii * np.sin(angles),
 scene = builder.build()
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 start = time.perf_counter()
-result = render(scene, size=size)
+result = render(scene, options=RenderOptions(size=size))
 seconds = time.perf_counter() - start
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 print(json.dumps({"before_mb": before / 1024, "peak_mb": peak / 1024, "seconds": seconds,

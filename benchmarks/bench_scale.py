@@ -17,7 +17,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tracer.scenes import spd  # noqa: E402
-from tracer.rendering.render import render  # noqa: E402
+from tracer.rendering.render import RenderOptions, render  # noqa: E402
 
 
 def one(size_factor, size):
@@ -25,7 +25,7 @@ def one(size_factor, size):
     scene = spd.tetra(size_factor)
     scene.max_depth = 2  # the study's depth for tetra
     generate = time.perf_counter() - start
-    result = render(scene, size=size)
+    result = render(scene, options=RenderOptions(size=size))
     totals = result.totals()
     return {"triangles": scene.n_elements, "generate_seconds": round(generate, 2),
             "build_seconds": round(result.timings["build"], 2), "trace_seconds": round(result.timings["trace"], 2),
@@ -37,7 +37,7 @@ def main():
     parser.add_argument("--size", type=int, default=512)
     parser.add_argument("--size-factor", type=int, default=10)
     args = parser.parse_args()
-    render(spd.tetra(2), size=8)  # compile (or load the numba cache) first
+    render(spd.tetra(2), options=RenderOptions(size=8))  # compile (or load the numba cache) first
     figures = {"size": args.size, "peer": one(6, args.size)}
     figures["large"] = one(args.size_factor, args.size)
     figures["peak_gib"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 2)

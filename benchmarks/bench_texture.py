@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from timing import best_of  # noqa: E402
 
-from tracer.rendering.render import render  # noqa: E402
+from tracer.rendering.render import RenderOptions, render  # noqa: E402
 from tracer.scenes.catalog import load  # noqa: E402
 
 TARGET_RATIO = 2.0
@@ -34,9 +34,10 @@ def main():
     figures = {"size": args.size, "filter": args.filter, "cpus": os.cpu_count()}
     for name in ("balls", "balls-textured"):
         scene = load(name)
-        render(scene, size=16, texture_filter=args.filter)  # compile (or load the numba cache) first
-        seconds, result = best_of(args.repeats, lambda: render(scene, size=args.size,
-                                                                texture_filter=args.filter))
+        # compile (or load the numba cache) first
+        render(scene, options=RenderOptions(size=16, texture_filter=args.filter))
+        options = RenderOptions(size=args.size, texture_filter=args.filter)
+        seconds, result = best_of(args.repeats, lambda: render(scene, options=options))
         totals = result.totals()
         records = totals["records"]
         figures[name] = {"seconds": round(seconds, 3), "trace_seconds": round(result.timings["trace"], 3),

@@ -23,7 +23,7 @@ import numpy as np
 
 from coherence.studies import study
 from timing import best_of
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.catalog import load
 from tracer.trace.access import AccessTrace, verify_trace
 from tracer.trace.check import read_meta
@@ -39,7 +39,7 @@ def main():
     scene = load(args.scene)
     if not (path / "meta.json").is_file():
         start = time.perf_counter()
-        render(scene, size=args.size, trace_path=path)
+        render(scene, options=RenderOptions(size=args.size), trace_path=path)
         print(f"rendered {args.scene} {args.size}x{args.size} in {time.perf_counter() - start:.1f} s", file=sys.stderr)
     trace = AccessTrace.load(path)
     checksums = read_meta(path)["checksums"]

@@ -24,7 +24,7 @@ import numpy as np
 from tracer.kd.tree import build_kdtree
 from tracer.rendering.camera import camera_rays
 from tracer.kd.closest import closest_hit
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.catalog import PAPER_SCENES, load
 from tracer.scenes.study import STUDY_SCENES
 
@@ -127,19 +127,19 @@ def main(argv=None):
     # --- one core: balls with and without logging, and Embree
     balls = load("balls")
     tree = build_kdtree(balls)
-    render(balls, tree, size=8, log=True)  # compile (or load from cache)
+    render(balls, tree, RenderOptions(size=8, log=True))  # compile (or load from cache)
     cpus = _one_core()
     try:
         t0 = time.perf_counter()
-        plain = render(balls, tree, size=size, log=False)
+        plain = render(balls, tree, RenderOptions(size=size, log=False))
         t_plain = time.perf_counter() - t0
         rays = plain.totals()["rays"]
         t0 = time.perf_counter()
-        logged = render(balls, tree, size=size, log=True)
+        logged = render(balls, tree, RenderOptions(size=size, log=True))
         t_log_first = time.perf_counter() - t0  # the first logged pass also faults in its buffers
         del logged
         t0 = time.perf_counter()
-        logged = render(balls, tree, size=size, log=True)
+        logged = render(balls, tree, RenderOptions(size=size, log=True))
         t_log = min(t_log_first, time.perf_counter() - t0)
         t_prim = _primary_seconds(balls, tree, size)
         emb = embree_rate(balls, size)
@@ -182,10 +182,10 @@ def main(argv=None):
             t0 = time.perf_counter()
             tree = build_kdtree(scene)
             build = time.perf_counter() - t0
-            render(scene, tree, size=4, log=True)
+            render(scene, tree, RenderOptions(size=4, log=True))
             t0 = time.perf_counter()
-            res = render(scene, tree, size=size, log=True, trace_path=os.path.join(tmp, name),
-                         memory_budget=512 << 20)
+            res = render(scene, tree, RenderOptions(size=size, log=True, memory_budget=512 << 20),
+                         trace_path=os.path.join(tmp, name))
             seconds = time.perf_counter() - t0
             t = res.totals()
             files = sum(os.path.getsize(os.path.join(tmp, name, f)) for f in os.listdir(os.path.join(tmp, name)))

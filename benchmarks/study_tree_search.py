@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tracer.scenes import catalog as scenes  # noqa: E402
 from tracer.kd.tree import KdTreeConfig  # noqa: E402
-from tracer.rendering.render import render  # noqa: E402
+from tracer.rendering.render import RenderOptions, render  # noqa: E402
 from tracer.scenes.study import STUDY_SCENES  # noqa: E402
 from tracer.rendering.workload import Workload  # noqa: E402
 
@@ -68,7 +68,7 @@ def candidates():
 
 def tests_at_study_size(scene, workload: Workload, size: int) -> float:
     """Intersection tests of ``scene`` at ``size``², scaled to 512², in millions."""
-    result = render(scene, size=size, log=False, workload=workload)
+    result = render(scene, options=RenderOptions(size=size, log=False, workload=workload))
     return result.totals()["intersection_tests"] * (STUDY_SIZE / size) ** 2 / 1e6
 
 

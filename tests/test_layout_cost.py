@@ -157,10 +157,10 @@ def test_calibrate_with_fixed_costs_and_errors():
 
 def test_render_metadata_counts_every_record_kind():
     from scene_factory import random_scene
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = random_scene(n=40, seed=3)
-    trace = render(scene, size=(12, 12)).trace
+    trace = render(scene, options=RenderOptions(size=(12, 12))).trace
     counts = record_counts_of(trace)
     assert counts[RecordKind.SPHERE] == scene.sphere_radius.size
     assert counts[RecordKind.POLYGON] == scene.polygon_offsets.size - 1

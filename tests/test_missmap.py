@@ -50,11 +50,11 @@ def test_miss_map_equals_the_reference_schedule(mapping, background, hierarchy):
 
 def test_a_textured_scene_maps_its_texel_misses_too():
     from tracer.trace.records import RecordKind, unpack
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
     from tracer.scenes.catalog import load
 
     scene = load("balls-textured")
-    trace = render(scene, size=8).trace
+    trace = render(scene, options=RenderOptions(size=8)).trace
     kinds, _ = unpack(trace.records)
     assert (kinds == RecordKind.TEXEL).sum() > 0
     machine = Machine(n_cpus=2, quantum_cycles=20000.0, background_load=1, background_footprint=512)

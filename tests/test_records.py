@@ -38,10 +38,10 @@ def test_counter_names_name_what_their_columns_count():
     """Each name of the counter columns, looked up in a real render's totals, counts what it says:
     one primary ray per pixel, and the records of the kind it counts. Fails when two names of
     ``COUNTER_NAMES`` trade places (e.g. ``tuple(reversed(...))`` or a swapped pair)."""
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
     from tracer.scenes.catalog import load
 
-    trace = render(load("tetra"), size=8).trace
+    trace = render(load("tetra"), options=RenderOptions(size=8)).trace
     totals = trace.totals()
     kinds, _ = unpack(trace.records)
     assert totals["primary_rays"] == 64

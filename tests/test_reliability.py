@@ -75,11 +75,11 @@ def _recorded_anew(folder: Path, meta_edit=None, **arrays) -> None:
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     """A rendered tetra trace of 8x4 samples (its metadata records scene and image size)."""
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
     from tracer.scenes.catalog import load
 
     folder = tmp_path_factory.mktemp("rendered") / "tetra"
-    render(load("tetra"), size=(8, 4), trace_path=folder)
+    render(load("tetra"), options=RenderOptions(size=(8, 4)), trace_path=folder)
     return folder
 
 
@@ -583,6 +583,11 @@ CLI_CASES = [
     (["scene", "badvt.obj"], 2, "badvt.obj:4: expected a texture coordinate index, found '1/a'"),
     (["scene", "huge-texture.nff"], 2, "huge.png' is 16384 x 16384 (268,435,456 texels); a texture may hold at most"),
     (["render", "huge-texture.nff", "--size", "4"], 2, "huge.png' is 16384 x 16384"),
+    (["render", "tetra", "--size", "8", "--png", "counted.png", "--memory-budget", "0.001"], 0, "wrote counted.png"),
+    (["render", "tetra", "--size", "8", "--png", "x.jpg"], 2, "--png 'x.jpg' must end in .png"),
+    (["report", "tetra", "--size", "8", "--out", ""], 2, "output folder '' is an empty name"),
+    (["whatif", "latency", "--out", ""], 2, "output folder '' is an empty name"),
+    (["paper", "--size", "8", "--out", ""], 2, "output folder '' is an empty name"),
 ]
 
 _RUNNER = textwrap.dedent('''
@@ -625,7 +630,7 @@ _RUNNER = textwrap.dedent('''
 @pytest.fixture(scope="module")
 def scratch(tmp_path_factory):
     """The scratch folder the table's paths are relative to."""
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
     from tracer.scenes.catalog import load
 
     folder = tmp_path_factory.mktemp("cli")
@@ -652,7 +657,7 @@ def scratch(tmp_path_factory):
     (folder / "badvt.obj").write_text(triangle + "f 1/a 2 3\n")
     (folder / "huge.png").write_bytes(_png_header(16384, 16384))
     (folder / "huge-texture.nff").write_text(view + "texture big huge.png\nusetexture big\ns 0 0 0 1\n")
-    render(load("tetra"), size=8, trace_path=folder / "trace8")
+    render(load("tetra"), options=RenderOptions(size=8), trace_path=folder / "trace8")
     for name in ("trace8-flipped", "trace8-outside", "trace8-old", "trace8-f8", "trace8-magic"):
         shutil.copytree(folder / "trace8", folder / name)
     _flip(folder / "trace8-flipped" / "records.npy", 9)
@@ -1069,7 +1074,7 @@ def test_a_scene_summary_does_not_make_its_textures(tmp_path, capsys):
 
 def test_a_scene_read_without_texels_is_not_rendered_or_written(tmp_path):
     """Fails if a summary-only scene (texels=False) renders or writes its stand-in texels as black."""
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
     from tracer.scenes.catalog import load
     from tracer.scenes.nff import write_nff
 
@@ -1077,7 +1082,7 @@ def test_a_scene_read_without_texels_is_not_rendered_or_written(tmp_path):
     scene = load(_textured_nff(tmp_path, ["fits.png", "procedural 16 16 3"]), texels=False)
     assert not scene.texels_read and scene.summary()["textures"] == [[64, 32], [16, 16]]
     with pytest.raises(ValueError, match="read without its texels"):
-        render(scene, size=4)
+        render(scene, options=RenderOptions(size=4))
     with pytest.raises(ValueError, match="read without its texels"):
         write_nff(scene, tmp_path / "out.nff")
     assert not (tmp_path / "out.nff").exists()

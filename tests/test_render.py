@@ -10,7 +10,7 @@ from tracer.kd.tree import KdTreeConfig, build_kdtree
 import tracer.rendering.render as render_module
 from tracer.rendering.camera import camera_rays
 from tracer.kd.closest import closest_hit
-from tracer.rendering.render import render, save_png
+from tracer.rendering.render import RenderOptions, render, save_png
 from tracer.trace.records import FORMAT_VERSION, INDEX_MASK
 from tracer.trace.access import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, TraceWriter, pack, unpack
 
@@ -31,8 +31,8 @@ def _per_pixel_kind_counts(trace):
 
 def test_logging_does_not_change_image_or_counters(mixed):
     scene, tree = mixed
-    plain = render(scene, tree, size=(24, 20), log=False)
-    logged = render(scene, tree, size=(24, 20), log=True)
+    plain = render(scene, tree, RenderOptions(size=(24, 20), log=False))
+    logged = render(scene, tree, RenderOptions(size=(24, 20), log=True))
     assert plain.trace is None
     assert plain.image.shape == (20, 24, 3)
     assert np.array_equal(plain.image, logged.image)  # bit for bit
@@ -41,8 +41,8 @@ def test_logging_does_not_change_image_or_counters(mixed):
 
 def test_epsilon_applies_to_both_passes(mixed):
     scene, tree = mixed
-    plain = render(scene, tree, size=(16, 12), log=False, epsilon=0.05)
-    logged = render(scene, tree, size=(16, 12), log=True, epsilon=0.05)
+    plain = render(scene, tree, RenderOptions(size=(16, 12), log=False, epsilon=0.05))
+    logged = render(scene, tree, RenderOptions(size=(16, 12), log=True, epsilon=0.05))
     assert np.array_equal(plain.image, logged.image)
     assert np.array_equal(plain.counters, logged.counters)
     assert logged.trace.metadata["epsilon"] == 0.05
@@ -50,7 +50,7 @@ def test_epsilon_applies_to_both_passes(mixed):
 
 def test_counters_equal_record_counts_per_pixel(mixed):
     scene, tree = mixed
-    res = render(scene, tree, size=24)
+    res = render(scene, tree, RenderOptions(size=24))
     t = res.totals()
     # every ray type and primitive kind occurs, so the check covers them all
     for name in ("reflection_rays", "refraction_rays", "shadow_blocked", "tests_sphere",
@@ -69,15 +69,15 @@ def test_counters_equal_record_counts_per_pixel(mixed):
 
 def test_logging_is_deterministic(mixed):
     scene, tree = mixed
-    a = render(scene, tree, size=16).trace
-    b = render(scene, tree, size=16).trace
+    a = render(scene, tree, RenderOptions(size=16)).trace
+    b = render(scene, tree, RenderOptions(size=16)).trace
     assert np.array_equal(a.pixel_offsets, b.pixel_offsets)
     assert np.array_equal(a.records, b.records)
 
 
 def test_record_indices_are_in_range(mixed):
     scene, tree = mixed
-    trace = render(scene, tree, size=16).trace
+    trace = render(scene, tree, RenderOptions(size=16)).trace
     kinds, index = unpack(trace.records)
     limits = {RecordKind.KD_NODE: len(tree.nodes), RecordKind.INDEX_ENTRY: len(tree.primitive_indices),
               RecordKind.SPHERE: len(scene.sphere_radius), RecordKind.TRIANGLE: len(scene.triangle_vertices),
@@ -96,7 +96,7 @@ def test_record_indices_are_in_range(mixed):
 
 def test_one_sphere_hand_checked_records():
     scene = one_sphere()
-    res = render(scene, size=9)
+    res = render(scene, options=RenderOptions(size=9))
     trace = res.trace
     centre = 4 * 9 + 4
     # root is a leaf with the one sphere: node, entry, test; shading reads the
@@ -114,16 +114,16 @@ def test_one_sphere_hand_checked_records():
 
 def test_max_depth_limits_secondary_rays(mixed):
     scene, tree = mixed
-    one = render(scene, tree, size=16, max_depth=1, log=False).totals()
-    more = render(scene, tree, size=16, max_depth=4, log=False).totals()
+    one = render(scene, tree, RenderOptions(size=16, max_depth=1, log=False)).totals()
+    more = render(scene, tree, RenderOptions(size=16, max_depth=4, log=False)).totals()
     assert one["reflection_rays"] == one["refraction_rays"] == 0
     assert more["reflection_rays"] > 0 and more["primary_hits"] == one["primary_hits"]
 
 
 def test_median_tree_gives_same_image(mixed):
     scene, tree = mixed
-    a = render(scene, tree, size=16, log=False)
-    b = render(scene, kd_config=KdTreeConfig(builder="median"), size=16, log=False)
+    a = render(scene, tree, RenderOptions(size=16, log=False))
+    b = render(scene, options=RenderOptions(kd_config=KdTreeConfig(builder="median"), size=16, log=False))
     hits = COUNTER_NAMES.index("primary_hits")
     assert np.array_equal(a.counters[:, hits], b.counters[:, hits])
     np.testing.assert_allclose(a.image, b.image, atol=1e-9)
@@ -131,7 +131,7 @@ def test_median_tree_gives_same_image(mixed):
 
 def test_trace_save_load_round_trip(tmp_path, mixed):
     scene, tree = mixed
-    res = render(scene, tree, size=12, metadata={"note": "round trip"})
+    res = render(scene, tree, RenderOptions(size=12), metadata={"note": "round trip"})
     path = res.trace.save(tmp_path / "t")
     back = AccessTrace.load(path)
     assert isinstance(back.records, np.memmap)
@@ -150,10 +150,10 @@ def test_trace_save_load_round_trip(tmp_path, mixed):
 
 def test_chunked_trace_equals_in_memory_trace(tmp_path, mixed):
     scene, tree = mixed
-    full = render(scene, tree, size=12).trace
+    full = render(scene, tree, RenderOptions(size=12)).trace
     budget = 4 * 997  # far below the trace's size: many chunks
     assert 4 * full.n_records > 10 * budget
-    chunked = render(scene, tree, size=12, trace_path=tmp_path / "c", memory_budget=budget)
+    chunked = render(scene, tree, RenderOptions(size=12, memory_budget=budget), trace_path=tmp_path / "c")
     assert isinstance(chunked.trace.records, np.memmap)
     assert np.array_equal(chunked.trace.records, full.records)
     assert np.array_equal(chunked.trace.pixel_offsets, full.pixel_offsets)
@@ -161,7 +161,7 @@ def test_chunked_trace_equals_in_memory_trace(tmp_path, mixed):
     assert chunked.trace.totals() == full.totals()
     assert np.array_equal(chunked.counters, full.counters)  # filled in the trace's file, not in memory
     with pytest.raises(ValueError, match="memory_budget"):
-        render(scene, tree, size=12, memory_budget=budget)
+        render(scene, tree, RenderOptions(size=12, memory_budget=budget))
 
 
 def test_counters_filled_in_their_file_survive_dropped_pages(tmp_path):
@@ -188,7 +188,7 @@ def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):
     # several batches, the in-memory array starts tiny, and one thread
     # against all must not matter.
     scene, tree = mixed
-    ref = render(scene, tree, size=24)
+    ref = render(scene, tree, RenderOptions(size=24))
     per_item = np.add.reduceat(np.diff(ref.trace.pixel_offsets),
                                np.arange(0, ref.trace.n_pixels, render_module.CHUNK))
     slot = int(np.median(per_item))
@@ -198,7 +198,7 @@ def test_trace_does_not_depend_on_slots_batches_or_threads(monkeypatch, mixed):
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        one = render(scene, tree, size=24)
+        one = render(scene, tree, RenderOptions(size=24))
     finally:
         numba.set_num_threads(threads)
     assert 0 < np.sum(per_item > slot) < len(per_item)
@@ -231,18 +231,18 @@ def test_pack_unpack():
 def test_render_validation(mixed):
     scene, tree = mixed
     with pytest.raises(ValueError, match="size"):
-        render(scene, tree, size=0)
+        render(scene, tree, RenderOptions(size=0))
     with pytest.raises(ValueError, match="max_depth"):
-        render(scene, tree, size=4, max_depth=0)
+        render(scene, tree, RenderOptions(size=4, max_depth=0))
     with pytest.raises(ValueError, match="scene"):
         render("balls")
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="epsilon"):
-            render(scene, tree, size=4, epsilon=bad)
+            render(scene, tree, RenderOptions(size=4, epsilon=bad))
 
 
 def test_save_png(tmp_path):
-    res = render(one_sphere(), size=9, log=False)
+    res = render(one_sphere(), options=RenderOptions(size=9, log=False))
     path = save_png(res.image, tmp_path / "img" / "one.png")
     assert path.stat().st_size > 0
     with pytest.raises(ValueError, match="shape"):
@@ -266,4 +266,41 @@ def test_huge_coordinates_are_refused_before_any_overflow(field, value):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a numpy overflow warning fails the test
         with pytest.raises(ValueError, match=rf"Scene\.{field}_\w+: row 0 holds .*within \+-1e\+100"):
-            render(b.build(), size=4)
+            render(b.build(), options=RenderOptions(size=4))
+
+
+@pytest.mark.parametrize("field, value", [("size", True), ("size", 2.0), ("size", (4,)), ("size", (4, 0)),
+                                          ("corner_rays", 1), ("log", "yes"), ("keep_records", None),
+                                          ("kd_config", "sah"), ("max_depth", 0), ("max_depth", 65),
+                                          ("memory_budget", 3), ("epsilon", 0.0), ("epsilon", True),
+                                          ("workload", "1997"), ("texture_filter", "cubic")])
+def test_render_options_name_the_bad_field(field, value):
+    """Each bad value is refused by RenderOptions naming its field; fails if a check is dropped (e.g. a
+    size of True was taken as 1, as render(scene, size=True) once was)."""
+    with pytest.raises(ValueError, match=f"RenderOptions.{field}"):
+        RenderOptions(**{field: value})
+
+
+def test_camera_rays_refuse_a_boolean_size():
+    """Fails if checked_size takes True for 1 (``isinstance(v, bool)`` dropped)."""
+    from tracer.rendering.camera import camera_rays
+
+    with pytest.raises(ValueError, match="size must be an int >= 1"):
+        camera_rays(one_sphere(), True)
+
+
+def test_counted_records_equal_kept_ones_within_any_budget(mixed):
+    """keep_records=False gives the image, counters and record count of a kept trace, and needs no
+    memory for the trace: a budget far below it, which a kept trace refuses, passes. Fails if the
+    counting path keeps the records in memory (_GrowingRecords) or drops the count."""
+    scene, tree = mixed
+    kept = render(scene, tree, RenderOptions(size=12))
+    budget = 4 * 997
+    assert 4 * kept.trace.n_records > 10 * budget
+    counted = render(scene, tree, RenderOptions(size=12, keep_records=False, memory_budget=budget))
+    assert counted.trace is None and counted.n_records == kept.trace.n_records == kept.n_records
+    assert np.array_equal(counted.image, kept.image) and np.array_equal(counted.counters, kept.counters)
+    assert counted.totals() == kept.totals()
+    with pytest.raises(ValueError, match=rf"memory_budget \({budget / 2**20:.4g} MB of records\); pass trace_"):
+        render(scene, tree, RenderOptions(size=12, memory_budget=budget))
+    assert render(scene, tree, RenderOptions(size=4, log=False)).n_records is None

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from tracer.scenes.nff import read_nff
-from tracer.rendering.render import SPD_EPSILON, render
+from tracer.rendering.render import SPD_EPSILON, RenderOptions, render
 from tracer.scenes.catalog import load
 
 # Copies of ../shared/reference/spd (output of the original SPD generators).
@@ -23,14 +23,14 @@ needs_reference = pytest.mark.skipif(not (SPD / "tetra.nff").is_file(), reason="
 
 @pytest.fixture(scope="module")
 def tetra_counts():
-    return render(read_nff(SPD / "tetra.nff", max_depth=5), corner_rays=True, log=False,
-                  epsilon=SPD_EPSILON).totals()
+    return render(read_nff(SPD / "tetra.nff", max_depth=5),
+                  options=RenderOptions(corner_rays=True, log=False, epsilon=SPD_EPSILON)).totals()
 
 
 @pytest.fixture(scope="module")
 def balls_counts():
-    return render(read_nff(SPD / "balls.nff", max_depth=5), corner_rays=True, log=False,
-                  epsilon=SPD_EPSILON).totals()
+    return render(read_nff(SPD / "balls.nff", max_depth=5),
+                  options=RenderOptions(corner_rays=True, log=False, epsilon=SPD_EPSILON)).totals()
 
 
 @needs_reference
@@ -82,7 +82,7 @@ def test_shell_tree_does_not_degenerate():
     # shell, so a few hundred tests per ray are inherent (the study counted
     # 212e6 tests); clipping spheres that enclose a node keeps it there
     scene = load("shell")
-    res = render(scene, size=32, log=False)
+    res = render(scene, options=RenderOptions(size=32, log=False))
     t = res.totals()
     assert t["intersection_tests"] / t["rays"] < 350
     assert t["primary_hits"] > 0.2 * t["primary_rays"]

@@ -15,7 +15,7 @@ from coherence.calibration import STUDY1997_COSTS
 from coherence.cost import SQUARE_ROOT_CYCLES_21164, CostModel, alpha8400, modern
 from tracer.rendering.camera import camera_rays
 from tracer.rendering.geometry import hit_sphere
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.trace.access import COUNTER_NAMES, RecordKind, unpack
 
 
@@ -47,7 +47,7 @@ def test_one_sphere_root_tests_follow_the_discriminants():
     # real roots; a primary ray's has them where b^2 - c >= 0, computed here
     # in numpy, apart from the renderer's code.
     scene = one_sphere()
-    trace = render(scene, size=9).trace
+    trace = render(scene, options=RenderOptions(size=9)).trace
     origin, directions = camera_rays(scene, size=9)
     d = directions.reshape(-1, 3)
     b = d @ origin                               # sphere at the origin, radius 1
@@ -62,7 +62,7 @@ def test_one_sphere_root_tests_follow_the_discriminants():
 
 def test_root_tests_are_a_subset_of_sphere_and_cone_tests():
     scene = random_scene(("sphere", "cone", "triangle"), n=90, seed=4)
-    counters = render(scene, size=24).trace.counters
+    counters = render(scene, options=RenderOptions(size=24)).trace.counters
     col = {name: i for i, name in enumerate(COUNTER_NAMES)}
     roots = counters[:, col["root_tests"]]
     quadratic = counters[:, col["tests_sphere"]] + counters[:, col["tests_cone"]]
@@ -73,7 +73,7 @@ def test_root_tests_are_a_subset_of_sphere_and_cone_tests():
 
 def test_triangles_take_no_square_roots():
     scene = random_scene(("triangle", "polygon"), n=60, seed=5)
-    assert render(scene, size=16).trace.totals()["root_tests"] == 0
+    assert render(scene, options=RenderOptions(size=16)).trace.totals()["root_tests"] == 0
 
 
 def test_cost_model_charges_root_tests():

@@ -16,7 +16,7 @@ from tracer.scenes.nff import NFFError, format_nff, parse_nff, read_nff, write_n
 from tracer.scenes.nff_fast import Fallback, parse_fast
 from tracer.scenes.obj import OBJError, read_obj
 from tracer.trace.records import RecordKind
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.model import Camera, ElementKind, Material, SceneBuilder, scenes_equal, untextured
 from tracer.rendering.texture import procedural_texture
 
@@ -337,11 +337,11 @@ def test_scenes_nff_cannot_express_are_refused_by_the_writer(tmp_path):
 # ---------------------------------------------------------------- rendering
 def test_a_textured_nff_renders_with_texel_records_and_the_plain_one_without():
     scene = read_nff(DATA / "board.nff")
-    counts = render(scene, size=8).trace.kind_counts()
+    counts = render(scene, options=RenderOptions(size=8)).trace.kind_counts()
     assert counts[RecordKind.TEXEL] > 0 and counts[RecordKind.TEXTURE] > 0
     plain_text = "\n".join(line for line in (DATA / "board.nff").read_text().splitlines()
                            if not line.startswith("usetexture"))
-    plain = render(parse_nff(plain_text, str(DATA / "board.nff")), size=8).trace.kind_counts()
+    plain = render(parse_nff(plain_text, str(DATA / "board.nff")), options=RenderOptions(size=8)).trace.kind_counts()
     assert plain[RecordKind.TEXEL] == 0 and plain[RecordKind.TEXTURE] == 0
     assert plain[RecordKind.SPHERE] == counts[RecordKind.SPHERE]  # the same geometry, traversed alike
 
@@ -359,7 +359,7 @@ def test_obj_with_mtl_parses_to_the_expected_arrays():
     np.testing.assert_array_equal(scene.triangle_uv, [[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]],
                                                       [[0, 0], [1, 0], [1, 1]], [[NAN, NAN]] * 3])
     np.testing.assert_array_equal(scene.triangle_vertices[2], [[-1, -1, 0], [1, -1, 0], [0, 0, 1]])
-    counts = render(scene, size=8).trace.kind_counts()
+    counts = render(scene, options=RenderOptions(size=8)).trace.kind_counts()
     assert counts[RecordKind.TEXEL] > 0
 
 

@@ -300,10 +300,11 @@ def _small_textured_scene():
 
 
 def test_textured_render_logs_texels_and_counts_them():
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = _small_textured_scene()
-    results = {mode: render(scene, size=24, texture_filter=mode) for mode in ("nearest", "bilinear", "trilinear")}
+    results = {mode: render(scene, options=RenderOptions(size=24, texture_filter=mode))
+               for mode in ("nearest", "bilinear", "trilinear")}
     for result in results.values():
         kinds, _ = unpack(result.trace.records)
         totals = result.totals()
@@ -318,15 +319,15 @@ def test_textured_render_logs_texels_and_counts_them():
     from tracer.scenes.spd import balls
     plain = balls()
     plain.max_depth = 2
-    assert not np.allclose(render(plain, size=24, log=False).image, results["trilinear"].image)
+    assert not np.allclose(render(plain, options=RenderOptions(size=24, log=False)).image, results["trilinear"].image)
 
 
 @pytest.mark.parametrize("order", ["linear", "morton", "blocked"])
 def test_textured_trace_replays_exactly_through_cachesim(order):
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = _small_textured_scene()
-    trace = render(scene, size=12).trace
+    trace = render(scene, options=RenderOptions(size=12)).trace
     layout = get_layout("compact").with_texels(TextureLayout(order, tile=4, superblock=2))
     placed = place_layout(layout, trace, scene)
     addresses = placed.addresses(trace.records, 32)
@@ -353,10 +354,10 @@ def test_misses_by_kind_equal_a_plain_replay_per_process():
     from cachesim.config import Hierarchy
     from coherence.kind_misses import misses_by_kind, texture_summary
     from coherence.mappings import get_mapping
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = _small_textured_scene()
-    trace = render(scene, size=12).trace
+    trace = render(scene, options=RenderOptions(size=12)).trace
     placed = place_layout(get_layout("compact").with_texels(TextureLayout("morton")), trace, scene)
     base = get_hierarchy("alpha21164")
     hierarchy = Hierarchy(tuple(replace_size(level, level.size // 32) for level in base.levels),
@@ -419,10 +420,10 @@ def test_texture_whatif_runs_on_a_small_image(tmp_path):
 def test_misses_per_layout_equal_one_layout_at_a_time():
     from coherence.kind_misses import misses_by_kind, misses_by_kind_per_layout
     from coherence.mappings import get_mapping
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = _small_textured_scene()
-    trace = render(scene, size=12).trace
+    trace = render(scene, options=RenderOptions(size=12)).trace
     hierarchy = get_hierarchy("alpha21164")
     placements = {label: place_layout(get_layout("compact").with_texels(TextureLayout.from_label(label)), trace, scene)
                   for label in ("linear", "morton", "blocked2x2")}
@@ -442,16 +443,16 @@ def test_report_texture_section_tables():
     from analyses.report_texture import LAYOUTS, texture_section
     from coherence.cost import get_cost_model
     from coherence.mappings import get_mapping
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     scene = _small_textured_scene()
-    trace = render(scene, size=12).trace
+    trace = render(scene, options=RenderOptions(size=12)).trace
     section = texture_section(trace, scene, get_layout("compact"), get_hierarchy("alpha21164"),
                               [get_mapping("S"), get_mapping("DB")], 4, get_cost_model("alpha8400"))
     share, layouts, curves = section["share"], section["layouts"], section["curves"]
     assert set(share["mapping"]) == {"S", "DB"} and len(share) == 2 * 3
     l1 = share[share["level"] == "L1"]
-    assert (l1["texel_reads"] == render(scene, size=12, log=False).totals()["texel_reads"]).all()
+    assert (l1["texel_reads"] == render(scene, options=RenderOptions(size=12, log=False)).totals()["texel_reads"]).all()
     assert ((share["texture_miss_share"] > 0) & (share["texture_miss_share"] <= 1)).all()
     assert list(dict.fromkeys(layouts["layout"])) == list(LAYOUTS)
     linear = layouts[(layouts["layout"] == "linear")].reset_index(drop=True)

@@ -8,7 +8,7 @@ from tracer.scenes import catalog as scenes
 from tracer.kd.closest import closest_hit, closest_hit_bruteforce
 from tracer.kd.tree import KdTreeConfig, build_kdtree
 from tracer.trace.records import COUNTER_NAMES, COUNTER_OF_KIND, RecordKind, WRITE_FLAG, unpack
-from tracer.rendering.render import render
+from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.study import PAPER_SCENES
 from tracer.rendering.workload import WORKLOADS, Workload, get_workload
 
@@ -51,7 +51,7 @@ def test_modern_is_todays_tracer():
 def test_study_workload_has_the_same_parameters_for_every_paper_scene():
     metadata = []
     for name in PAPER_SCENES:
-        trace = render(scenes.load(name), size=4, workload="study1997").trace
+        trace = render(scenes.load(name), options=RenderOptions(size=4, workload="study1997")).trace
         metadata.append((trace.metadata["kd_config"], trace.metadata["workload"]))
     assert all(entry == metadata[0] for entry in metadata)
     assert metadata[0][1]["name"] == "study1997"
@@ -59,8 +59,8 @@ def test_study_workload_has_the_same_parameters_for_every_paper_scene():
 
 
 def test_default_render_is_the_modern_workload(mixed):
-    default = render(mixed, size=12)
-    modern = render(mixed, size=12, workload="modern")
+    default = render(mixed, options=RenderOptions(size=12))
+    modern = render(mixed, options=RenderOptions(size=12, workload="modern"))
     assert np.array_equal(default.trace.records, modern.trace.records)
     assert np.array_equal(default.counters, modern.counters)
     assert default.trace.metadata["workload"]["name"] == "modern"
@@ -71,8 +71,8 @@ def test_default_render_is_the_modern_workload(mixed):
 
 def test_shadow_nearest_changes_test_counts_not_the_picture(mixed):
     tree = build_kdtree(mixed)
-    anyhit = render(mixed, tree, size=20, workload=Workload("a", KdTreeConfig()))
-    nearest = render(mixed, tree, size=20, workload=Workload("n", KdTreeConfig(), shadow_nearest=True))
+    anyhit = render(mixed, tree, RenderOptions(size=20, workload=Workload("a", KdTreeConfig())))
+    nearest = render(mixed, tree, RenderOptions(size=20, workload=Workload("n", KdTreeConfig(), shadow_nearest=True)))
     assert np.array_equal(anyhit.image, nearest.image)
     a, n = _counters(anyhit), _counters(nearest)
     assert np.array_equal(a["shadow_blocked"], n["shadow_blocked"])
@@ -105,7 +105,7 @@ def test_study_tree_tests_repeat_objects_in_several_leaves():
     # each leaf it visits that lists it, counted against the tree's own leaves
     scene = random_scene(("sphere",), n=40, seed=2, size=1.2)
     config = KdTreeConfig(builder="median", tree_depth=8, leaf_size=1)
-    result = render(scene, size=16, workload=Workload("w", config))
+    result = render(scene, options=RenderOptions(size=16, workload=Workload("w", config)))
     trace = result.trace
     kinds, index = unpack(trace.records)
     leaf_entries = index[kinds == RecordKind.INDEX_ENTRY]
@@ -119,7 +119,7 @@ def test_study_tree_tests_repeat_objects_in_several_leaves():
 
 
 def test_ray_data_records_match_counters_and_the_ray_tree(mixed):
-    result = render(mixed, size=(14, 10), workload="study1997")
+    result = render(mixed, options=RenderOptions(size=(14, 10), workload="study1997"))
     trace = result.trace
     kinds, index = unpack(trace.records)
     writes = (trace.records & np.uint32(WRITE_FLAG)) != 0
@@ -171,8 +171,8 @@ def test_ray_data_records_match_counters_and_the_ray_tree(mixed):
 
 def test_study_image_equals_modern_image_on_the_same_tree(mixed):
     tree = build_kdtree(mixed, WORKLOADS["study1997"].kd_config)
-    modern = render(mixed, tree, size=12, workload="modern")
-    study = render(mixed, tree, size=12, workload="study1997")
+    modern = render(mixed, tree, RenderOptions(size=12, workload="modern"))
+    study = render(mixed, tree, RenderOptions(size=12, workload="study1997"))
     assert np.array_equal(modern.image, study.image)
 
 
@@ -223,7 +223,7 @@ def test_missing_rays_test_every_object_of_every_leaf_they_cross(config):
     tree = build_kdtree(scene, config)
     assert tree.stats["references"] > 60  # objects listed in several leaves
     size = 12
-    result = render(scene, tree, size=size, log=False, max_depth=1, workload=Workload("w", config))
+    result = render(scene, tree, RenderOptions(size=size, log=False, max_depth=1, workload=Workload("w", config)))
     c = _counters(result)
     origin, directions = camera_rays(scene, size=size)
     leaves = _leaf_boxes(tree)

@@ -5,6 +5,8 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
+from pathlib import Path
 
 from analyses.commands.options import (HelpFormatter, check_at_least, scene_options, size_options, tree_options,
                                        workload_options)
@@ -57,8 +59,8 @@ def register(subparsers) -> None:
     parser.add_argument("--no-log", action="store_true",
                         help="render without logging accesses (faster; no --trace)")
     parser.add_argument("--memory-budget", type=float, metavar="MB", default=1024.0,
-                        help="records held in RAM at once, in MB; larger traces go to "
-                             "--trace DIR in chunks (default 1024)")
+                        help="memory for the records of one logging batch, in MB (default 1024); the records "
+                             "go to --trace DIR in chunks, or without --trace are only counted")
     parser.add_argument("--texture-filter", choices=("trilinear", "bilinear", "nearest"), default="trilinear",
                         help="how textured surfaces filter their texels (default: trilinear; the level of "
                              "detail comes from ray cones)")
@@ -118,7 +120,7 @@ def report(result, scene_name: str, seconds: float) -> dict:
         "root_tests": t["root_tests"],
         "per_ray": {"tests": t["intersection_tests"] / rays, "node_visits": t["node_visits"] / rays},
         "records": t.get("records"),
-        "bytes_per_record": 4 if result.trace is not None else None,
+        "bytes_per_record": 4 if result.n_records is not None else None,
         "epsilon": result.epsilon,
         "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "workload": result.workload,
         "timings": result.timings, "seconds": seconds,
@@ -159,7 +161,7 @@ def _table(rep: dict) -> str:
 def run(args: argparse.Namespace) -> int:
     from analyses.commands import checks
     from tracer.kd.tree import KdTreeConfig
-    from tracer.rendering.render import render
+    from tracer.rendering.render import RenderOptions, render
 
     # every user error surfaces here, before the scene is built or a ray is traced
     check_at_least(args, size=1)
@@ -171,29 +173,32 @@ def run(args: argparse.Namespace) -> int:
     budget = max(4, int(min(args.memory_budget, 2.0 ** 50) * 2**20))
     if args.png:
         checks.check_output_file("--png", args.png)
+        if Path(args.png).suffix.lower() != ".png":
+            raise ValueError(f"--png {args.png!r} must end in .png (the image is written as PNG)")
     if args.trace:
         checks.check_trace_folder("--trace", args.trace)
     checks.check_scene_argument(args.scene)
     samples = args.size + 1 if args.corner_rays else args.size
-    in_memory = 0 if (args.no_log or args.trace) else budget
-    checks.check_memory("--size", samples, bytes_per_pixel=checks.RENDER_BYTES_PER_PIXEL, extra_bytes=in_memory)
+    # without --trace the records are counted, not kept: no trace is held in memory
+    checks.check_memory("--size", samples, bytes_per_pixel=checks.RENDER_BYTES_PER_PIXEL)
     print(f"loading {args.scene} ...", file=sys.stderr)
     scene = _load_scene(args.scene, args.max_depth)
     kd_config = KdTreeConfig(builder=args.kd) if args.kd else None
+    options = RenderOptions(size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
+                            keep_records=args.trace is not None, kd_config=kd_config, memory_budget=budget,
+                            epsilon=args.epsilon, workload=args.workload, texture_filter=args.texture_filter)
     tree = None
     if args.trace:
-        pilot = render(scene, size=checks.PILOT_SIZE, kd_config=kd_config, epsilon=args.epsilon,
-                       workload=args.workload, texture_filter=args.texture_filter)
-        per_sample = 4 * pilot.trace.n_records / pilot.trace.n_pixels
+        pilot = render(scene, options=replace(options, size=checks.PILOT_SIZE, corner_rays=False,
+                                              keep_records=False))
+        per_sample = 4 * pilot.n_records / (pilot.width * pilot.height)
         checks.check_disk("--trace", args.trace, int(1.25 * per_sample * samples * samples))
         tree = pilot.tree
         del pilot
     print(f"rendering {scene.name} at {args.size}x{args.size} "
           f"({'with' if not args.no_log else 'without'} access logging) ...", file=sys.stderr)
     start = time.perf_counter()
-    result = render(scene, tree, size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
-                    epsilon=args.epsilon, kd_config=kd_config, trace_path=args.trace, workload=args.workload,
-                    memory_budget=budget, texture_filter=args.texture_filter,
+    result = render(scene, tree, options, trace_path=args.trace,
                     metadata={"command": "coherence render " + " ".join(sys.argv[2:])})
     seconds = time.perf_counter() - start
     if args.png:

@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
     if args.dask:
         checks.require_distributed()
-    out = args.out or f"report-{Path(args.scene).stem.lower()}"
+    out = args.out if args.out is not None else f"report-{Path(args.scene).stem.lower()}"
     counts = args.processes if args.processes else range(1, args.max_processes + 1)
     experiment = experiment_from_args(args, n_processes=tuple(counts))
     report = build_report(experiment, out=out, miss_map=miss_map)

@@ -32,14 +32,24 @@ class CameraFrame(NamedTuple):
     samples_x: int       #: samples per row
 
 
+def checked_size(size, name: str = "size") -> tuple[int, int]:
+    """An image size, an int or a (width, height) pair, as a pair of ints >= 1.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name``: not an int (a bool or a float is not), below 1, or
+        not one or two of them.
+    """
+    pair = (size, size) if np.ndim(size) == 0 else tuple(size)
+    if len(pair) != 2 or any(isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1
+                             for v in pair):
+        raise ValueError(f"{name} must be an int >= 1 or a (width, height) pair of them, got {size!r}")
+    return int(pair[0]), int(pair[1])
+
+
 def _resolve_size(scene: Scene, size) -> tuple[int, int]:
-    if size is None:
-        return scene.camera.resolution
-    if np.ndim(size) == 0:
-        size = (size, size)
-    if len(size) != 2 or any(int(s) != s or int(s) < 1 for s in size):
-        raise ValueError(f"size must be a positive int or (width, height), got {size!r}")
-    return int(size[0]), int(size[1])
+    return scene.camera.resolution if size is None else checked_size(size)
 
 
 def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = False) -> CameraFrame:

@@ -26,7 +26,8 @@ import numba
 import numpy as np
 
 from rtcommon.versions import package_versions
-from tracer.rendering.camera import _resolve_size, camera_frame
+from rtcommon.validate import require_int
+from tracer.rendering.camera import camera_frame, checked_size
 from tracer.rendering.geometry import prepare_geometry
 from tracer.kd.tree import KdTree, KdTreeConfig
 from tracer.trace.records import COUNTER_NAMES, N_COUNTERS
@@ -75,6 +76,8 @@ class RenderResult:
         The :class:`~tracer.rendering.workload.Workload` imitated, as plain values.
     texture_filter : str
         How textured surfaces were filtered.
+    n_records : int or None
+        Records logged (kept or only counted); None without logging.
     """
 
     image: np.ndarray
@@ -87,6 +90,7 @@ class RenderResult:
     epsilon: float = 0.0
     workload: dict = field(default_factory=dict)
     texture_filter: str = "trilinear"
+    n_records: int | None = None
 
     def totals(self) -> dict:
         """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
@@ -95,7 +99,9 @@ class RenderResult:
         out["rays"] = (out["primary_rays"] + out["shadow_rays"]
                        + out["reflection_rays"] + out["refraction_rays"])
         out["intersection_tests"] = sum(out[n] for n in COUNTER_NAMES if n.startswith("tests_"))
-        if self.trace is not None:
+        if self.n_records is not None:
+            out["records"] = self.n_records
+        elif self.trace is not None:
             out["records"] = self.trace.n_records
         return out
 
@@ -118,8 +124,9 @@ class _GrowingRecords:
     def extend(self, pieces) -> None:
         need = self.n + sum(len(piece) for piece in pieces)
         if 4 * need > self.memory_budget:
-            raise ValueError(f"the trace needs more than memory_budget ({self.memory_budget} bytes); "
-                             f"pass trace_path to write it to disk in chunks")
+            raise ValueError(f"the trace needs more than memory_budget ({self.memory_budget / 2**20:.4g} MB of "
+                             "records); pass trace_path to write it to disk in chunks, or keep_records=False "
+                             "to count the records only")
         if need > len(self.data):
             self.data.resize(max(need, 2 * len(self.data)), refcheck=False)
         for piece in pieces:
@@ -167,50 +174,115 @@ def _log_samples(kernel_inputs, out, memory_budget, sink):
         sink(pieces)
 
 
-def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: bool = False,
-           log: bool = True, kd_config: KdTreeConfig | None = None, max_depth: int | None = None,
-           trace_path=None, memory_budget: int = DEFAULT_MEMORY_BUDGET,
-           metadata: dict | None = None, epsilon: float | None = None,
-           workload: str | Workload | None = None, texture_filter: str = "trilinear") -> RenderResult:
-    """Render ``scene`` and, with ``log``, record every scene access per pixel.
+#: the texture filters :class:`RenderOptions` accepts, by name
+TEXTURE_FILTERS = {f.name.lower(): f for f in TextureFilter}
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """How :func:`render` renders and logs; every field is checked when the options are made.
 
     Parameters
     ----------
-    scene : Scene
-    tree : KdTree, optional
-        Built from ``kd_config`` when omitted.
     size : int or (int, int), optional
         Image width and height; default the camera's resolution.
     corner_rays : bool
         Trace (W+1) x (H+1) rays through the pixel corners (SPD counting)
         instead of W x H through the centres.
     log : bool
-        Produce the :class:`AccessTrace` (one logged pass) or only the image and
-        counters (one pass).
+        Trace with logging (one logged pass: the records every pixel reads)
+        or only the image and counters (one pass without).
+    keep_records : bool
+        With ``log``: keep the records, in an :class:`AccessTrace` in memory
+        or in ``trace_path`` (default); False counts them only
+        (``RenderResult.n_records``), in the memory of one logging batch,
+        so that a render for its image and figures needs no trace.
     kd_config : KdTreeConfig, optional
         The tree rule; default the workload's.
     max_depth : int, optional
-        Ray-tree depth (primary = 1); default ``scene.max_depth``.
-    trace_path : path, optional
-        Also save the trace there (atomically). A trace whose records exceed
-        ``memory_budget`` bytes requires it: records are then written in
-        chunks straight to disk and the returned trace is memory-mapped.
+        Ray-tree depth in 1..64 (primary = 1); default ``scene.max_depth``.
     memory_budget : int
-        Bytes of records held in memory at once (>= 4).
-    metadata : dict, optional
-        Extra JSON-serialisable entries for the trace's metadata.
+        Bytes of records held in memory at once (>= 4): a trace kept in
+        memory may not exceed it, and a logging batch's buffer stays
+        within it.
     epsilon : float, optional
         Hits closer than this (scene units) to the origin of a reflection,
         refraction or shadow ray are ignored; default 1e-8 of the scene's
         bounding-box diagonal. :data:`SPD_EPSILON` reproduces the published
         SPD counts.
     workload : str or Workload, optional
-        The tracer imitated, a :data:`tracer.rendering.workload.WORKLOADS` name or a
-        :class:`~tracer.rendering.workload.Workload`; default ``"modern"`` (today's
-        SAH tracer). Recorded in the trace's metadata.
+        The tracer imitated, a :data:`tracer.rendering.workload.WORKLOADS`
+        name or a :class:`~tracer.rendering.workload.Workload`; default
+        ``"modern"`` (today's SAH tracer). Kept as the Workload; recorded in
+        the trace's metadata.
     texture_filter : {"trilinear", "bilinear", "nearest"}
-        How textured surfaces filter their texels (:mod:`tracer.rendering.texture`);
-        the level of detail comes from ray cones. Recorded in the metadata.
+        How textured surfaces filter their texels
+        (:mod:`tracer.rendering.texture`); the level of detail comes from
+        ray cones. Recorded in the metadata.
+
+    Raises
+    ------
+    ValueError
+        Naming the field and what it accepts.
+    """
+
+    size: int | tuple[int, int] | None = None
+    corner_rays: bool = False
+    log: bool = True
+    keep_records: bool = True
+    kd_config: KdTreeConfig | None = None
+    max_depth: int | None = None
+    memory_budget: int = DEFAULT_MEMORY_BUDGET
+    epsilon: float | None = None
+    workload: str | Workload | None = None
+    texture_filter: str = "trilinear"
+
+    def __post_init__(self):
+        if self.size is not None:
+            object.__setattr__(self, "size", checked_size(self.size, "RenderOptions.size"))
+        for name in ("corner_rays", "log", "keep_records"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"RenderOptions.{name} must be True or False, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, bool(getattr(self, name)))
+        if self.kd_config is not None and not isinstance(self.kd_config, KdTreeConfig):
+            raise ValueError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
+        if self.max_depth is not None:
+            object.__setattr__(self, "max_depth", require_int("RenderOptions.max_depth", self.max_depth, 1, 64))
+        object.__setattr__(self, "memory_budget", require_int("RenderOptions.memory_budget", self.memory_budget, 4))
+        if self.epsilon is not None:
+            if isinstance(self.epsilon, (bool, np.bool_)) or not isinstance(self.epsilon, (int, float, np.number)) \
+                    or not (math.isfinite(self.epsilon) and self.epsilon > 0):
+                raise ValueError(f"RenderOptions.epsilon must be a positive finite distance, got {self.epsilon!r}")
+            object.__setattr__(self, "epsilon", float(self.epsilon))
+        try:
+            workload = get_workload("modern" if self.workload is None else self.workload)
+        except ValueError as error:
+            raise ValueError(f"RenderOptions.workload: {error}") from None
+        object.__setattr__(self, "workload", workload)
+        if self.texture_filter not in TEXTURE_FILTERS:
+            raise ValueError(f"RenderOptions.texture_filter must be one of {', '.join(TEXTURE_FILTERS)}, "
+                             f"got {self.texture_filter!r}")
+
+
+def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | None = None, *,
+           trace_path=None, metadata: dict | None = None) -> RenderResult:
+    """Render ``scene`` and, with ``options.log``, record every scene access per pixel.
+
+    Parameters
+    ----------
+    scene : Scene
+    tree : KdTree, optional
+        Built from ``options.kd_config`` when omitted.
+    options : RenderOptions, optional
+        Size, logging, tree rule, depth, tolerance, workload, texture
+        filter; default ``RenderOptions()``.
+    trace_path : path, optional
+        Also save the trace there (atomically). A trace whose records exceed
+        ``options.memory_budget`` bytes requires it (or ``keep_records``
+        False): records are then written in chunks straight to disk and the
+        returned trace is memory-mapped.
+    metadata : dict, optional
+        Extra JSON-serialisable entries for the trace's metadata.
 
     Returns
     -------
@@ -218,19 +290,18 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     """
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a Scene, got {type(scene).__name__}")
-    width, height = _resolve_size(scene, size)
-    depth = scene.max_depth if max_depth is None else max_depth
-    if int(depth) != depth or not 1 <= depth <= 64:
-        raise ValueError(f"max_depth must be an int in 1..64, got {depth!r}")
+    options = RenderOptions() if options is None else options
+    if not isinstance(options, RenderOptions):
+        raise ValueError(f"options must be RenderOptions, got {type(options).__name__}")
+    width, height = scene.camera.resolution if options.size is None else options.size
+    depth = scene.max_depth if options.max_depth is None else options.max_depth
+    if isinstance(depth, (bool, np.bool_)) or int(depth) != depth or not 1 <= depth <= 64:
+        raise ValueError(f"max_depth must be an int in 1..64, got {depth!r} (the scene's {scene.name!r})")
     depth = int(depth)
-    if int(memory_budget) != memory_budget or memory_budget < 4:
-        raise ValueError(f"memory_budget must be an int >= 4 bytes, got {memory_budget!r}")
-    if epsilon is not None and not (math.isfinite(epsilon) and epsilon > 0):
-        raise ValueError(f"epsilon must be a positive finite distance, got {epsilon!r}")
-    filters = {f.name.lower(): f for f in TextureFilter}
-    if texture_filter not in filters:
-        raise ValueError(f"texture_filter must be one of {', '.join(filters)}, got {texture_filter!r}")
-    workload = get_workload("modern" if workload is None else workload)
+    corner_rays, log, memory_budget = options.corner_rays, options.log, options.memory_budget
+    epsilon, texture_filter, workload = options.epsilon, options.texture_filter, options.workload
+    filters = TEXTURE_FILTERS
+    kd_config = options.kd_config
     if kd_config is None and tree is None:
         kd_config = workload.kd_config
     timings = {}
@@ -297,7 +368,9 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
                                          shading.level_height, shading.texture_level).levels()
             meta["texture_filter"] = texture_filter
         meta.update(metadata or {})
-        if trace_path is None:
+        if trace_path is None and not options.keep_records:
+            _log_samples(kernel_inputs, out, memory_budget, lambda pieces: None)  # counts are all that is kept
+        elif trace_path is None:
             records = _GrowingRecords(memory_budget)
             _log_samples(kernel_inputs, out, memory_budget, records.extend)
             np.cumsum(counts, out=offsets[1:])
@@ -319,7 +392,7 @@ def render(scene: Scene, tree: KdTree | None = None, *, size=None, corner_rays: 
     timings["total"] = time.perf_counter() - t_start
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
                         timings=timings, width=sx, height=sy, epsilon=eps, workload=workload.to_dict(),
-                        texture_filter=texture_filter)
+                        texture_filter=texture_filter, n_records=int(counts.sum()) if log else None)
 
 
 def save_png(image, path) -> Path:
