@@ -11,6 +11,7 @@ from pathlib import Path
 from analyses.commands.options import (HelpFormatter, check_at_least, scene_options, size_options, tree_options,
                                        workload_options)
 from rtcommon.files import write_bytes_atomic
+from rtcommon.validate import InputError
 
 HELP = "render a scene with the instrumented ray tracer; report rays, tests, node visits, records"
 
@@ -167,14 +168,14 @@ def run(args: argparse.Namespace) -> int:
     check_at_least(args, size=1)
     checks.check_range("--max-depth", args.max_depth, 1, 64)
     if args.no_log and args.trace:
-        raise ValueError("--trace needs logging; drop --no-log")
+        raise InputError("--trace needs logging; drop --no-log")
     if not args.memory_budget > 0 or args.memory_budget != args.memory_budget:
-        raise ValueError(f"--memory-budget must be > 0 MB, got {args.memory_budget}")
+        raise InputError(f"--memory-budget must be > 0 MB, got {args.memory_budget}")
     budget = max(4, int(min(args.memory_budget, 2.0 ** 50) * 2**20))
     if args.png:
         checks.check_output_file("--png", args.png)
         if Path(args.png).suffix.lower() != ".png":
-            raise ValueError(f"--png {args.png!r} must end in .png (the image is written as PNG)")
+            raise InputError(f"--png {args.png!r} must end in .png (the image is written as PNG)")
     if args.trace:
         checks.check_trace_folder("--trace", args.trace)
     checks.check_scene_argument(args.scene)
