@@ -59,6 +59,7 @@ import xxhash
 from rtcommon.files import make_temp_dir, remove_stale_temporaries
 from rtcommon.jsonio import json_default
 from rtcommon.validate import require_int
+from tracer.trace.check import META_CHECKSUM
 
 __all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir", "trace_key", "CACHE_ENV"]
 
@@ -67,7 +68,8 @@ CACHE_ENV = "COHERENCE_CACHE"
 
 _INFO = "render.json"
 _INFO_DIGEST = "render.json.xxh3"  # XXH3-64 of render.json's bytes, beside it
-_TRACE_DIGEST = "meta.json.xxh3"  # the trace's own digest, which covers all of its files
+_TRACE_DIGEST = META_CHECKSUM  # the trace's own digest, which covers all of its files
+_IMAGE = "image.png"  # the rendered image, beside the trace folder
 _KD_BUILDERS = ("sah", "median")
 _PRIVATE_CACHES: dict = {}
 _PILOT_SIZE = 32  # image size of the render that estimates a trace's bytes per pixel  # read-only cache root -> this process's temporary stand-in
@@ -278,7 +280,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     else:
         info["cached"] = True
     info["path"] = str(entry)
-    info["png"] = str(entry / "image.png")
+    info["png"] = str(entry / _IMAGE)
     return scene, trace, info
 
 
@@ -304,11 +306,11 @@ def _check_entry(entry: Path, key: str, info: dict, trace) -> None:
     from tracer.trace.access import TraceIntegrityError
 
     try:
-        image = xxhash.xxh3_64_hexdigest((entry / "image.png").read_bytes())
+        image = xxhash.xxh3_64_hexdigest((entry / _IMAGE).read_bytes())
     except (FileNotFoundError, NotADirectoryError):
-        raise TraceIntegrityError("image.png is missing") from None
+        raise TraceIntegrityError(f"{_IMAGE} is missing") from None
     if image != info.get("image_checksum"):
-        raise TraceIntegrityError("image.png does not match its checksum")
+        raise TraceIntegrityError(f"{_IMAGE} does not match its checksum")
     if (entry / "trace" / _TRACE_DIGEST).read_text(encoding="ascii", errors="replace").strip() != \
             info.get("trace_digest"):
         raise TraceIntegrityError(f"the trace is not the one {_INFO} was written with")
@@ -389,13 +391,13 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
         seconds = time.perf_counter() - start
         bar.update(1)
         bar.close()
-        save_png(result.image, tmp / "image.png")
+        save_png(result.image, tmp / _IMAGE)
         info = {
             "key": key, "scene": scene.name, "size": size, "kd": kd, "max_depth": int(scene.max_depth),
             "workload": workload,
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
-            "image_checksum": xxhash.xxh3_64_hexdigest((tmp / "image.png").read_bytes()),
+            "image_checksum": xxhash.xxh3_64_hexdigest((tmp / _IMAGE).read_bytes()),
             "trace_digest": (tmp / "trace" / _TRACE_DIGEST).read_text(encoding="ascii").strip(),
         }
         data = (json.dumps(info, indent=1, default=json_default) + "\n").encode("utf-8")

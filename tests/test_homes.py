@@ -91,3 +91,18 @@ def test_whatif_help_names_its_files():
     for pattern in WHATIF_FILES.values():
         assert pattern.format(name="<name>") in text
     assert f"with {META_SUFFIX}" in text
+
+
+def test_a_saved_trace_holds_exactly_the_format_files(tmp_path):
+    """A saved trace folder holds ``META_FILE``, ``META_CHECKSUM`` and ``ARRAY_FILES``,
+    nothing else, and loads back. Fails if ``AccessTrace.save`` writes the counters
+    to ``tmp / "counts.npy"``."""
+    from trace_factory import random_trace
+    from tracer.trace.access import AccessTrace
+    from tracer.trace.check import ARRAY_FILES, META_CHECKSUM, META_FILE
+
+    trace = random_trace(6, 4, seed=2)
+    trace.save(tmp_path / "t")
+    assert sorted(path.name for path in (tmp_path / "t").iterdir()) == sorted(
+        [META_FILE, META_CHECKSUM, *ARRAY_FILES.values()])
+    assert AccessTrace.load(tmp_path / "t").n_records == trace.n_records

@@ -141,7 +141,9 @@ def check_trace_folder(option: str, path) -> Path:
     if path.exists():
         if not path.is_dir():
             raise NotADirectoryError(f"{option} {str(path)!r} exists and is a file, not a trace folder")
-        if not (path / "meta.json").is_file() and any(path.iterdir()):
+        from tracer.trace.check import META_FILE
+
+        if not (path / META_FILE).is_file() and any(path.iterdir()):
             raise InputError(f"{option} {str(path)!r} exists and is not a trace folder; not overwriting")
     check_writable_ancestor(path.parent, f"{option} {str(path)!r}")
     return path

@@ -37,8 +37,8 @@ from tracer.trace.records import (  # noqa: F401  (re-exported: the format's nam
     Counter, RecordKind, pack, record_id, record_kind, unpack,
 )
 from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityError, array_checksum)
-    CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, TraceIntegrityError,
-    array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
+    ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, META_FILE,
+    TraceIntegrityError, array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
 )
 
 _ARRAYS = tuple(DTYPES)
@@ -161,9 +161,9 @@ class AccessTrace:
             checksums = {}
             for name, array in (("pixel_offsets", self.pixel_offsets), ("counters", self.counters)):
                 array = np.ascontiguousarray(array, dtype=np.int64)
-                np.save(tmp / f"{name}.npy", array)
+                np.save(tmp / ARRAY_FILES[name], array)
                 checksums[name] = array_checksum(array)
-            out = np.lib.format.open_memmap(tmp / "records.npy", mode="w+", dtype=np.uint32,
+            out = np.lib.format.open_memmap(tmp / ARRAY_FILES["records"], mode="w+", dtype=np.uint32,
                                             shape=(self.n_records,))
             hasher = xxhash.xxh3_64()
             for a in range(0, self.n_records, _CHUNK):
@@ -210,7 +210,7 @@ class AccessTrace:
             if directory.exists():
                 raise NotADirectoryError(f"trace {str(directory)!r} is a file, not a trace folder")
             raise FileNotFoundError(f"no such trace directory: {str(directory)!r}")
-        for name in ("meta.json", "pixel_offsets.npy", "records.npy", "counters.npy"):
+        for name in (META_FILE, *ARRAY_FILES.values()):
             if not (directory / name).is_file():
                 raise FileNotFoundError(f"trace {str(directory)!r} lacks {name}")
         meta = read_meta(directory)
@@ -279,7 +279,7 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
             "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums, "headers": header_checksums(tmp)}}
     data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
-    (tmp / "meta.json").write_bytes(data)
+    (tmp / META_FILE).write_bytes(data)
     # beside it rather than inside, so meta.json stays a plain, comparable record of the render
     (tmp / _META_CHECKSUM).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
 
@@ -292,7 +292,7 @@ def _publish(tmp: Path, directory: Path) -> None:
     if directory.exists():
         if not directory.is_dir():
             raise NotADirectoryError(f"{str(directory)!r} exists and is a file, not a trace directory; not overwriting")
-        if not (directory / "meta.json").is_file() and any(directory.iterdir()):
+        if not (directory / META_FILE).is_file() and any(directory.iterdir()):
             raise ValueError(f"{str(directory)!r} exists and is not a trace directory; not overwriting")
         old = directory.with_name(f"{temp_prefix(directory.name)}old.tmp")
         os.replace(directory, old)
@@ -318,7 +318,7 @@ class TraceWriter:
         self.tmp = _temp_sibling(self.directory)
         self.n_records = 0
         self._hasher = xxhash.xxh3_64()
-        self._file = open(self.tmp / "records.npy", "wb")
+        self._file = open(self.tmp / ARRAY_FILES["records"], "wb")
         self._file.write(_npy_header(0))  # rewritten with the final length
         self._counters = None
 
@@ -345,7 +345,7 @@ class TraceWriter:
         never sit in memory whole; :meth:`finish` then takes ``counters``
         None.
         """
-        self._counters = np.lib.format.open_memmap(self.tmp / "counters.npy", mode="w+", dtype=np.int64,
+        self._counters = np.lib.format.open_memmap(self.tmp / ARRAY_FILES["counters"], mode="w+", dtype=np.int64,
                                                    shape=(n_pixels, n_counters))
         return self._counters
 
@@ -374,7 +374,7 @@ class TraceWriter:
         self._file.write(_npy_header(n))
         self._file.close()
         pixel_offsets = np.ascontiguousarray(pixel_offsets, dtype=np.int64)
-        np.save(self.tmp / "pixel_offsets.npy", pixel_offsets)
+        np.save(self.tmp / ARRAY_FILES["pixel_offsets"], pixel_offsets)
         if counters is None:  # filled in place (counters_array): already in its file
             if self._counters is None:
                 raise ValueError("finish: counters is None, but counters_array was never called")
@@ -382,7 +382,7 @@ class TraceWriter:
             self.release_counter_pages()
         else:
             counters = np.ascontiguousarray(counters, dtype=np.int64)
-            np.save(self.tmp / "counters.npy", counters)
+            np.save(self.tmp / ARRAY_FILES["counters"], counters)
         checksums = {"pixel_offsets": array_checksum(pixel_offsets), "records": self._hasher.hexdigest(),
                      "counters": array_checksum(counters)}
         del counters

@@ -36,7 +36,12 @@ from tracer.trace.records import (COUNTER_NAMES, FORMAT_VERSION, INDEX_MASK, KIN
 CHECKSUM_ALGORITHM = "xxh3_64"
 #: The arrays of a trace, each in ``<name>.npy``, with the dtype the format stores.
 DTYPES = {"pixel_offsets": np.dtype("<i8"), "records": np.dtype("<u4"), "counters": np.dtype("<i8")}
-META_CHECKSUM = "meta.json.xxh3"  # XXH3-64 of meta.json's bytes, beside it
+#: The files of a saved trace folder: its record (what was rendered, and the checksums) ...
+META_FILE = "meta.json"
+#: ... each array's file, by array name ...
+ARRAY_FILES = {name: f"{name}.npy" for name in DTYPES}
+#: ... and the XXH3-64 of the record's bytes, beside it.
+META_CHECKSUM = META_FILE + ".xxh3"
 CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
 
 
@@ -128,7 +133,7 @@ def check_values(trace, checksums: dict | None, where: str, files: bool = False)
     ------
     TraceIntegrityError
     """
-    label = (lambda name: f"{name}.npy") if files else (lambda name: name)
+    label = ARRAY_FILES.__getitem__ if files else (lambda name: name)
     wanted = (lambda name: None) if checksums is None else checksums.get
     offsets = np.asarray(trace.pixel_offsets)
     if wanted("pixel_offsets") is not None and array_checksum(offsets) != wanted("pixel_offsets"):
@@ -279,7 +284,7 @@ def read_meta(directory: Path) -> dict:
         trace), a mismatch, unreadable JSON or another format version.
     """
     where = f"trace {str(directory)!r}"
-    data = (directory / "meta.json").read_bytes()
+    data = (directory / META_FILE).read_bytes()
     try:
         meta = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
@@ -298,8 +303,8 @@ def read_meta(directory: Path) -> dict:
         raise _refuse(where, f"unsupported format_version {meta.get('format_version')!r}")
     checksums = meta.get("checksums") if isinstance(meta.get("checksums"), dict) else {}
     headers = checksums.get("headers") if isinstance(checksums.get("headers"), dict) else {}
-    missing = [f"{name}.npy" for name in DTYPES if not isinstance(checksums.get(name), str)]
-    missing += [f"{name}.npy's header" for name in DTYPES if not isinstance(headers.get(name), str)]
+    missing = [ARRAY_FILES[name] for name in DTYPES if not isinstance(checksums.get(name), str)]
+    missing += [f"{ARRAY_FILES[name]}'s header" for name in DTYPES if not isinstance(headers.get(name), str)]
     if missing:
         what = "checksums" if len(missing) == 2 * len(DTYPES) else f"checksum of {', '.join(missing)}"
         raise _refuse(where, f"meta.json holds no {what}, so the trace cannot be verified",
@@ -352,7 +357,7 @@ def dimensions(meta: dict, where: str) -> dict:
 
 def header_checksums(folder: Path) -> dict:
     """XXH3-64 of each array file's ``.npy`` header in ``folder``, by array name."""
-    return {name: xxhash.xxh3_64_hexdigest(read_npy_header(folder / f"{name}.npy").raw) for name in DTYPES}
+    return {name: xxhash.xxh3_64_hexdigest(read_npy_header(folder / ARRAY_FILES[name]).raw) for name in DTYPES}
 
 
 def load_array(directory: Path, name: str, shape: tuple, checksums: dict, mmap: bool) -> np.ndarray:
@@ -365,7 +370,7 @@ def load_array(directory: Path, name: str, shape: tuple, checksums: dict, mmap: 
         Naming the trace and the file.
     """
     where = f"trace {str(directory)!r}"
-    path = directory / f"{name}.npy"
+    path = directory / ARRAY_FILES[name]
     try:
         header = read_npy_header(path)
     except (ValueError, OSError) as error:
