@@ -21,14 +21,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 MAX_PARAMETERS = 10
 
-#: Functions still over the limit, as "path:function", each with the helper
-#: who is removing it; the lead empties this list once they have landed.
-#: An entry whose function is back under the limit is ignored.
-OVER_THE_LIMIT_FOR_NOW = {
-    # H2 (the renderer's options as one object)
-    "tracer/rendering/render.py:render",
-}
-
 # "DESIGN.md", "issue 12", "issues 12 and 13", "issue #12", "§4"
 _OUTSIDE = re.compile(r"DESIGN\.md|\b[Ii]ssues?\s+#?\d+|§")
 # "docs/memory_image.md" or "docs/design.md, "Layers"" (a page and one of its headings)
@@ -100,7 +92,7 @@ def unresolved_pointers(root: Path = ROOT) -> list[str]:
 def test_no_function_takes_more_than_ten_parameters():
     """Fails if ``coherence.metrics.add_speedups`` gets ten more keyword
     parameters (``*, a=0, b=0, ...``), or any other non-kernel function an eleventh."""
-    offending = [item for item in over_the_limit() if item.split(" takes ")[0] not in OVER_THE_LIMIT_FOR_NOW]
+    offending = over_the_limit()
     assert not offending, "pass a bundle instead of:\n" + "\n".join(offending)
 
 
