@@ -20,6 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_report import run  # noqa: E402
+from analyses.paper_output import PAPER_FILES  # noqa: E402
 
 TARGET_SECONDS = 600.0
 
@@ -37,7 +38,7 @@ def main():
         if args.fresh_traces:
             argv += ["--cache", str(Path(scratch) / "cache")]
         seconds, peak = run(argv, env)
-        runs = sum(1 for _ in open(Path(scratch) / "out" / "paper.csv")) - 1
+        runs = sum(1 for _ in open(Path(scratch) / "out" / PAPER_FILES["runs"])) - 1
     print(f"coherence paper --size {args.size}{' (traces rendered in the run)' if args.fresh_traces else ''}: "
           f"{seconds:7.1f} s  peak {peak / 2**30:5.2f} GiB, {runs} rows of runs, {os.cpu_count()} CPUs")
     met = seconds <= TARGET_SECONDS

@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from analyses.report import REPORT_FILES
+
 
 def run(argv, env):
     """Wall seconds and peak RSS (bytes) of one CLI run; fails loudly on a non-zero exit."""
@@ -67,7 +69,7 @@ def main():
             seconds, peak = run(["report", *common, *budget, "--out", str(out), "--cache", str(cache)],
                                 run_env)
             print(f"{label:6s}: {seconds:7.1f} s  peak {peak / 2**30:5.2f} GiB", flush=True)
-            return seconds, peak, (out / "results.csv").read_bytes()
+            return seconds, peak, (out / REPORT_FILES["results"]).read_bytes()
 
         results = {}
         if not args.skip_cold:

@@ -26,6 +26,7 @@ from timing import best_of
 from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.catalog import load
 from tracer.trace.access import AccessTrace, verify_trace
+from tracer.trace.check import META_FILE
 from tracer.trace.check import read_meta
 
 
@@ -37,7 +38,7 @@ def main():
     args = parser.parse_args()
     path = args.cache / f"{args.scene}-{args.size}"
     scene = load(args.scene)
-    if not (path / "meta.json").is_file():
+    if not (path / META_FILE).is_file():
         start = time.perf_counter()
         render(scene, options=RenderOptions(size=args.size), trace_path=path)
         print(f"rendered {args.scene} {args.size}x{args.size} in {time.perf_counter() - start:.1f} s", file=sys.stderr)

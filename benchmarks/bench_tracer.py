@@ -27,6 +27,7 @@ from tracer.kd.closest import closest_hit
 from tracer.rendering.render import RenderOptions, render
 from tracer.scenes.catalog import PAPER_SCENES, load
 from tracer.scenes.study import STUDY_SCENES
+from tracer.trace.check import ARRAY_FILES
 
 
 def _study_tests_1e6(name: str) -> float:
@@ -189,7 +190,7 @@ def main(argv=None):
             seconds = time.perf_counter() - t0
             t = res.totals()
             files = sum(os.path.getsize(os.path.join(tmp, name, f)) for f in os.listdir(os.path.join(tmp, name)))
-            rec_bytes = os.path.getsize(os.path.join(tmp, name, "records.npy"))
+            rec_bytes = os.path.getsize(os.path.join(tmp, name, ARRAY_FILES["records"]))
             row = {"elements": scene.n_elements, "max_depth": scene.max_depth, "rays": t["rays"],
                    "rays_by_type": {k: t[k] for k in ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays")},
                    "build_seconds": build, "trace_seconds": seconds, "timings": res.timings,

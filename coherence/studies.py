@@ -24,6 +24,7 @@ from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import require_int
 from tracer.trace.access import COUNTER_NAMES, RecordKind
+from tracer.trace.check import META_FILE
 
 
 @dataclass(frozen=True)
@@ -233,7 +234,7 @@ def simulate_stored(trace_folder: str, distribution, hierarchy, placed, cost, ma
     from tracer.trace.access import AccessTrace
 
     folder = os.path.abspath(trace_folder)
-    key = (folder, os.stat(os.path.join(folder, "meta.json")).st_mtime_ns)  # a trace saved again is loaded again
+    key = (folder, os.stat(os.path.join(folder, META_FILE)).st_mtime_ns)  # a trace saved again is loaded again
     if key not in _STORED:
         _STORED.clear()  # one trace at a time: a worker's memory holds one study
         _STORED[key] = AccessTrace.load(folder, mmap=True)
