@@ -51,7 +51,7 @@ from cachesim import Hierarchy, get_hierarchy
 from analyses.experiment import Experiment
 from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.files import remove_stale_temporaries
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import InputError, require_int, require_number
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
@@ -175,12 +175,19 @@ def parse_grid_flag(flag: str) -> tuple[str, list]:
 
 
 def load_study_file(path) -> WhatIf:
-    """A study from a TOML file: top-level base keys and a ``[grid]`` table."""
+    """A study from a TOML file (UTF-8, a byte-order mark skipped): top-level base keys and a ``[grid]`` table."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such what-if file")
+    raw = path.read_bytes()
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = raw.decode("utf-8-sig")  # a byte-order mark, as some editors write, is skipped
+    except UnicodeDecodeError as error:
+        line = raw[:error.start].count(b"\n") + 1
+        raise InputError(f"{path}:{line}: not a text file (byte {error.start} is not UTF-8); expected a TOML "
+                         "what-if study") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{path}: not valid TOML: {error}") from None
     grid = data.pop("grid", None)

@@ -506,7 +506,8 @@ def test_write_files_atomic_writes_all_or_nothing(tmp_path):
 # empty.nff, noview.nff and digits.nff (NFF files the strict reader refuses), huge.nff (a
 # triangle at 1e300, which the renderer refuses), bom.nff (after a UTF-8 byte-order mark),
 # depth0.nff ('# max_depth 0'), negative.nff (Kd -0.5), usemtl.obj (usemtl without mtllib), vn.obj
-# (normal 2 of 1), badvt.obj ('f 1/a 2 3') and huge-texture.nff (a 16384 x 16384 PNG header).
+# (normal 2 of 1), badvt.obj ('f 1/a 2 3'), huge-texture.nff (a 16384 x 16384 PNG header) and
+# bom-study.toml (a what-if study without a grid, after a byte-order mark).
 CLI_CASES = [
     (["render", "balls", "--size", "20000"], 2, "needs about"),
     (["render", "tetra", "--size", "0"], 2, "--size must be >= 1"),
@@ -588,6 +589,8 @@ CLI_CASES = [
     (["report", "tetra", "--size", "8", "--out", ""], 2, "output folder '' is an empty name"),
     (["whatif", "latency", "--out", ""], 2, "output folder '' is an empty name"),
     (["paper", "--size", "8", "--out", ""], 2, "output folder '' is an empty name"),
+    (["whatif", "--file", "binary.toml"], 2, "binary.toml:1: not a text file (byte 0 is not UTF-8)"),
+    (["whatif", "--file", "bom-study.toml"], 2, "bom-study.toml: needs a [grid] table"),
 ]
 
 _RUNNER = textwrap.dedent('''
@@ -656,6 +659,7 @@ def scratch(tmp_path_factory):
     (folder / "vn.obj").write_text(triangle + "vn 0 0 1\nf 1//2 2//1 3//1\n")
     (folder / "badvt.obj").write_text(triangle + "f 1/a 2 3\n")
     (folder / "huge.png").write_bytes(_png_header(16384, 16384))
+    (folder / "bom-study.toml").write_bytes(b"\xef\xbb\xbfjobs = 1\n")
     (folder / "huge-texture.nff").write_text(view + "texture big huge.png\nusetexture big\ns 0 0 0 1\n")
     render(load("tetra"), options=RenderOptions(size=8), trace_path=folder / "trace8")
     for name in ("trace8-flipped", "trace8-outside", "trace8-old", "trace8-f8", "trace8-magic"):
