@@ -19,12 +19,12 @@ extra whether the line was written or not.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import (EVICTIONS, EXCLUSIVE, LRU, _add_counts, _fill_levels, _find, _insert, _serving_level,
-                           _set_base)
-from rtcommon.jit import NO_REFCOUNTS
+from cachesim.full import _fill_levels, _hash_find, _place, _serving_level, _touch, build_index
+from cachesim.sets import EVICTIONS, EXCLUSIVE, LRU, _add_counts, _find
+from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 
 
-@njit(cache=True, **NO_REFCOUNTS)
+@njit(cache=True, inline="always")
 def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work):
     """Run ``addresses`` (uint64, (N,)) through one state, one access at a time.
 
@@ -34,17 +34,32 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
     parameters and the returned clock are those of
     :func:`cachesim.kernels.simulate_stream`.
     """
+    return _walk(addresses, writes, geometry, state, None, clock, served_by, record, work)
+
+
+@njit(cache=True, **NOT_INLINED)
+def _simulate_indexed(addresses, writes, geometry, state, clock, served_by, record, work):
+    """:func:`_simulate_by_access` (same parameters, same results) with the
+    large fully associative levels indexed (:mod:`cachesim.full`): O(1) an
+    access there instead of O(ways), after O(ways log ways) to build the index."""
+    index, exact = build_index(geometry, state, clock)
+    if not exact:
+        return _walk(addresses, writes, geometry, state, None, clock, served_by, record, work)
+    return _walk(addresses, writes, geometry, state, index, clock, served_by, record, work)
+
+
+@njit(cache=True, **NO_REFCOUNTS)
+def _walk(addresses, writes, geometry, state, index, clock, served_by, record, work):
+    """The loop of :func:`_simulate_by_access`; ``index`` is None or a
+    :class:`cachesim.full.FullIndex` built for this call."""
     rel_shift = geometry.rel_shift
     n_sets = geometry.n_sets
     set_mask = geometry.set_mask
     ways = geometry.ways
     policy = geometry.policy
-    offset = geometry.offset
-    seeds = geometry.seeds
     write_allocate = geometry.write_allocate
     inclusion = geometry.inclusion
     tags = state.tags
-    stamps = state.stamps
     counts = state.counts
     n_levels = rel_shift.shape[0]
     has_writes = writes.shape[0] > 0
@@ -83,20 +98,23 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
             if record:
                 served_by[i] = 0
             continue
-        base0 = (line0 & mask0 if mask0 >= 0 else line0 % n_sets0) * ways0
-        slot = _find(tags, base0, ways0, line0)
+        if index is not None and index.indexed[0]:
+            slot = _hash_find(index, 0, line0)
+        else:
+            base0 = (line0 & mask0 if mask0 >= 0 else line0 % n_sets0) * ways0
+            slot = _find(tags, base0, ways0, line0)
         if slot >= 0:
             first_hits += 1
             if is_write:
                 first_write_hits += 1
             if track0:
-                stamps[slot] = clock
+                _touch(slot, 0, state, index, clock)
             if record:
                 served_by[i] = 0
             previous = line0
             continue
         lines[0] = line0
-        served = _serving_level(line0, 1, geometry, state, clock, is_write, work)
+        served = _serving_level(line0, 1, geometry, state, index, clock, is_write, work)
         if record:
             served_by[i] = served
         if inclusion == EXCLUSIVE:
@@ -104,14 +122,13 @@ def _simulate_by_access(addresses, writes, geometry, state, clock, served_by, re
             # Hierarchy), so a write moves lines as a read does.
             line = line0
             for level in range(n_levels):
-                base = _set_base(line, level, n_sets, set_mask, ways, offset)
-                line = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
+                line = _place(line, level, geometry, state, index, clock)
                 if line < 0:
                     break
                 counts[level, EVICTIONS] += 1
             previous = line0
             continue
-        _fill_levels(served, 0, geometry, state, clock, is_write, work)
+        _fill_levels(served, 0, geometry, state, index, clock, is_write, work)
         previous = line0 if (allocate0 or not is_write) else np.int64(-1)
     level_hits[0] = first_hits
     level_write_hits[0] = first_write_hits

@@ -20,7 +20,8 @@ hierarchies move lines on every hit and keep the general walk.
 import numpy as np
 from numba import njit
 
-from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _fill_levels, _insert, _serving_level
+from cachesim.full import _fill_levels, _serving_level
+from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _insert
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 
 
@@ -152,10 +153,10 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
                 continue
         # Neither level holds it: walk the levels below the second, as the general walk does.
         second_misses += 1
-        served = _serving_level(line0, 2, geometry, state, clock, is_write, work)
+        served = _serving_level(line0, 2, geometry, state, None, clock, is_write, work)
         if served_by is not None:
             served_by[at] = served
-        _fill_levels(served, 2, geometry, state, clock, is_write, work)
+        _fill_levels(served, 2, geometry, state, None, clock, is_write, work)
         if not (is_write and not allocate1):
             if ways1 == 1:  # no stamp, as the walk's direct-mapped fill
                 evicted = tags[base1]

@@ -57,9 +57,10 @@ Line numbers are byte addresses shifted right by the first level's line shift
 import numpy as np
 from numba import njit, prange
 
-from cachesim.by_access import _simulate_by_access
+from cachesim.by_access import _simulate_by_access, _simulate_indexed
 from cachesim.by_level import _simulate_by_level
 from cachesim.direct_first import _simulate_direct_first, serves_direct_first
+from cachesim.full import uses_index
 from cachesim.sets import (ACCESSES, CHUNK, EVICTIONS, EXCLUSIVE, FIFO, HITS, INCLUSIVE, INVALIDATIONS, LRU,
                            MISSES, N_COUNTERS, NON_INCLUSIVE, RANDOM, WRITE_HITS, WRITE_MISSES, WRITES,
                            CacheArrays, CacheGeometry, ChunkBuffers, chunk_buffers)
@@ -106,6 +107,9 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     packages' compiled code that feeds many short streams (one pixel's reads,
     say) to one state. Every access is a read.
     """
+    if uses_index(geometry, addresses.shape[0]):
+        return _simulate_indexed(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by, record,
+                                 work)
     if geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):
@@ -137,9 +141,13 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     (:mod:`cachesim.by_level`, the fast path); everything else walks each
     access down the levels (:mod:`cachesim.by_access`, which documents the
     write semantics), with the first two levels looked up at once when the
-    first is direct-mapped (:mod:`cachesim.direct_first`). All give identical
-    states and counts where they apply.
+    first is direct-mapped (:mod:`cachesim.direct_first`), and with large
+    fully associative levels indexed on a long enough stream
+    (:mod:`cachesim.full`). All give identical states and counts where they
+    apply.
     """
+    if uses_index(geometry, addresses.shape[0]):
+        return _simulate_indexed(addresses, writes, geometry, state, clock, served_by, record, work)
     if writes.shape[0] == 0 and geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):

@@ -189,22 +189,6 @@ def _insert(tags, stamps, seed, base, n_ways, policy, line, clock):
 
 
 @njit(cache=True, inline="always")
-def _back_invalidate(tags, evicted, level, rel_shift, set_mask, n_sets, ways, offset, invalidations):
-    """Inclusion: remove every line of the levels above ``level`` that lies in
-    its ``evicted`` line, counting them in ``invalidations`` per level."""
-    for upper in range(level):
-        spread = rel_shift[level] - rel_shift[upper]
-        first = evicted << spread
-        mask = set_mask[upper]
-        for sub in range(first, first + (np.int64(1) << spread)):
-            base = offset[upper] + (sub & mask if mask >= 0 else sub % n_sets[upper]) * ways[upper]
-            for way in range(base, base + ways[upper]):
-                if tags[way] == sub:
-                    tags[way] = -1
-                    invalidations[upper] += 1
-
-
-@njit(cache=True, inline="always")
 def _add_counts(counts, n_accesses, n_writes, level_hits, level_write_hits, invalidations):
     """Add one call's per-level hits, write hits and invalidations to
     ``counts``: only misses go down a level, so the accesses of level
@@ -221,63 +205,3 @@ def _add_counts(counts, n_accesses, n_writes, level_hits, level_write_hits, inva
         counts[level, INVALIDATIONS] += invalidations[level]
         entering -= level_hits[level]
         entering_writes -= level_write_hits[level]
-
-
-@njit(cache=True, inline="always")
-def _serving_level(line0, first_level, geometry, state, clock, is_write, work):
-    """Look ``line0`` up from ``first_level`` down; return the level that holds it (the number of levels: memory).
-
-    Leaves each level's line in ``work.level_lines``, counts the hit in
-    ``work.level_hits`` (and ``level_write_hits``), stamps an LRU hit and,
-    in an exclusive hierarchy, takes the line out of the level that held it
-    (it moves up). The walk of :mod:`cachesim.by_access` and, below its
-    first two levels, of :mod:`cachesim.direct_first`; their kernels run
-    without reference counting, so reading the geometry bundle here costs
-    nothing per access.
-    """
-    tags = state.tags
-    n_levels = geometry.rel_shift.shape[0]
-    for level in range(first_level, n_levels):
-        line = line0 >> geometry.rel_shift[level]
-        work.level_lines[level] = line
-        base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
-        slot = _find(tags, base, geometry.ways[level], line)
-        if slot >= 0:
-            work.level_hits[level] += 1
-            if is_write:
-                work.level_write_hits[level] += 1
-            if geometry.policy[level] == LRU:
-                state.stamps[slot] = clock
-            if geometry.inclusion == EXCLUSIVE:
-                tags[slot] = -1  # the line moves up to the first level
-            return level
-    return n_levels
-
-
-@njit(cache=True, inline="always")
-def _fill_levels(served, last_level, geometry, state, clock, is_write, work):
-    """Place the line of :func:`_serving_level` in levels ``served - 1`` down to ``last_level``.
-
-    Bottom-up, so that back-invalidations of lower levels never remove the
-    line just placed above them; a write skips the levels that do not
-    allocate writes. Counts evictions, and in an inclusive hierarchy
-    back-invalidates the levels above an evicted line.
-    """
-    tags = state.tags
-    for level in range(served - 1, last_level - 1, -1):
-        if is_write and not geometry.write_allocate[level]:
-            continue
-        line = work.level_lines[level]
-        base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
-        if geometry.ways[level] == 1:
-            # Direct-mapped: no choice and no order to keep (no stamp).
-            evicted = tags[base]
-            tags[base] = line
-        else:
-            evicted = _insert(tags, state.stamps, geometry.seeds[level], base, geometry.ways[level],
-                              geometry.policy[level], line, clock)
-        if evicted >= 0:
-            state.counts[level, EVICTIONS] += 1
-            if geometry.inclusion == INCLUSIVE and level > 0:
-                _back_invalidate(tags, evicted, level, geometry.rel_shift, geometry.set_mask, geometry.n_sets,
-                                 geometry.ways, geometry.offset, work.level_invalidations)

@@ -9,7 +9,7 @@ A, B, C = 0, 64, 128  # three 64-byte lines
 
 @pytest.mark.parametrize("assoc", [2, "full"])
 def test_inclusive_fills_run_from_the_lowest_level_up(assoc):
-    """Fails if ``_fill_levels`` in cachesim/sets.py fills top-down
+    """Fails if ``_fill_levels`` in cachesim/full.py fills top-down
     (``range(last_level, served)``): L1 would evict B for C and the last B would go to L2.
 
     L1 and L2 hold two lines each. After A, B, A the lines' recency differs:
@@ -30,7 +30,7 @@ def test_inclusive_fills_run_from_the_lowest_level_up(assoc):
 def test_a_write_goes_down_as_a_write_below_a_write_allocating_level(l1_assoc):
     """Fails if a write fills a level whose ``write_allocate`` is false, as a
     read fetch would (Dinero IV's rule): drop the ``continue`` of
-    ``_fill_levels`` in cachesim/sets.py (2-way L1) or make the L2 fill of
+    ``_fill_levels`` in cachesim/full.py (2-way L1) or make the L2 fill of
     cachesim/direct_first.py unconditional (direct-mapped L1). L2 would then
     hold A and serve its last read.
 
