@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 from rtcommon.versions import package_versions
-from rtcommon.validate import require_int
+from rtcommon.validate import require_bool, require_int, require_number
 from tracer.rendering.camera import camera_frame, checked_size
 from tracer.rendering.geometry import prepare_geometry
 from tracer.kd.tree import KdTree, KdTreeConfig
@@ -241,19 +241,17 @@ class RenderOptions:
         if self.size is not None:
             object.__setattr__(self, "size", checked_size(self.size, "RenderOptions.size"))
         for name in ("corner_rays", "log", "keep_records"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"RenderOptions.{name} must be True or False, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, bool(getattr(self, name)))
+            object.__setattr__(self, name, require_bool(f"RenderOptions.{name}", getattr(self, name)))
         if self.kd_config is not None and not isinstance(self.kd_config, KdTreeConfig):
             raise ValueError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
         if self.max_depth is not None:
             object.__setattr__(self, "max_depth", require_int("RenderOptions.max_depth", self.max_depth, 1, 64))
         object.__setattr__(self, "memory_budget", require_int("RenderOptions.memory_budget", self.memory_budget, 4))
         if self.epsilon is not None:
-            if isinstance(self.epsilon, (bool, np.bool_)) or not isinstance(self.epsilon, (int, float, np.number)) \
-                    or not (math.isfinite(self.epsilon) and self.epsilon > 0):
-                raise ValueError(f"RenderOptions.epsilon must be a positive finite distance, got {self.epsilon!r}")
-            object.__setattr__(self, "epsilon", float(self.epsilon))
+            epsilon = require_number("RenderOptions.epsilon", self.epsilon, 0, "a distance")
+            if epsilon == 0:
+                raise ValueError("RenderOptions.epsilon must be a finite number > 0 (a distance), got 0")
+            object.__setattr__(self, "epsilon", epsilon)
         try:
             workload = get_workload("modern" if self.workload is None else self.workload)
         except ValueError as error:
