@@ -9,9 +9,11 @@ sizes. A record read touches every cache line its bytes span, so a 96-byte
 triangle read costs three or four 32-byte lines.
 
 Presets (:data:`LAYOUTS`): ``compact``, the float32 records of today's
-tracer, and ``alpha1997``, a 1990s C tracer's structs on the 64-bit Alpha.
-Their sizes are one table, :data:`PRESET_RECORDS`; ``docs/memory_image.md``
-shows it with the reason for every size (a test keeps the two equal).
+tracer, ``alpha1997``, a 1990s C tracer's structs on the 64-bit Alpha, and
+``malloc1997``, the same structs allocated one at a time in a 1990s heap
+(a layout with a ``heap``: :mod:`coherence.malloc_image`). Their sizes are one
+table, :data:`PRESET_RECORDS`; ``docs/memory_image.md`` shows it with the
+reason for every size (a test keeps the two equal).
 
 Texels are not packed in index order: the layout's
 :class:`~coherence.texture_layout.TextureLayout` (``MemoryLayout.texels``:
@@ -33,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from coherence.malloc_image import HEAP_KINDS, CreationOrder, HeapModel, heap_blocks
 from coherence.page_placement import PagePlacement, PageTable, identity_pages, translate_addresses
 from coherence.texture_layout import TextureLayout
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
@@ -112,6 +115,11 @@ class MemoryLayout:
     name : str
     texels : TextureLayout
         The order of texels in their region (row-major by default).
+    heap : HeapModel, optional
+        Allocate the scene's records (:data:`~coherence.malloc_image.HEAP_KINDS`)
+        one at a time with this allocator, in the tracer's creation order,
+        in a heap after the regions (whose places for those kinds stay
+        unused); see :meth:`place`. None (the default): regions only.
     """
 
     records: dict = field(default_factory=dict)
@@ -119,6 +127,7 @@ class MemoryLayout:
     region_align: int = 4096
     name: str = "custom"
     texels: TextureLayout = field(default_factory=TextureLayout)
+    heap: HeapModel | None = None
 
     def __post_init__(self):
         expected = {kind.name.lower() for kind in RecordKind}
@@ -139,6 +148,8 @@ class MemoryLayout:
                 raise ValueError(f"MemoryLayout.records[{name!r}].per_vertex is only for polygons and patches")
         require_int("MemoryLayout.base", self.base, 0, 2**48 - 1)
         require_power_of_two("MemoryLayout.region_align", self.region_align)
+        if self.heap is not None and not isinstance(self.heap, HeapModel):
+            raise ValueError(f"MemoryLayout.heap must be a HeapModel or None, got {self.heap!r}")
 
     def scaled(self, factor: int) -> "MemoryLayout":
         """This layout with every record ``factor`` times as many bytes (alignments kept).
@@ -150,12 +161,13 @@ class MemoryLayout:
         records = {name: RecordLayout(record.size * int(factor), record.align, record.per_vertex * int(factor))
                    for name, record in self.records.items()}
         return MemoryLayout(records=records, base=self.base, region_align=self.region_align,
-                            name=self.name if factor == 1 else f"{self.name} x{int(factor)}", texels=self.texels)
+                            name=self.name if factor == 1 else f"{self.name} x{int(factor)}", texels=self.texels,
+                            heap=self.heap)
 
     def with_texels(self, texels: TextureLayout) -> "MemoryLayout":
         """This layout with its texels in the order of ``texels``."""
         return MemoryLayout(records=dict(self.records), base=self.base, region_align=self.region_align,
-                            name=self.name, texels=texels)
+                            name=self.name, texels=texels, heap=self.heap)
 
     def _texel_starts(self, count: int, stride: int, textures):
         """Offsets of ``count`` texels from their region's start, and the region's bytes."""
@@ -170,7 +182,7 @@ class MemoryLayout:
         key = kind.name.lower() if isinstance(kind, RecordKind) else str(kind).lower()
         return self.records[key]
 
-    def place(self, record_counts, vertex_counts=None, textures=None) -> "PlacedLayout":
+    def place(self, record_counts, vertex_counts=None, textures=None, creation=None) -> "PlacedLayout":
         """Addresses of every record of a scene.
 
         Parameters
@@ -184,11 +196,21 @@ class MemoryLayout:
             Each texture's mip levels as ``(width, height)``, finest first (a
             trace's ``textures`` metadata); needed when there are texels. The
             texels are then placed by :attr:`texels`, each at its aligned size.
+        creation : coherence.malloc_image.CreationOrder, optional
+            Needed with a :attr:`heap`, and only then: every record of the
+            heap's kinds once, in the order the tracer allocated them
+            (:func:`coherence.malloc_image.trace_creation_order`). Each gets a
+            block of the heap, which starts on the first page boundary after
+            the regions; every other kind keeps its region's place.
 
         Returns
         -------
         PlacedLayout
         """
+        if (creation is None) != (self.heap is None):
+            raise ValueError(f"layout {self.name!r}: " + ("a heap layout places records in their creation order; "
+                             "give creation=, or use coherence.studies.place_layout(layout, trace, scene)"
+                             if creation is None else "creation= is only for a layout with a heap"))
         counts = _by_kind(record_counts, "record_counts")
         vertices = _by_kind(vertex_counts or {}, "vertex_counts")
         kind_first = np.zeros(N_KINDS + 1, dtype=np.int64)
@@ -222,8 +244,35 @@ class MemoryLayout:
             address = _round_up(address + region, self.region_align)
         for kind in RecordKind:
             kind_first[kind + 1] = kind_first[kind] + sizes[kind].size
-        return PlacedLayout(self, np.concatenate([starts[kind] for kind in RecordKind]),
-                            np.concatenate([sizes[kind] for kind in RecordKind]), kind_first, address)
+        record_start = np.concatenate([starts[kind] for kind in RecordKind])
+        record_size = np.concatenate([sizes[kind] for kind in RecordKind])
+        if self.heap is not None:
+            address = self._place_heap(creation, record_start, record_size, kind_first, address)
+        return PlacedLayout(self, record_start, record_size, kind_first, address)
+
+    def _place_heap(self, creation, record_start, record_size, kind_first, heap_start) -> int:
+        """Move the heap kinds' records of ``record_start`` into heap blocks; returns the heap's end."""
+        if not isinstance(creation, CreationOrder):
+            raise ValueError(f"creation must be a coherence.malloc_image.CreationOrder, got {type(creation).__name__}")
+        kind = np.asarray(creation.kind, dtype=np.int64)
+        index = np.asarray(creation.index, dtype=np.int64)
+        if kind.shape != index.shape or kind.ndim != 1:
+            raise ValueError("creation: kind and index must be 1-d arrays of one length")
+        counts = np.diff(kind_first)
+        heap_kinds = np.array([int(k) for k in HEAP_KINDS], dtype=np.int64)
+        expected = int(counts[heap_kinds].sum())
+        good = np.isin(kind, heap_kinds)
+        good[good] &= (index[good] >= 0) & (index[good] < counts[kind[good]])
+        rows = kind_first[kind[good]] + index[good]
+        if not good.all() or kind.size != expected or np.unique(rows).size != expected:
+            names = ", ".join(f"{RecordKind(k).name.lower()} {int(counts[k])}" for k in heap_kinds)
+            raise ValueError(f"creation must name every record of the heap's kinds once ({names}); it names "
+                             f"{kind.size} allocations, {int(good.sum())} of them records of those kinds, "
+                             f"{np.unique(rows).size} distinct")
+        blocks = heap_blocks(self.heap, record_size[rows], heap_start)
+        record_start[rows] = blocks + self.heap.header
+        top = blocks + self.heap.block_sizes(record_size[rows])
+        return max(int(heap_start), int(top.max(initial=heap_start)))
 
 
 class RecordPlacement(NamedTuple):
@@ -261,7 +310,8 @@ class PlacedLayout:
     kind_first : ndarray of int64, shape (K + 1,)
         Records of kind ``k`` are rows ``kind_first[k]:kind_first[k + 1]``.
     end : int
-        First address after the last region.
+        First address after the last region (after the heap, for a layout
+        with a heap).
     pages : PageTable
         Physical frames of the pages the regions span; empty (the default)
         when physical addresses are the virtual ones (:meth:`with_pages`).
@@ -552,14 +602,20 @@ def _alpha1997() -> MemoryLayout:
     return MemoryLayout(name="alpha1997", records={name: sizes[1] for name, sizes in PRESET_RECORDS.items()})
 
 
-LAYOUTS = {"compact": _compact, "alpha1997": _alpha1997}
+def _malloc1997() -> MemoryLayout:
+    # docs/memory_image.md: the alpha1997 structs, each malloc'ed in the tracer's creation order
+    return MemoryLayout(name="malloc1997", records={name: sizes[1] for name, sizes in PRESET_RECORDS.items()},
+                        heap=HeapModel())
+
+
+LAYOUTS = {"compact": _compact, "alpha1997": _alpha1997, "malloc1997": _malloc1997}
 
 #: The memory layout a run uses unless told otherwise: today's compact records.
 DEFAULT_LAYOUT = "compact"
 
 
 def get_layout(name_or_layout) -> MemoryLayout:
-    """A preset by name (``compact``, ``alpha1997``) or a MemoryLayout."""
+    """A preset by name (``compact``, ``alpha1997``, ``malloc1997``) or a MemoryLayout."""
     if isinstance(name_or_layout, MemoryLayout):
         return name_or_layout
     try:

@@ -54,7 +54,10 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
     Record counts come from the trace (its metadata, or the records read);
     with ``scene``, polygons and patches get their true vertex counts (else
     4 each). Texels are placed by the levels in the trace's ``textures``
-    metadata.
+    metadata. A layout with a heap (``malloc1997``) places records in the
+    order the tracer created them, from the scene and its tree
+    (:func:`coherence.malloc_image.trace_creation_order`; without ``scene``,
+    the catalogue's scene the trace names).
     """
     counts = record_counts_of(trace)
     vertices = {}
@@ -67,7 +70,11 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
             counts[kind] = sizes.size
             vertices[kind] = sizes
     textures = trace.metadata.get("textures") if hasattr(trace, "metadata") else None
-    return layout.place(counts, vertices, textures)
+    if layout.heap is None:
+        return layout.place(counts, vertices, textures)
+    from coherence.malloc_image import trace_creation_order
+
+    return layout.place(counts, vertices, textures, trace_creation_order(trace, scene))
 
 
 @dataclass(frozen=True)
