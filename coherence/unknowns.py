@@ -38,8 +38,8 @@ DISTRIBUTIONS = ("uniform", "log-uniform", "integer", "categorical")
 #: Source keys of :attr:`Unknown.source`; the full citations are in
 #: ``docs/unknowns.md`` under "Sources", one heading per key.
 SOURCES = (
-    "alphaserver8400-manual", "alpha21164pc-manual", "digital-unix-vm", "kessler-hill-1992",
-    "memory-image-docs", "shared-machine", "bsd-quantum", "osfpal-dtbmiss", "alpha-sqrt",
+    "alphaserver8400-manual", "alphaserver4100-memory", "alpha21164pc-manual", "digital-unix-vm", "kessler-hill-1992",
+    "memory-image-docs", "shared-machine", "unix-quanta", "osfpal-dtbmiss", "alpha-sqrt",
     "instruction-counts", "tree-search",
 )
 
@@ -163,7 +163,7 @@ def _unknowns() -> tuple:
                 float(machine.background_footprint), "log-uniform", 98304.0, 4194304.0,
                 source="shared-machine", unit="bytes"),
         Unknown("quantum_cycles", "Machine.quantum_cycles, --quantum", float(machine.quantum_cycles),
-                "log-uniform", 3e6, 3e7, source="bsd-quantum", unit="cycles"),
+                "log-uniform", 3e6, 6e7, source="unix-quanta", unit="cycles"),
         Unknown("data_tlb", "Hierarchy.tlb, --hierarchy alpha21164-dtb", "off" if hierarchy.tlb is None else "on",
                 "categorical", choices=("off", "on"), source="alpha21164pc-manual"),
         Unknown("dtb_miss_cycles", "Tlb.miss_cycles", float(DTB_MISS_CYCLES), "log-uniform", 21.0, 170.0,

@@ -93,7 +93,7 @@ def test_every_source_has_a_heading_in_the_docs():
     """Each source key used, and each key of SOURCES, has its own heading under "Sources".
 
     Fails when a citation is missing: checked by deleting the
-    "### bsd-quantum" heading.
+    "### unix-quanta" heading.
     """
     text = (DOCS / "unknowns.md").read_text(encoding="utf-8")
     sources = text[text.index("\n## Sources\n"):]
