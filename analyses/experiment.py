@@ -27,7 +27,8 @@ from cachesim.config import DEFAULT_HIERARCHY
 from coherence.cost import DEFAULT_COST_MODEL
 from coherence.layout import DEFAULT_LAYOUT
 from coherence.mappings import DEFAULT_MAPPINGS
-from coherence.simulation import STUDY_CPUS
+from coherence.page_placement import PAGE_PLACEMENTS
+from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
 from rtcommon.validate import require_bool, require_int
 
 __all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
@@ -72,6 +73,14 @@ class Experiment:
         CPUs of the simulated machine, >= 1.
     background : int
         Always-runnable processes of other users, for real time, >= 0.
+    background_footprint : int
+        Bytes one time slice of another user's process streams through its
+        CPU's caches, >= 0 (:class:`coherence.simulation.Machine`).
+    page_placement : str
+        How the operating system places the scene's pages in physical
+        memory, one of :data:`coherence.page_placement.PAGE_PLACEMENTS`.
+    page_seed : int
+        Seed of the page placement's colours, >= 0.
     cache_dir : str or os.PathLike, optional
         Trace cache folder (:func:`analyses.traces.cached_trace`).
     dask : str or distributed.Client, optional
@@ -102,6 +111,9 @@ class Experiment:
     cost: object = DEFAULT_COST_MODEL
     n_cpus: int = STUDY_CPUS
     background: int = 4
+    background_footprint: int = DEFAULT_BACKGROUND_FOOTPRINT
+    page_placement: str = "contiguous"
+    page_seed: int = 0
     cache_dir: object = None
     dask: object = None
     memory_budget: int = DEFAULT_MEMORY_BUDGET
@@ -142,6 +154,9 @@ class Experiment:
                 raise ValueError(f"Experiment.{name}: {error}") from None
         require_int("Experiment.n_cpus", self.n_cpus, 1)
         require_int("Experiment.background", self.background, 0)
+        require_int("Experiment.background_footprint", self.background_footprint, 0)
+        _choose("page_placement", self.page_placement, PAGE_PLACEMENTS)
+        require_int("Experiment.page_seed", self.page_seed, 0)
         if self.cache_dir is not None and not isinstance(self.cache_dir, (str, os.PathLike)):
             raise ValueError(f"Experiment.cache_dir must be a folder path or None, got {self.cache_dir!r}")
         if isinstance(self.dask, str) and not self.dask.strip():
@@ -173,10 +188,14 @@ class Experiment:
         return _cost(self.cost)
 
     def machine(self):
-        """The simulated :class:`coherence.simulation.Machine`: ``n_cpus`` CPUs, ``background`` load."""
+        """The simulated :class:`coherence.simulation.Machine`: ``n_cpus`` CPUs, ``background`` load of
+        ``background_footprint`` bytes a slice, pages placed by ``page_placement``."""
+        from coherence.page_placement import PagePlacement
         from coherence.simulation import Machine
 
-        return Machine(n_cpus=self.n_cpus, background_load=self.background)
+        return Machine(n_cpus=self.n_cpus, background_load=self.background,
+                       background_footprint=self.background_footprint,
+                       page_placement=PagePlacement(self.page_placement, seed=self.page_seed))
 
     def kd_builder(self) -> str:
         """``kd``, else the workload's builder."""
@@ -191,7 +210,8 @@ class Experiment:
         used), ``max_depth`` (None: the scene's), ``mappings`` (names),
         ``n_processes``, ``hierarchy`` and ``cost`` (their fields, so a file
         or a custom object is recorded too), ``layout`` (its name),
-        ``n_cpus`` and ``background_load``. ``cache_dir``, ``dask``,
+        ``n_cpus``, ``background_load``, ``background_footprint``,
+        ``page_placement`` and ``page_seed``. ``cache_dir``, ``dask``,
         ``memory_budget`` and ``progress`` are left out: no result depends
         on them.
         """
@@ -199,7 +219,9 @@ class Experiment:
                 "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
                 "n_processes": list(self.n_processes), "hierarchy": self.hierarchy_object().to_dict(),
                 "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
-                "n_cpus": int(self.n_cpus), "background_load": int(self.background)}
+                "n_cpus": int(self.n_cpus), "background_load": int(self.background),
+                "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,
+                "page_seed": int(self.page_seed)}
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:

@@ -133,3 +133,20 @@ def test_a_tlb_of_another_page_size_is_refused():
 def test_bad_configuration_names_the_field(bad):
     with pytest.raises(ValueError, match="PagePlacement"):
         PagePlacement(**bad)
+
+
+def test_a_report_places_pages_as_asked_and_records_it(tmp_path):
+    """``report --page-placement random`` reaches the machine and its parameters; fails when
+    Experiment.machine() leaves page_placement out (the report then records contiguous)."""
+    import json
+
+    from analyses.cli import main
+
+    out = tmp_path / "out"
+    assert main(["report", "tetra", "--size", "16", "--processes", "2", "--mappings", "S", "--layout", "alpha1997",
+                 "--page-placement", "random", "--page-seed", "4", "--background-footprint", "65536",
+                 "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    machine = summary["parameters"]["machine"]
+    assert machine["page_placement"] == {"policy": "random", "page_size": PAGE, "seed": 4}
+    assert machine["background_footprint"] == 65536

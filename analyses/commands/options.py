@@ -23,7 +23,7 @@ from rtcommon.validate import InputError
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
-           "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS",
+           "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS", "PAGE_PLACEMENTS",
            "WORKLOADS", "workload_options", "EXPERIMENT_OPTIONS", "experiment_from_args"]
 
 
@@ -80,6 +80,7 @@ KD_BUILDERS = RegistryNames("tracer.kd.tree", "BUILDERS")
 WORKLOADS = RegistryNames("tracer.rendering.workload", "WORKLOADS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
 SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
+PAGE_PLACEMENTS = RegistryNames("coherence.page_placement", "PAGE_PLACEMENTS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
 
@@ -282,8 +283,9 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
 #: Option (``args`` attribute) -> :class:`analyses.experiment.Experiment` field it sets.
 EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", "kd": "kd", "max_depth": "max_depth",
                       "mappings": "mappings", "processes": "n_processes", "hierarchy": "hierarchy", "layout": "layout",
-                      "cost": "cost", "cpus": "n_cpus", "background": "background", "cache": "cache_dir",
-                      "dask": "dask"}
+                      "cost": "cost", "cpus": "n_cpus", "background": "background",
+                      "background_footprint": "background_footprint", "page_placement": "page_placement",
+                      "page_seed": "page_seed", "cache": "cache_dir", "dask": "dask"}
 
 
 def experiment_from_args(args: argparse.Namespace, base=None, **fields):
@@ -336,7 +338,7 @@ def chosen_mappings(args: argparse.Namespace) -> list:
 
 def machine_options(*, processes, processes_help: str, background: int, background_why: str,
                     cpus: bool = True) -> argparse.ArgumentParser:
-    """The simulated machine: ``--processes``, ``--cpus`` and ``--background``.
+    """The simulated machine: ``--processes``, ``--cpus``, ``--background`` (and its footprint) and page placement.
 
     Parameters
     ----------
@@ -358,4 +360,13 @@ def machine_options(*, processes, processes_help: str, background: int, backgrou
     parent.add_argument("--background", type=int, default=background, metavar="B",
                         help="always-runnable processes of other users, for real time "
                              f"(default {background}: {background_why})")
+    parent.add_argument("--background-footprint", type=int, default=None, metavar="BYTES",
+                        help="bytes one slice of another user's process streams through its CPU's caches "
+                             "(default 1 MiB: about 100 MB/s for a 10 ms slice; see coherence.simulation.Machine)")
+    parent.add_argument("--page-placement", default="contiguous", choices=PAGE_PLACEMENTS, metavar="NAME",
+                        help="which physical pages the operating system gives the scene's 8 KB pages, which decides "
+                             "conflicts in the physically indexed S- and B-cache: %(choices)s (default %(default)s: "
+                             "physical = virtual; see coherence.page_placement)")
+    parent.add_argument("--page-seed", type=int, default=0, metavar="N",
+                        help="seed of bin-hopping's first colour and of random's colours (default %(default)s)")
     return parent

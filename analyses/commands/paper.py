@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.commands.checks import check_memory, require_distributed
     from analyses.traces import check_cache_dir
 
-    check_at_least(args, size=1, background=0, processes=1)
+    check_at_least(args, size=1, background=0, background_footprint=0, page_seed=0, processes=1)
     if args.dask:
         require_distributed()
     check_memory("--size", args.size)

@@ -3,10 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (PLACEMENTS, SCHEDULERS, HelpFormatter, RegistryNames, machine_options,
-                                      model_options)
-
-PAGE_PLACEMENTS = RegistryNames("coherence.page_placement", "PAGE_PLACEMENTS")
+from analyses.commands.options import PLACEMENTS, SCHEDULERS, HelpFormatter, machine_options, model_options
 
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
 
@@ -53,15 +50,6 @@ def register(subparsers) -> None:
     parser.add_argument("--placement", default="round-robin", choices=PLACEMENTS, metavar="NAME",
                         help="static scheduler: how processes are pinned to CPUs when there are more of them: "
                              "%(choices)s (default %(default)s)")
-    parser.add_argument("--background-footprint", type=int, default=None, metavar="BYTES",
-                        help="bytes one slice of another user's process streams through its CPU's caches "
-                             "(default 1 MiB: about 100 MB/s for a 10 ms slice; see coherence.simulation.Machine)")
-    parser.add_argument("--page-placement", default="contiguous", choices=PAGE_PLACEMENTS, metavar="NAME",
-                        help="which physical pages the operating system gives the scene's 8 KB pages, which decides "
-                             "conflicts in the physically indexed S- and B-cache: %(choices)s (default %(default)s: "
-                             "physical = virtual; see coherence.page_placement)")
-    parser.add_argument("--page-seed", type=int, default=0, metavar="N",
-                        help="seed of bin-hopping's first colour and of random's colours (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON (runs and parameters) instead of a table")
     parser.add_argument("--csv", metavar="PATH", help="write the full per-run table to CSV (+ .meta.json)")
     parser.add_argument("--processes-csv", metavar="PATH", help="write the per-process table to CSV")
