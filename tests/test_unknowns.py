@@ -103,13 +103,13 @@ def test_every_source_has_a_heading_in_the_docs():
 
 
 def test_choices_name_real_options():
-    """Categorical choices are values the toolkit accepts (malloc1997 may still be being built).
+    """Categorical choices are exactly the values the toolkit accepts.
 
     Fails when a choice is misspelt: checked by renaming "bin-hopping" to
     "binhopping" in the module and the docs.
     """
     assert set(unknown("page_placement").choices) == set(PAGE_PLACEMENTS)
-    assert set(LAYOUTS) <= set(unknown("memory_image").choices) <= set(LAYOUTS) | {"malloc1997"}
+    assert set(unknown("memory_image").choices) == set(LAYOUTS)
 
 
 def test_tree_variants_come_from_the_tree_search_and_the_default_is_the_study_tree():
