@@ -23,6 +23,7 @@ depend on it.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import subprocess
@@ -168,6 +169,9 @@ def _compile(hierarchy, layout, cost, machine, mappings) -> None:
 
     from analyses.report_curves import miss_ratio_curves
 
+    if layout.heap is not None:
+        # the synthetic trace has no scene to allocate a heap from; the kernels are the same without it
+        layout = dataclasses.replace(layout, heap=None)
     with tempfile.TemporaryDirectory(prefix="coherence-warmup-") as folder:
         trace = synthetic_trace(folder)
         placed = place_layout(layout, trace)

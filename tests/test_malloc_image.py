@@ -270,3 +270,18 @@ def test_bad_input_is_named():
         HeapModel(header=12)
     with pytest.raises(ValueError, match="HeapModel.smallest_block"):
         HeapModel(smallest_block=16)
+
+
+def test_the_report_warm_up_compiles_for_malloc1997():
+    """The report's warm-up compiles the simulation on a synthetic trace, which
+    has no scene to allocate a heap from; with ``malloc1997`` it compiles the
+    same kernels without the heap instead of failing. Fails if
+    ``analyses.warmup._compile`` keeps the layout's heap (no ``replace``)."""
+    from analyses.warmup import _compile
+    from cachesim import get_hierarchy
+    from coherence.cost import get_cost_model
+    from coherence.mappings import get_mapping
+    from coherence.simulation import Machine
+
+    _compile(get_hierarchy("alpha21164"), get_layout("malloc1997"), get_cost_model("alpha8400"), Machine(),
+             [get_mapping("S")])
