@@ -468,10 +468,10 @@ def test_fuzzed_extension_text_gives_a_scene_or_an_nff_error_and_scenes_round_tr
     assert scenes_equal(scene, again)
 
 
-def test_the_readme_nff_example_reads_as_it_says(tmp_path):
+def test_the_documented_nff_example_reads_as_it_says(tmp_path):
     import re
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parent.parent / "docs" / "scene_files.md").read_text(encoding="utf-8")
     (example,) = re.findall(r"```nff\n(.*?)```", readme, re.S)
     write_png(procedural_texture(16, 8, seed=0), tmp_path / "wood.png")
     scene = parse_nff(VIEW + example, folder=tmp_path)
