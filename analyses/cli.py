@@ -76,7 +76,45 @@ def main(argv: list[str] | None = None) -> int:
     dies by SIGINT at once, which its shell reports as 130). 141 (128 +
     SIGPIPE, as a C tool killed by it) without a word when the reader of the
     output went away (a closed pipe: ``| head``).
+
+    A real command line (``argv`` None) that has finished ends its process
+    once the exit handlers have run, skipping Python's teardown, during
+    which Ctrl-C could no longer be caught (:func:`_leave_after_exit_handlers`).
     """
+    if argv is not None:
+        return _main(argv)
+    import atexit
+
+    ending: list[int] = []
+    atexit.register(_leave_after_exit_handlers, ending)  # registered first, so it runs last
+    status = _main(None)
+    ending.append(status)
+    return status
+
+
+def _leave_after_exit_handlers(ending: list) -> None:
+    """End a finished command line's process once the exit handlers have run, without Python's teardown.
+
+    The teardown (modules, numba's and llvmlite's objects) takes about a
+    second after a report and does nothing the run needs: every output is
+    written and closed by then. It runs with signal handlers gone, so a
+    Ctrl-C during it killed the process without a word. ``ending`` holds the
+    exit status once the command has returned one (not after --help or an
+    argparse error, which leave the normal way).
+    """
+    import os
+
+    if not ending:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(ending[0])
+
+
+def _main(argv: list[str] | None) -> int:
     words = sys.argv[1:] if argv is None else argv
     commands = {module.rpartition(".")[2] for module in COMMAND_MODULES}
     # named before parsing: a Ctrl-C during start-up says "coherence report: interrupted" too

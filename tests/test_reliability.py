@@ -1192,3 +1192,33 @@ def test_user_errors_and_bugs_are_told_apart(monkeypatch, capsys, error, status)
         assert said[0].startswith("Traceback") and f"{type(raised).__name__}: {raised}" in said[-2]
         assert said[-1] == f"coherence cachesim: internal error (a bug in the toolkit, not in what it was given): " \
                            f"{type(raised).__name__}: {raised}"
+
+
+_LATE_INTERRUPT = textwrap.dedent('''
+    import os, signal, sys
+    from analyses import cli
+    from analyses.commands import cachesim
+
+    class InterruptAtTeardown:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+
+    def run(args):
+        cachesim.left_over = InterruptAtTeardown()  # lives until Python tears the modules down
+        return 0
+
+    cachesim.run = run
+    sys.argv = ["coherence", "cachesim", "addresses.txt"]
+    sys.exit(cli.main())
+''')
+
+
+def test_a_finished_command_line_leaves_before_pythons_teardown():
+    """Once a command has finished, the process ends after the exit handlers, without Python's teardown:
+    a Ctrl-C there found no handler and killed the process without a word (a second after a report).
+
+    Fails (the object's SIGINT at teardown kills the process: rc -2) if ``main`` no longer registers
+    ``_leave_after_exit_handlers``.
+    """
+    done = _python(_LATE_INTERRUPT)
+    assert (done.returncode, done.stderr) == (0, "")

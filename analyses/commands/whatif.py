@@ -123,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--processes", args.processes, 1)
     checks.check_range("--size", args.size, 1)
     checks.check_scene_argument(args.scene, "--scene")
+    if args.size is not None:  # before the memory budget's check, which would ask for more than the machine has
+        checks.check_memory("--size", args.size)
     study = build_study(args)
     if args.dask:
         checks.require_distributed()
