@@ -102,7 +102,8 @@ def _leave_after_exit_handlers(ending: list) -> None:
     exit status once the command has returned one (not after --help or an
     argparse error, which leave the normal way).
     """
-    import os
+    # os._exit is the documented way to end a process without clean-up; the underscore names what it skips
+    from os import _exit as exit_without_teardown
 
     if not ending:
         return
@@ -111,7 +112,7 @@ def _leave_after_exit_handlers(ending: list) -> None:
             stream.flush()
         except (OSError, ValueError):
             pass
-    os._exit(ending[0])
+    exit_without_teardown(ending[0])
 
 
 def _main(argv: list[str] | None) -> int:
