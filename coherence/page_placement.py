@@ -37,10 +37,15 @@ Virtual pages are allocated in address order: the tracer builds its scene,
 tree and index lists region by region, in the layout's order, before the
 first pixel is rendered. All processes share the scene's physical pages (the
 scene is built before the processes fork, and they only read it), so one
-:class:`PageTable` serves every process of a run. Other users' pages (the
-background load's streams) are not translated: each stream stays contiguous
-from a seeded start, which is what ``contiguous``, ``colouring`` and
-``bin-hopping`` give a long-running job's pages anyway.
+:class:`PageTable` serves every process of a run.
+
+Other users' pages (the background load's streams, each a long-running job
+reading on where its last slice stopped) are placed too. Under
+``contiguous``, ``colouring`` and ``bin-hopping`` a stream's consecutive
+pages have consecutive colours, from a seeded start: the stream as it is
+without translation. Under ``random`` page ``k`` of background process
+``b``'s stream gets the colour a hash of (seed, b, k) gives
+(:func:`translate_stream`, :class:`BackgroundPages`).
 """
 from __future__ import annotations
 
@@ -52,7 +57,8 @@ from numba import njit
 
 from rtcommon.validate import require_int, require_power_of_two
 
-__all__ = ["PAGE_PLACEMENTS", "PagePlacement", "PageTable", "identity_pages", "translate_addresses"]
+__all__ = ["PAGE_PLACEMENTS", "BackgroundPages", "PagePlacement", "PageTable", "identity_pages",
+           "translate_addresses", "translate_stream"]
 
 PAGE_PLACEMENTS = ("contiguous", "colouring", "bin-hopping", "random")
 
@@ -79,6 +85,28 @@ class PageTable(NamedTuple):
 def identity_pages() -> PageTable:
     """The :class:`PageTable` that translates nothing."""
     return PageTable(0, 13, np.zeros(0, dtype=np.int64))
+
+
+#: Bits of a background stream's page number in its physical frames (:func:`translate_stream`).
+STREAM_PAGE_BITS = 34
+
+
+class BackgroundPages(NamedTuple):
+    """How other users' streams are placed, as compiled code reads it.
+
+    Attributes
+    ----------
+    page_shift : int
+        log2 of the page size.
+    colour_bits : int
+        log2 of the page colours; -1: streams are not translated.
+    seed : int
+        Seed of the colours' hash.
+    """
+
+    page_shift: int
+    colour_bits: int
+    seed: int
 
 
 @dataclass(frozen=True)
@@ -156,6 +184,12 @@ class PagePlacement:
             colour = np.random.default_rng(self.seed).integers(0, n_colours, used_pages.size, dtype=np.int64)
         return PageTable(int(first_page), shift, (virtual << colour_bits) | colour)
 
+    def background(self, n_colours: int) -> BackgroundPages:
+        """The placement of other users' streams (translated only under ``random``)."""
+        require_power_of_two("n_colours", n_colours)
+        bits = n_colours.bit_length() - 1 if self.policy == "random" else -1
+        return BackgroundPages(self.page_size.bit_length() - 1, bits, self.seed)
+
     def to_dict(self) -> dict:
         return {"policy": self.policy, "page_size": self.page_size, "seed": self.seed}
 
@@ -174,3 +208,35 @@ def translate_addresses(addresses, count, pages):
     for i in range(count):
         address = addresses[i]
         addresses[i] = (np.uint64(frame[(address >> shift) - first]) << shift) | (address & offset_mask)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _mixed(value):
+    """SplitMix64's output function: a well-spread 64-bit hash of ``value`` (uint64)."""
+    value = (value ^ (value >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    value = (value ^ (value >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return value ^ (value >> np.uint64(31))
+
+
+@njit(cache=True, nogil=True)
+def translate_stream(addresses, count, process, first_address, pages):
+    """Place ``addresses[:count]`` of background process ``process``'s stream (uint64 byte addresses,
+    the stream starting at ``first_address``) in random frames.
+
+    Page ``k`` of the stream (counted from the page of ``first_address``) gets frame
+    ``((process + 1) << STREAM_PAGE_BITS | k) << colour_bits | colour`` with ``colour`` the low
+    ``colour_bits`` bits of ``_mixed(seed * 2**40 + process * 2**34 + k)``: distinct pages get
+    distinct frames, and no frame of a stream is a frame of the scene (whose frames lie far below).
+    """
+    shift = np.uint64(pages.page_shift)
+    offset_mask = (np.uint64(1) << shift) - np.uint64(1)
+    colour_mask = (np.uint64(1) << np.uint64(pages.colour_bits)) - np.uint64(1)
+    first_page = np.uint64(first_address) >> shift
+    owner = np.uint64(process + 1) << np.uint64(STREAM_PAGE_BITS)
+    key = (np.uint64(pages.seed) << np.uint64(40)) + (np.uint64(process) << np.uint64(STREAM_PAGE_BITS))
+    for i in range(count):
+        address = addresses[i]
+        k = (address >> shift) - first_page
+        colour = _mixed(key + k) & colour_mask
+        frame = ((owner | k) << np.uint64(pages.colour_bits)) | colour
+        addresses[i] = (frame << shift) | (address & offset_mask)

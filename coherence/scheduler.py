@@ -50,6 +50,7 @@ from cachesim import kernels as K
 from cachesim import tlb as T
 from cachesim.fresh import skip_fresh_lines
 from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
+from coherence.page_placement import BackgroundPages, translate_stream
 from rtcommon.jit import NO_REFCOUNTS
 
 # Columns of the per-process cycle totals the event loop writes.
@@ -107,11 +108,15 @@ class BackgroundLoad(NamedTuple):
         instead of walking it access by access: the caller has checked
         that it is exact (:func:`cachesim.fresh.skips_exactly`), that no TLB
         is looked up, and that lines are the first level's.
+    pages : BackgroundPages
+        Where the streams' pages lie in physical memory (``colour_bits``
+        -1: as they are; see :func:`coherence.page_placement.translate_stream`).
     """
 
     first_line: np.ndarray
     footprint_lines: int
     skip: bool = False
+    pages: BackgroundPages = BackgroundPages(13, -1, 0)
 
 
 class CpuTlbs(NamedTuple):
@@ -223,6 +228,8 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     first_line = background.first_line
     footprint_lines = background.footprint_lines
     skip_background = background.skip
+    background_pages = background.pages
+    place_background = background_pages.colour_bits >= 0
     out_cycles = out.cycles
     out_placement = out.placement
     task_owner = out.task_owner
@@ -312,6 +319,8 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             else:
                 for i in range(footprint_lines):
                     buffer[i] = np.uint64((start + i) << line_shift)
+                if place_background:
+                    translate_stream(buffer, footprint_lines, b, first_line[b] << line_shift, background_pages)
                 cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
                                                    served, record_served, work)
                 _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])

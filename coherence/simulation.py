@@ -452,9 +452,10 @@ def _background(machine: Machine, line_shift: int, state: CacheState, tlbs: CpuT
     """The machine's background load, its slices skipped rather than walked where that is exact
     (:mod:`cachesim.fresh`: the caches' state and our processes' counts are the same either way)."""
     load = machine.background(line_shift)
+    pages = machine.page_placement.background(machine.page_placement.colours(state.hierarchy))
     skip = (machine.background_load > 0 and not tlbs.enabled and line_shift == state.geometry.line_shift
-            and skips_exactly(state.geometry, load.footprint_lines))
-    return BackgroundLoad(load.first_line, load.footprint_lines, bool(skip))
+            and pages.colour_bits < 0 and skips_exactly(state.geometry, load.footprint_lines))
+    return BackgroundLoad(load.first_line, load.footprint_lines, bool(skip), pages)
 
 
 def _cpu_tlbs(state: CacheState, n_cpus: int, n_all: int) -> CpuTlbs:

@@ -150,3 +150,61 @@ def test_a_report_places_pages_as_asked_and_records_it(tmp_path):
     machine = summary["parameters"]["machine"]
     assert machine["page_placement"] == {"policy": "random", "page_size": PAGE, "seed": 4}
     assert machine["background_footprint"] == 65536
+
+
+def _splitmix_output(value: int) -> int:
+    """SplitMix64's output function in plain Python integers (Steele, Lea & Flood 2014)."""
+    mask = (1 << 64) - 1
+    value = ((value ^ (value >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    value = ((value ^ (value >> 27)) * 0x94D049BB133111EB) & mask
+    return value ^ (value >> 31)
+
+
+def test_a_background_stream_maps_as_by_hand_under_random_placement():
+    """Page k of stream b gets frame ((b + 1) << 34 | k) << colour_bits | hashed colour. Fails when
+    the hash ignores the process (``key`` without ``process << 34``: two users' streams would share
+    their colour sequence)."""
+    from coherence.page_placement import translate_stream
+
+    pages = PagePlacement("random", PAGE, 6).background(512)
+    first = (1 << 56) + (1 << 48) * 2 + 123 * 64
+    for process in (0, 2):
+        stream = np.arange(first, first + 3 * PAGE, 64, dtype=np.uint64)
+        placed = stream.copy()
+        translate_stream(placed, placed.size, process, first, pages)
+        expected = []
+        for address in stream.tolist():
+            k = address // PAGE - first // PAGE
+            colour = _splitmix_output(((6 << 40) + (process << 34) + k) & ((1 << 64) - 1)) & 511
+            expected.append(((((process + 1) << 34 | k) << 9 | colour) << 13) | address % PAGE)
+        np.testing.assert_array_equal(placed, np.array(expected, dtype=np.uint64))
+    assert PagePlacement("colouring").background(512).colour_bits == -1
+
+
+def test_other_users_pages_are_placed_only_by_random_placement():
+    """With other users' slices in the run queue, colouring and bin hopping leave their streams
+    contiguous, so our counts equal contiguous placement's wherever only the streams could differ;
+    random placement scatters them. Fails when translate_stream is skipped in the schedule (the
+    random run's counts then equal those with only the scene's pages placed)."""
+    from dataclasses import replace
+
+    from coherence.cost import alpha8400
+    from coherence.simulation import Machine
+
+    counts = {"kd_node": 4000, "index_entry": 6000, "sphere": 2000, "material": 8, "light": 3}
+    trace = _spread_trace(16, 16, counts, 200, seed=11)
+    hierarchy = alpha21164()
+    placed = get_layout("alpha1997").place(counts)
+    distribution = get_mapping("S").build(trace.width, trace.height, 2)
+    busy = Machine(n_cpus=2, background_load=2, quantum_cycles=2e5, background_footprint=1 << 19)
+
+    def l3_misses(machine, layout=placed):
+        return simulate_run(trace, distribution, hierarchy, layout, alpha8400(), machine).processes["L3_misses"]
+
+    contiguous = l3_misses(busy)
+    colouring = l3_misses(replace(busy, page_placement=PagePlacement("colouring")))
+    assert contiguous.equals(colouring)
+    random = PagePlacement("random", PAGE, 2)
+    both = l3_misses(replace(busy, page_placement=random))
+    scene_only = l3_misses(busy, placed.with_pages(random, hierarchy))  # the machine leaves streams as they are
+    assert not both.equals(scene_only)
