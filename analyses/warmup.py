@@ -1,9 +1,9 @@
 """Compile the simulation's kernels in a second process while the first one renders.
 
-The first report after an install compiles for about a minute: some 35 s
-for the tracer (the kd-tree builder and the render kernel), then some 25 s
-for the simulation (the schedule's event loop with its cache paths, the
-record-to-line conversion, reuse distances). Numba compiles under one lock
+The first report after an install compiles the tracer (the kd-tree builder
+and the render kernel) and then the simulation (the schedule's event loop
+with its cache paths, the record-to-line conversion, reuse distances), each
+for a good part of a minute. Numba compiles under one lock
 per process, so a thread cannot overlap the two; a second process can.
 
 :func:`simulation_warm_up` starts ``python -m analyses.warmup`` when the

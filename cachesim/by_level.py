@@ -71,9 +71,6 @@ def _ordered_pass(lines, clocks, n_in, level, shift, geometry, state, three_ways
     just made. ``three_ways`` (a constant at each call, for a three-way level
     whose sets are a power of two) selects the unrolled search; each copy of
     the loop then has few enough live values to keep them in registers.
-    Together with marking ``served_by`` after the loop, these took
-    bench_cachesim's stream from 30 to 26 ms (the 21164's S-cache pass from
-    16 to 12 ms).
     """
     tags = state.tags
     stamps = state.stamps

@@ -51,9 +51,8 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
 def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work):
     """The kernel of :func:`_simulate_direct_first`, compiled apart for a
     stream of reads (``writes`` None) and for one that does not record
-    ``served_by`` (None): numba drops the checks of a None argument. Either
-    alone gained nothing measurable; both together, 6-10% of a study-era
-    run, for about 4 s of compilation.
+    ``served_by`` (None): numba drops the checks of a None argument, at the
+    price of compiling more specialisations.
 
     Every index is cast to unsigned: numba fixes up a negative signed index
     (a shift, a mask and an add at every array access), which took a quarter
@@ -102,8 +101,7 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
         # Reads that the first level or the second serves run in a loop of
         # their own, left at the first access it cannot serve with what that
         # access looked up: the values only the rest needs wait outside it,
-        # and the loop keeps its own in registers (the kernel 15% faster on
-        # the modern balls trace's lines, 6% on the study-era one's).
+        # and the loop keeps its own in registers.
         while True:
             at = np.uint64(i)
             line0 = np.int64(addresses[at] >> shift)

@@ -127,8 +127,7 @@ def _reuse_pass(addresses, shift, distances, state):
     replaced by larger ones (its scalars are updated in place).
 
     :func:`_reuse_run` does the work without reference counting
-    (:data:`rtcommon.jit.NO_REFCOUNTS`: with it, the pass ran at 17 M
-    accesses/s on balls' trace; without, at 38) and stops where the state
+    (:data:`rtcommon.jit.NO_REFCOUNTS`) and stops where the state
     needs room; here the room is made: the live times renumbered (and the
     tree grown), the hash table or the histogram grown.
     """

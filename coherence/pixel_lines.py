@@ -2,8 +2,7 @@
 
 A schedule replay turns each pixel's records into line addresses
 (:func:`coherence.layout.record_lines_and_writes`) every time it renders the
-pixel: about 40% of a replay's time on balls at 512x512 without background
-load. A study replays the same trace dozens of times with one layout and one
+pixel, a large share of a replay's time. A study replays the same trace dozens of times with one layout and one
 smallest line size, so :func:`pixel_lines` does that work once, and
 :func:`coherence.simulation.simulate_run` reads slices of the result instead.
 It costs 9 bytes per line access (address and write flag) and 16 per pixel

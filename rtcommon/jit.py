@@ -10,8 +10,8 @@ hand: it is when the callee was compiled in the same process, not when it was
 loaded from numba's cache. So one cached caller held the callee inlined and
 another did not, and the inlined copy ran slower: inside
 :func:`coherence.scheduler.run_schedule`, whose own state leaves the cache
-simulator's loop too few registers, a balls study-era run took 9.5 s with the
-kernels inlined against 7.8 s with them called (same code, same counts).
+simulator's loop too few registers, a run with the kernels inlined was
+markedly slower than with them called (same code, same counts).
 
 Numba has no option that only says "do not inline"; debug information is its
 one switch that marks a function ``noinline`` (``numba.core.lowering``). The
@@ -26,11 +26,11 @@ NOT_INLINED = {"debug": True, "_dbg_extend_lifetimes": False, "boundscheck": Fal
 #: bundles of arrays to a compiled function is costly in numba: every array
 #: travels as some nine machine words (so the tracer's traversal took about
 #: 300 of them per ray), and the callee takes a reference to each array on
-#: entry and drops it on exit, two atomic operations per array. A primary
-#: ray of tetra that missed the scene cost 108 ns that way. Inlining the
-#: callee into the loop (numba's ``inline="always"``) removes the argument
-#: traffic but not the references, taken anew on each pass; a loop compiled
-#: with this option takes none, and the same ray costs 6 ns.
+#: entry and drops it on exit, two atomic operations per array: for a ray
+#: that misses the scene, most of its cost. Inlining the callee into the
+#: loop (numba's ``inline="always"``) removes the argument traffic but not
+#: the references, taken anew on each pass; a loop compiled with this
+#: option takes none.
 #:
 #: Only for functions that allocate nothing and return no arrays (a function
 #: without reference counting cannot own memory): the caller allocates the

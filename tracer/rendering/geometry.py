@@ -399,7 +399,7 @@ def hit_element(kind, idx, geo, ray, tmin, tmax):
 
     Inlined into the traversal (numba IR): called once per test, it would
     otherwise take the ``Geometry`` bundle apart, with reference counting,
-    on every call (the renderer ran 3% slower than with positional arrays).
+    on every call.
 
     ``kind`` is an :class:`~tracer.scenes.model.ElementKind` value, ``idx`` the row
     in that kind's arrays of ``geo`` (:class:`Geometry`).
