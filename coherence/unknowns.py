@@ -25,6 +25,7 @@ from cachesim.tlb_config import DTB_MISS_CYCLES
 from coherence.cost import SQUARE_ROOT_CYCLES_21164
 from coherence.layout import DEFAULT_LAYOUT
 from coherence.simulation import Machine
+from tracer.rendering.tree_variants import PLAUSIBLE_TREE_VARIANTS, STUDY_TREE_VARIANT, tree_rule_name
 from tracer.rendering.workload import WORKLOADS
 
 __all__ = ["DISTRIBUTIONS", "SOURCES", "STUDY_TREE_RULE", "TREE_VARIANTS", "UNKNOWNS", "Unknown", "unknown"]
@@ -44,20 +45,12 @@ SOURCES = (
 )
 
 #: The study-era tree rule by its name in ``docs/study_tree_search.csv``.
-STUDY_TREE_RULE = "d16-l32-box-cycle-todepth-nearest"
+STUDY_TREE_RULE = STUDY_TREE_VARIANT
 
-#: Tree rules of the tree search whose scaled test counts at 32 x 32 lie
-#: within 25% of the study's for balls and shell and are no farther from
-#: tetra's than the chosen rule's (0.73 at that size; tetra's count is
-#: coarse at 32 x 32): the chosen rule and its five neighbours.
-TREE_VARIANTS = (
-    STUDY_TREE_RULE,
-    "d14-l32-box-longest-todepth-nearest",
-    "d15-l32-box-longest-todepth-nearest",
-    "d15-l48-box-longest-todepth-nearest",
-    "d17-l32-box-cycle-todepth-nearest",
-    "d17-l48-box-cycle-todepth-nearest",
-)
+#: The tree rules a study samples: the plausible variants of
+#: :mod:`tracer.rendering.tree_variants` (tests within 25% of the study's on
+#: every SPD scene at 128 x 128), the study's rule first.
+TREE_VARIANTS = PLAUSIBLE_TREE_VARIANTS
 
 
 @dataclass(frozen=True)
@@ -137,11 +130,8 @@ class Unknown:
 
 def _study_tree_rule_name() -> str:
     """The study-era tree rule and shadow rule, spelled as in the tree search's table."""
-    tree = WORKLOADS["study1997"].kd_config
-    clip = "clip" if tree.clip else "box"
-    split = "todepth" if tree.split_to_depth else "separate"
-    shadow = "nearest" if WORKLOADS["study1997"].shadow_nearest else "anyhit"
-    return f"d{tree.tree_depth}-l{tree.leaf_size}-{clip}-{tree.axis_rule}-{split}-{shadow}"
+    study = WORKLOADS["study1997"]
+    return tree_rule_name(study.kd_config, study.shadow_nearest)
 
 
 def _unknowns() -> tuple:
