@@ -56,12 +56,18 @@ class FullIndex(NamedTuple):
         Per table entry ``e``: the line at ``2 e`` (-1: none), and at
         ``2 e + 1`` the way (an index into ``tags``) holding it; side by
         side, so that a lookup reads one host cache line.
-    older, newer : ndarray of int64, shape (W,)
-        Per way, its neighbours in the recency list (-1: none).
+    node_base : ndarray of int64, shape (L,)
+        First entry of each indexed level's ways in ``older``, ``newer``
+        and ``heap``, which hold the indexed levels' ways only (``F`` in all).
+    node_shift : ndarray of int64, shape (L,)
+        ``offset[l] - node_base[l]``: way ``w`` of level ``l`` (an index into
+        ``tags``) is entry ``w - node_shift[l]``.
+    older, newer : ndarray of int64, shape (F,)
+        Per way, its neighbours (ways) in the recency list (-1: none).
     head, tail : ndarray of int64, shape (L,)
         Oldest and newest way of each indexed level's list (-1: empty).
-    heap : ndarray of int64, shape (W,)
-        Per indexed level, from ``offset[l]``: a min-heap of its empty ways.
+    heap : ndarray of int64, shape (F,)
+        Per indexed level, from ``node_base[l]``: a min-heap of its empty ways.
     heap_size : ndarray of int64, shape (L,)
     """
 
@@ -69,6 +75,8 @@ class FullIndex(NamedTuple):
     hash_base: np.ndarray
     hash_bits: np.ndarray
     entries: np.ndarray
+    node_base: np.ndarray
+    node_shift: np.ndarray
     older: np.ndarray
     newer: np.ndarray
     head: np.ndarray
@@ -152,25 +160,27 @@ def _hash_remove(index, level, line):
 # ---------------------------------------------------------------- recency list
 @njit(cache=True, inline="always")
 def _unlink(index, level, slot):
-    older = index.older[slot]
-    newer = index.newer[slot]
+    shift = index.node_shift[level]
+    older = index.older[slot - shift]
+    newer = index.newer[slot - shift]
     if older >= 0:
-        index.newer[older] = newer
+        index.newer[older - shift] = newer
     else:
         index.head[level] = newer
     if newer >= 0:
-        index.older[newer] = older
+        index.older[newer - shift] = older
     else:
         index.tail[level] = older
 
 
 @njit(cache=True, inline="always")
 def _append(index, level, slot):
+    shift = index.node_shift[level]
     last = index.tail[level]
-    index.older[slot] = last
-    index.newer[slot] = -1
+    index.older[slot - shift] = last
+    index.newer[slot - shift] = -1
     if last >= 0:
-        index.newer[last] = slot
+        index.newer[last - shift] = slot
     else:
         index.head[level] = slot
     index.tail[level] = slot
@@ -241,7 +251,7 @@ def _empty(slot, level, geometry, state, index):
         _hash_remove(index, level, state.tags[slot])
         if geometry.policy[level] != RANDOM:
             _unlink(index, level, slot)
-        _heap_push(index, level, geometry.offset[level], slot)
+        _heap_push(index, level, index.node_base[level], slot)
     state.tags[slot] = -1
 
 
@@ -256,7 +266,7 @@ def _place(line, level, geometry, state, index, clock):
     base = geometry.offset[level]
     ordered = geometry.policy[level] != RANDOM
     if index.heap_size[level] > 0:
-        victim = _heap_pop(index, level, base)
+        victim = _heap_pop(index, level, index.node_base[level])
     elif ordered:
         victim = index.head[level]
     else:
@@ -359,7 +369,9 @@ def build_index(geometry, state, clock):
     indexed = np.zeros(n_levels, dtype=np.bool_)
     hash_base = np.zeros(n_levels, dtype=np.int64)
     hash_bits = np.zeros(n_levels, dtype=np.int64)
+    node_base = np.zeros(n_levels, dtype=np.int64)
     entries = 0
+    nodes = 0
     for level in range(n_levels):
         if geometry.n_sets[level] == 1 and geometry.ways[level] >= INDEXED_MIN_WAYS:
             indexed[level] = True
@@ -369,11 +381,12 @@ def build_index(geometry, state, clock):
             hash_base[level] = entries
             hash_bits[level] = bits
             entries += np.int64(1) << bits
-    n_ways = tags.shape[0]
-    index = FullIndex(indexed, hash_base, hash_bits, np.full(2 * entries, -1, dtype=np.int64),
-                      np.full(n_ways, -1, dtype=np.int64),
-                      np.full(n_ways, -1, dtype=np.int64), np.full(n_levels, -1, dtype=np.int64),
-                      np.full(n_levels, -1, dtype=np.int64), np.zeros(n_ways, dtype=np.int64),
+            node_base[level] = nodes
+            nodes += geometry.ways[level]
+    index = FullIndex(indexed, hash_base, hash_bits, np.full(2 * entries, -1, dtype=np.int64), node_base,
+                      geometry.offset - node_base, np.full(nodes, -1, dtype=np.int64),
+                      np.full(nodes, -1, dtype=np.int64), np.full(n_levels, -1, dtype=np.int64),
+                      np.full(n_levels, -1, dtype=np.int64), np.zeros(nodes, dtype=np.int64),
                       np.zeros(n_levels, dtype=np.int64))
     exact = True
     for level in range(n_levels):
@@ -391,7 +404,7 @@ def build_index(geometry, state, clock):
                     exact = False
             else:
                 # Rising ways: a sorted array is a min-heap as it stands.
-                index.heap[base + index.heap_size[level]] = slot
+                index.heap[node_base[level] + index.heap_size[level]] = slot
                 index.heap_size[level] += 1
         if geometry.policy[level] != RANDOM:
             filled = filled[:n_filled]
