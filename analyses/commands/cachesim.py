@@ -9,7 +9,8 @@ EPILOG = """\
 addresses file:
   .npy   a one-dimensional integer array (e.g. np.save("a.npy", addresses))
   other  text, one address per line, decimal (4096) or 0x-hex (0x1000);
-         blank lines and '#' comments are skipped
+         blank lines and '#' comments are skipped; ASCII (a UTF-8
+         byte-order mark at the start is skipped)
 
 hierarchy:
   alpha21164  8 KB direct-mapped 32 B / 96 KB 3-way 64 B / 4 MB direct-mapped 64 B
