@@ -50,7 +50,7 @@ import pandas as pd
 from cachesim import Hierarchy, get_hierarchy
 from analyses.experiment import Experiment
 from coherence.metrics import DECOMPOSITION_COLUMNS
-from rtcommon.files import remove_stale_temporaries
+from rtcommon.files import read_text_file, remove_stale_temporaries
 from rtcommon.validate import InputError, require_int, require_number
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
@@ -179,13 +179,7 @@ def load_study_file(path) -> WhatIf:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such what-if file")
-    raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8-sig")  # a byte-order mark, as some editors write, is skipped
-    except UnicodeDecodeError as error:
-        line = raw[:error.start].count(b"\n") + 1
-        raise InputError(f"{path}:{line}: not a text file (byte {error.start} is not UTF-8); expected a TOML "
-                         "what-if study") from None
+    text = read_text_file(path, "a TOML what-if study")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
-from rtcommon.files import write_text_atomic
+from rtcommon.files import read_text_file, write_text_atomic
 from rtcommon.validate import require_bool, require_int, require_number, require_power_of_two
 
 POLICIES = ("lru", "fifo", "random")
@@ -294,13 +294,7 @@ class Hierarchy:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such hierarchy file")
         suffix = path.suffix.lower()
-        data = path.read_bytes()
-        try:
-            text = data.decode("utf-8-sig")  # a byte-order mark, as some editors write, is skipped
-        except UnicodeDecodeError as error:
-            line = data[: error.start].count(b"\n") + 1
-            raise ValueError(f"{path}:{line}: not a text file (byte {error.start} is not UTF-8); expected "
-                             f"a {suffix.lstrip('.').upper() or 'TOML or JSON'} hierarchy") from None
+        text = read_text_file(path, f"a {suffix.lstrip('.').upper() or 'TOML or JSON'} hierarchy")
         try:
             if suffix == ".toml":
                 data = tomllib.loads(text)

@@ -193,6 +193,26 @@ class _interrupts_deferred:
         return False
 
 
+def read_text_file(path: str | os.PathLike, expected: str) -> str:
+    """The text of a UTF-8 file, a byte-order mark (as some editors write) skipped.
+
+    Raises
+    ------
+    rtcommon.validate.InputError
+        Naming the file, the line and ``expected`` (e.g. "a TOML what-if
+        study") when the bytes are not UTF-8.
+    """
+    from rtcommon.validate import InputError
+
+    data = Path(path).read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = data[:error.start].count(b"\n") + 1
+        raise InputError(f"{path}:{line}: not a text file (byte {error.start} is not UTF-8); expected "
+                         f"{expected}") from None
+
+
 def regular_file(path: str | os.PathLike, what: str) -> Path:
     """``path`` as a Path if it is an existing regular file, else a clear error.
 

@@ -560,7 +560,7 @@ CLI_CASES = [
     (["whatif", "latency", "--jobs", "0"], 2, "--jobs must be >= 1"),
     (["whatif", "latency", "--jobs", "-1"], 2, "--jobs must be >= 1"),
     (["whatif", "latency", "--processes", "0"], 2, "--processes must be >= 1"),
-    (["whatif", "latency", "--size", "20000"], 2, "--memory-budget must be at least"),
+    (["whatif", "latency", "--size", "20000"], 2, "needs about"),
     (["whatif", "latency", "--out", "afile"], 2, "is not a folder"),
     (["whatif", "--file", "pipe.txt"], 2, "not a regular file"),
     (["whatif", "latency", "--cache", "afile"], 2, "is a file, not a folder"),

@@ -107,3 +107,16 @@ def test_round_number_and_plain_by_hand():
     assert plain({1: (np.bool_(True), frame, None, "x", np.float32(0.5))}, 2) == \
         {"1": [True, [{"a": 1, "b": 0.12}, {"a": 2, "b": None}], None, "x", 0.5]}
     assert plain(object.__new__(type("Odd", (), {"__str__": lambda self: "odd"})), 3) == "odd"
+
+
+def test_read_text_file_skips_a_bom_and_names_the_line_of_bad_bytes(tmp_path):
+    """Fails when the byte-order mark is kept (decoding as plain ``utf-8``) or the line is counted
+    from 0."""
+    from rtcommon.files import read_text_file
+    from rtcommon.validate import InputError
+
+    (tmp_path / "a.toml").write_bytes(b"\xef\xbb\xbfx = 1\n")
+    assert read_text_file(tmp_path / "a.toml", "a TOML file") == "x = 1\n"
+    (tmp_path / "b.toml").write_bytes(b"x = 1\ny = \xff\n")
+    with pytest.raises(InputError, match=r"b.toml:2: not a text file \(byte 10 is not UTF-8\); expected a TOML file"):
+        read_text_file(tmp_path / "b.toml", "a TOML file")
