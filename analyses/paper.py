@@ -16,11 +16,14 @@
    cycles depend on the caches and the layout, not on the cycles per
    operation);
 3. fits three costs (per intersection test, per ray, per kd-node visit),
-   each bounded, to the study's sequential S times (:data:`STUDY_TABLE`)
-   with :mod:`coherence.calibration`; every other operation is tied to the
-   test cost by a ratio fixed in advance. Each scene is also predicted from
-   a fit to the other four (leave one out), and every other mapping's
-   one-process time is predicted, not fitted;
+   each within its prior range (by default; ``costs`` chooses), to the
+   study's sequential S times (:data:`STUDY_TABLE`) with
+   :mod:`coherence.calibration`; every other operation is tied to the test
+   cost by a ratio fixed in advance. What the fitted model does not explain
+   is reported per scene (``unexplained_seconds``), and a cost at a bound is
+   flagged (``<cost>_at_bound``). Each scene is also predicted from a fit to
+   the other four (leave one out), and every other mapping's one-process
+   time is predicted, not fitted;
 4. runs every mapping at every process count per scene with the calibrated
    model on an 8-CPU machine whose real time carries a background load
    (:data:`DEFAULT_BACKGROUND` always-runnable processes of other users);
@@ -97,8 +100,10 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
         Study scenes (default all five, :data:`tracer.scenes.catalog.PAPER_SCENES`).
     costs : coherence.calibration.CostStructure, optional
         Which cycles per operation are fitted and how the rest follow
-        (default :data:`coherence.calibration.STUDY1997_COSTS`: per test,
-        per ray and per node visit, bounded).
+        (default :data:`coherence.calibration.STUDY1997_PRIOR_COSTS`: per
+        test, per ray and per node visit, each within its prior range;
+        :data:`coherence.calibration.STUDY1997_COSTS` is the older fit
+        within 5-5,000 cycles, :data:`coherence.calibration.FITS` names both).
     crossover : bool
         Also run :func:`analyses.crossover.crossover_study` per scene at the
         verdict's process count with the calibrated model: where would
@@ -116,7 +121,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
 
     from analyses.traces import cached_trace
     from coherence import study
-    from coherence.calibration import STUDY1997_COSTS, CostStructure
+    from coherence.calibration import STUDY1997_PRIOR_COSTS, CostStructure
     from coherence.studies import Execution
     from tracer.scenes.catalog import PAPER_SCENES
     from tracer.trace.access import AccessTrace
@@ -133,7 +138,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     shares = memory_shares(experiment.memory_budget, size * size, max(2, n_jobs))
     mapping_objects = experiment.mapping_objects()
     names = [m.name for m in mapping_objects]
-    costs = STUDY1997_COSTS if costs is None else costs
+    costs = STUDY1997_PRIOR_COSTS if costs is None else costs
     if not isinstance(costs, CostStructure):
         raise ValueError(f"costs must be a coherence.calibration.CostStructure, got {type(costs).__name__}")
     hierarchy = experiment.hierarchy_object()
@@ -238,7 +243,7 @@ def _calibrate(measurements: list, costs, clock_hz: float, size: int):
     four (:func:`coherence.calibration.leave_one_out`). Returns the
     calibrated model and :attr:`PaperResult.calibration`.
     """
-    from coherence.calibration import fit_costs, fitted_values, leave_one_out, rms
+    from coherence.calibration import at_bounds, fit_costs, fitted_values, leave_one_out, rms
 
     measurements = pd.DataFrame(measurements).set_index("scene")
     study_rows = STUDY_TABLE.set_index("scene")
@@ -251,11 +256,17 @@ def _calibrate(measurements: list, costs, clock_hz: float, size: int):
         "target_seconds": fit["measured_seconds"],
         "fitted_seconds": fit["fitted_seconds"],
         "residual_seconds": fit["fitted_seconds"] - fit["measured_seconds"],
+        "unexplained_seconds": fit["unexplained_seconds"],
+        "unexplained_share": fit["unexplained_seconds"] / fit["measured_seconds"],
         "relative_error": fit["relative_error"],
         "memory_share": fit["memory_share"],
         "memory_seconds": measurements["memory_cycles"].to_numpy() / clock_hz,
     }, index=measurements.index)
     residuals["fitted_seconds_at_512"] = residuals["fitted_seconds"] / scale
+    residuals["unexplained_seconds_at_512"] = residuals["unexplained_seconds"] / scale
+    bound = at_bounds(values, costs)
+    for name, flag in bound.items():  # one flag per cost, on every scene's row: every output carries it
+        residuals[f"{name}_at_bound"] = flag
     if len(measurements) >= 2:
         held_out = leave_one_out(measurements, costs, clock_hz=clock_hz)
         residuals["left_out_seconds"] = held_out["predicted_seconds"]
@@ -265,14 +276,13 @@ def _calibrate(measurements: list, costs, clock_hz: float, size: int):
     residuals.index.name = "scene"
     residuals = residuals.reset_index()
     fitted = [{"name": cost.name, "reference": next(iter(cost.multiples)), "cycles": values[cost.name],
-               "low": cost.bounds[0], "high": cost.bounds[1],
-               "at_bound": bool(np.isclose(values[cost.name], cost.bounds[0], rtol=1e-6)
-                                or np.isclose(values[cost.name], cost.bounds[1], rtol=1e-6))}
+               "low": cost.bounds[0], "high": cost.bounds[1], "at_bound": bound[cost.name]}
               for cost in costs.fitted]
     calibration = {
         "model": model.to_dict(),
         "structure": costs.to_dict(),
         "fitted": fitted,
+        "at_bound": [cost["name"] for cost in fitted if cost["at_bound"]],
         "scale": scale,
         "residuals": residuals,
         "rms_relative_error": rms(residuals["relative_error"]),
@@ -339,9 +349,12 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
         ``our_max_depth``, ``study_tests_1e6``, ``our_tests_1e6`` (at our
         size), ``study_seconds``, ``target_seconds`` (at our size),
         ``fitted_seconds`` (calibrated model, sequential S),
-        ``relative_error``, ``simulated_seconds`` (sequential S run of the
+        ``unexplained_seconds`` (target minus fitted: what the model, every
+        cost inside its bounds, does not explain), ``unexplained_share``
+        (of the target), ``relative_error``, ``simulated_seconds`` (sequential S run of the
         study), ``our_rays``, ``our_tests_per_ray``, ``study_tests_per_pixel``
-        and ``our_tests_per_pixel``.
+        and ``our_tests_per_pixel``, then ``<cost>_at_bound`` per fitted
+        cost (the same on every row: whether that cost sits at a bound).
     """
     study_rows = STUDY_TABLE.set_index("scene")
     fits = residuals.set_index("scene")
@@ -368,12 +381,15 @@ def side_by_side(loaded: dict, runs: pd.DataFrame, residuals: pd.DataFrame, size
             "study_seconds": float(study_row["sequential_seconds"]),
             "target_seconds": float(fits.loc[name, "target_seconds"]),
             "fitted_seconds": float(fits.loc[name, "fitted_seconds"]),
+            "unexplained_seconds": float(fits.loc[name, "unexplained_seconds"]),
+            "unexplained_share": float(fits.loc[name, "unexplained_share"]),
             "relative_error": float(fits.loc[name, "relative_error"]),
             "simulated_seconds": float(s1["real_seconds"].iloc[0]) if len(s1) else float("nan"),
             "our_rays": rays,
             "our_tests_per_ray": tests / rays if rays else float("nan"),
             "study_tests_per_pixel": float(study_row["tests_1e6"]) * 1e6 / STUDY_SIZE ** 2,
             "our_tests_per_pixel": tests / (size * size),
+            **{column: bool(fits.loc[name, column]) for column in fits.columns if column.endswith("_at_bound")},
         })
     return pd.DataFrame(rows)
 

@@ -72,10 +72,12 @@ class PaperResult:
         ``model`` (calibrated cycles per operation), ``structure`` (what is
         fitted and how the rest follow), ``fitted`` (per fitted cost: its
         reference operation, cycles, bounds and whether it sits at one),
-        ``residuals`` (per scene: target, fitted, residual and relative
-        error in seconds, memory-stall share, and the time predicted by a
-        fit to the other scenes), ``scale`` (the pixel-count factor of the
-        targets), ``rms_relative_error``, ``left_out_rms_relative_error``.
+        ``at_bound`` (names of the fitted costs at a bound), ``residuals``
+        (per scene: target, fitted, residual, unexplained time and relative
+        error in seconds, memory-stall share, the time predicted by a fit to
+        the other scenes, and ``<cost>_at_bound`` per fitted cost),
+        ``scale`` (the pixel-count factor of the targets),
+        ``rms_relative_error``, ``left_out_rms_relative_error``.
     predictions : DataFrame
         Per scene, every mapping's predicted one-process time at 512x512 and
         its gap to S (:func:`analyses.paper.sequential_predictions`).

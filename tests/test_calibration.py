@@ -4,9 +4,11 @@ import pandas as pd
 import pytest
 from scipy.optimize import minimize
 
-from coherence.calibration import (OPERATION_FLOPS, STUDY1997_COSTS, CostStructure, FittedCost, fit_costs,
-                                   fitted_values, leave_one_out, rms)
+from coherence.calibration import (FITS, OPERATION_FLOPS, PRIOR_UNKNOWNS, STUDY1997_COSTS, STUDY1997_PRIOR_COSTS,
+                                   CostStructure, FittedCost, at_bounds, fit_costs, fitted_values, leave_one_out,
+                                   prior_range, rms)
 from coherence.cost import OPERATIONS
+from coherence.unknowns import unknown
 
 CLOCK = 1e6
 COUNTERS = ("primary_rays", "shadow_rays", "node_visits", "index_reads", "tests_sphere", "tests_triangle",
@@ -119,3 +121,115 @@ def test_study_structure_fits_three_costs_and_fixes_nothing_to_zero():
     assert len(STUDY1997_COSTS.fitted) == 3
     model = STUDY1997_COSTS.model([5.0, 5.0, 5.0], clock_hz=CLOCK, name="lowest")
     assert all(getattr(model, op) > 0 for op in OPERATIONS)
+
+
+# --------------------------------------------------------------------------
+# the fit within physical priors
+
+
+def test_every_tied_cost_with_a_prior_stays_inside_it():
+    """Over the whole range of the fitted test cost, the triangle test and a light's cost stay inside their
+    own priors from coherence.unknowns. Fails when light_read is tied by its flop ratio (45/22) instead of the
+    ratio of the priors' low ends (120/30)."""
+    test = STUDY1997_PRIOR_COSTS.fitted[0]
+    assert next(iter(test.multiples)) == "test_sphere"
+    for value in np.linspace(*test.bounds, 7):
+        model = STUDY1997_PRIOR_COSTS.model([value, 100.0, 20.0], clock_hz=CLOCK, name="trial")
+        for operation, name in PRIOR_UNKNOWNS.items():
+            entry = unknown(name)
+            assert entry.low - 1e-9 <= getattr(model, operation) <= entry.high + 1e-9, (operation, value)
+    # the three fitted costs' bounds are their priors, read from their one home
+    for cost, name in zip(STUDY1997_PRIOR_COSTS.fitted, ("cost_test_sphere", "cost_ray", "cost_node_visit")):
+        assert cost.bounds == (unknown(name).low, unknown(name).high)
+    assert FITS == {"priors": STUDY1997_PRIOR_COSTS, "study-bounds": STUDY1997_COSTS}
+
+
+def _grid_reference(measured, structure, points=61):
+    """The best relative least squares over a grid of every fitted cost's bounds, then refined by scipy's own
+    bounded least squares from the best grid point: slow and obvious."""
+    from itertools import product
+
+    from scipy.optimize import least_squares
+
+    seconds = measured["seconds"].to_numpy()
+    memory = measured["memory_cycles"].to_numpy()
+
+    def errors(x):
+        trial = structure.model(x, clock_hz=CLOCK, name="trial")
+        return (_seconds(measured, trial, memory) - seconds) / seconds
+
+    grids = [np.linspace(*cost.bounds, points) for cost in structure.fitted]
+    start = min(product(*grids), key=lambda x: float(np.sum(errors(np.array(x)) ** 2)))
+    low, high = np.array([cost.bounds for cost in structure.fitted]).T
+    refined = least_squares(errors, np.array(start), bounds=(low, high), xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                            x_scale=high)
+    return refined.x, float(np.sum(errors(refined.x) ** 2)), errors
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_prior_fit_matches_a_grid_search_within_the_same_bounds(seed):
+    """The prior fit reaches the lowest sum of squared relative errors that a grid over the priors, refined by
+    scipy's least_squares with the same bounds, finds. Fails when fit_costs drops its column scaling of the
+    bounds (bounds=(low, high) instead of (low * scale, high * scale))."""
+    runs = _runs(5, seed)
+    rng = np.random.default_rng(seed + 100)
+    measured = runs.assign(seconds=rng.uniform(20, 80, 5), memory_cycles=rng.uniform(0, 1e7, 5))
+    model, residuals = fit_costs(measured, STUDY1997_PRIOR_COSTS, clock_hz=CLOCK)
+    values = np.array(list(fitted_values(model, STUDY1997_PRIOR_COSTS).values()))
+    best, best_sum, errors = _grid_reference(measured, STUDY1997_PRIOR_COSTS, points=11)
+    low, high = np.array([cost.bounds for cost in STUDY1997_PRIOR_COSTS.fitted]).T
+    assert np.all(values >= low - 1e-9) and np.all(values <= high + 1e-9)
+    assert float(np.sum(errors(values) ** 2)) <= best_sum * (1 + 1e-6) + 1e-12
+    assert values == pytest.approx(best, rel=1e-4)
+
+
+def test_truth_inside_the_priors_is_recovered_exactly():
+    """Times made by costs inside every prior give those costs back, nothing unexplained and no cost at a
+    bound. Fails when the ray's range is read from cost_node_visit (15-60) instead of cost_ray."""
+    runs = _runs(5, 21)
+    memory = np.linspace(2e6, 4e6, 5)
+    truth_values = [47.0, 160.0, 33.0]
+    truth = STUDY1997_PRIOR_COSTS.model(truth_values, clock_hz=CLOCK, name="truth")
+    measured = runs.assign(seconds=_seconds(runs, truth, memory), memory_cycles=memory)
+    model, residuals = fit_costs(measured, STUDY1997_PRIOR_COSTS, clock_hz=CLOCK)
+    values = fitted_values(model, STUDY1997_PRIOR_COSTS)
+    assert list(values.values()) == pytest.approx(truth_values, rel=1e-9)
+    assert np.abs(residuals["unexplained_seconds"]).max() < 1e-9 * measured["seconds"].max()
+    assert at_bounds(values, STUDY1997_PRIOR_COSTS) == {"test": False, "ray": False, "node_visit": False}
+
+
+def test_truth_outside_the_priors_shows_unexplained_time_and_the_bound():
+    """Rays that truly cost 3,000 cycles (ten times their prior's top) while tests and node visits cost their
+    highest: the fit holds every cost at its upper bound, flags all three, and leaves per run exactly the
+    truth's cycles minus the top-of-prior model's as unexplained (positive). Fails when unexplained_seconds is
+    fitted minus measured, or when at_bounds checks only the lower bound."""
+    runs = _runs(5, 31)
+    memory = np.linspace(1e6, 2e6, 5)
+    highs = [cost.bounds[1] for cost in STUDY1997_PRIOR_COSTS.fitted]
+    truth = STUDY1997_PRIOR_COSTS.model([highs[0], 3000.0, highs[2]], clock_hz=CLOCK, name="truth")
+    measured = runs.assign(seconds=_seconds(runs, truth, memory), memory_cycles=memory)
+    model, residuals = fit_costs(measured, STUDY1997_PRIOR_COSTS, clock_hz=CLOCK)
+    values = fitted_values(model, STUDY1997_PRIOR_COSTS)
+    assert list(values.values()) == pytest.approx(highs, rel=1e-9)
+    assert at_bounds(values, STUDY1997_PRIOR_COSTS) == {"test": True, "ray": True, "node_visit": True}
+    top = STUDY1997_PRIOR_COSTS.model(highs, clock_hz=CLOCK, name="top")
+    expected = _seconds(runs, truth, memory) - _seconds(runs, top, memory)
+    assert (expected > 0).all()
+    assert residuals["unexplained_seconds"].to_numpy() == pytest.approx(expected, rel=1e-9)
+    assert residuals["unexplained_seconds"].to_numpy() == pytest.approx(
+        (residuals["measured_seconds"] - residuals["fitted_seconds"]).to_numpy(), rel=1e-12)
+    # the old fit's wide bounds let the ray cost absorb the same time
+    wide, wide_residuals = fit_costs(measured, STUDY1997_COSTS, clock_hz=CLOCK)
+    assert not any(at_bounds(fitted_values(wide, STUDY1997_COSTS), STUDY1997_COSTS).values())
+
+
+def test_a_cost_at_its_lower_bound_is_flagged():
+    """at_bounds flags the lower bound too. Fails when it checks only the upper bound."""
+    low = [cost.bounds[0] for cost in STUDY1997_PRIOR_COSTS.fitted]
+    assert at_bounds(dict(zip(("test", "ray", "node_visit"), [low[0], 100.0, 20.0])), STUDY1997_PRIOR_COSTS) == \
+        {"test": True, "ray": False, "node_visit": False}
+
+
+def test_prior_range_names_operations_without_one():
+    with pytest.raises(ValueError, match="no prior range for operation 'shading'"):
+        prior_range("shading")

@@ -18,7 +18,9 @@ from analyses import verdict as verdict_module
 from analyses.verdict import format_percent
 from analyses.cli import main
 from analyses.paper_output import PAPER_FILES
-from coherence.calibration import OPERATION_FLOPS
+from coherence.calibration import (FITS, OPERATION_FLOPS, PRIOR_UNKNOWNS, STUDY1997_COSTS, STUDY1997_PRIOR_COSTS,
+                                   STUDY_BOUNDS)
+from coherence.unknowns import unknown
 from coherence.cost import OPERATIONS
 
 SCENES = ["tetra", "balls"]
@@ -105,12 +107,54 @@ def test_calibration_residuals_reported(result):
     assert math.isfinite(cal["rms_relative_error"]) and math.isfinite(cal["left_out_rms_relative_error"])
     assert np.isfinite(residuals["left_out_seconds"]).all()
     assert ((residuals["memory_share"] > 0) & (residuals["memory_share"] < 1)).all()
-    # three bounded costs; every operation costs something; ties keep their flop ratios
+    # three costs, each inside its prior (the default fit), and so is every tied cost that has a prior
     assert len(cal["fitted"]) == 3
+    assert cal["structure"]["name"] == STUDY1997_PRIOR_COSTS.name
     for cost in cal["fitted"]:
         assert cost["low"] - 1e-9 <= cost["cycles"] <= cost["high"] + 1e-9
     assert all(cal["model"][op] > 0 for op in OPERATIONS)
-    assert cal["model"]["test_triangle"] / cal["model"]["test_sphere"] == pytest.approx(
+    for operation, name in PRIOR_UNKNOWNS.items():
+        assert unknown(name).low - 1e-9 <= cal["model"][operation] <= unknown(name).high + 1e-9, operation
+    # operations without a prior keep their flop ratios to the sphere test
+    assert cal["model"]["test_polygon"] / cal["model"]["test_sphere"] == pytest.approx(
+        OPERATION_FLOPS["test_polygon"] / OPERATION_FLOPS["test_sphere"])
+
+
+def test_unexplained_time_and_bound_flags_in_every_table(result):
+    """Per scene the time the model does not explain is the target minus the fitted time, in the residuals
+    and the scene table, and every fitted cost's at-bound flag is on every scene's row, equal to the fitted
+    list's. Fails when side_by_side copies residual_seconds (fitted minus target) as unexplained_seconds."""
+    cal = result.calibration
+    residuals = cal["residuals"].set_index("scene")
+    table = result.table.set_index("scene")
+    scale = (SIZE / 512) ** 2
+    for scene in SCENES:
+        unexplained = residuals.loc[scene, "target_seconds"] - residuals.loc[scene, "fitted_seconds"]
+        assert residuals.loc[scene, "unexplained_seconds"] == pytest.approx(unexplained, rel=1e-9, abs=1e-12)
+        assert table.loc[scene, "unexplained_seconds"] == pytest.approx(unexplained, rel=1e-9, abs=1e-12)
+        assert table.loc[scene, "unexplained_share"] == pytest.approx(
+            unexplained / residuals.loc[scene, "target_seconds"], rel=1e-9, abs=1e-12)
+        assert residuals.loc[scene, "unexplained_seconds_at_512"] == pytest.approx(unexplained / scale, rel=1e-9)
+    for cost in cal["fitted"]:
+        at = min(abs(cost["cycles"] - cost["low"]), abs(cost["cycles"] - cost["high"])) <= 1e-6 * cost["cycles"]
+        assert cost["at_bound"] == at
+        assert (table[f"{cost['name']}_at_bound"] == at).all()
+        assert (residuals[f"{cost['name']}_at_bound"] == at).all()
+        assert (cost["name"] in cal["at_bound"]) == at
+
+
+def test_study_bounds_fit_is_kept_for_comparison(result):
+    """The same measurements fitted with --fit study-bounds: the old structure, its 5-5000 bounds and flop-ratio
+    ties, and the command's choices are the names of coherence.calibration.FITS. Fails when FITS maps
+    'study-bounds' to the prior structure."""
+    from analyses.commands.paper import FIT_CHOICES
+
+    assert FIT_CHOICES == tuple(FITS)
+    measurements = result.calibration["measurements"].drop(columns="seconds").to_dict("records")
+    _, old = paper._calibrate(measurements, FITS["study-bounds"], result.parameters["clock_hz"], SIZE)
+    assert old["structure"]["name"] == STUDY1997_COSTS.name
+    assert all((cost["low"], cost["high"]) == STUDY_BOUNDS for cost in old["fitted"])
+    assert old["model"]["test_triangle"] / old["model"]["test_sphere"] == pytest.approx(
         OPERATION_FLOPS["test_triangle"] / OPERATION_FLOPS["test_sphere"])
 
 
@@ -270,8 +314,15 @@ def test_files_written_and_deterministic(written):
     assert summary["parameters"]["scenes"] == SCENES
     assert summary["parameters"]["background_load"] == paper.DEFAULT_BACKGROUND
     assert "versions" in summary and "residuals" in summary["calibration"]
+    # the unexplained time and the bound flags reach the files and the page
+    scenes = pd.read_csv(first / "scenes.csv")
+    assert {"unexplained_seconds", "test_at_bound", "ray_at_bound", "node_visit_at_bound"} <= set(scenes.columns)
+    assert [c["name"] for c in summary["calibration"]["fitted"] if c["at_bound"]] == summary["calibration"]["at_bound"]
+    assert all("unexplained_seconds" in row for row in summary["calibration"]["residuals"])
     assert len(summary["verdicts"]) == len(SCENES)
     page = (first / "index.html").read_text()
+    assert ("At a bound: " in page) == bool(summary["calibration"]["at_bound"])
+    assert ("No fitted cost is at a bound." in page) != bool(summary["calibration"]["at_bound"])
     assert page.count("data:image/png;base64,") == 2
     assert "http://" not in page and "https://" not in page
     assert (first / "speedup_real.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -290,6 +341,16 @@ def test_errors_before_work(tmp_path, capsys, argv, message):
     status = main(["paper", "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "cache"), *argv])
     assert status == 2
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
+
+
+def test_fit_must_be_one_of_the_fits(tmp_path, capsys):
+    """--fit takes only the names of coherence.calibration.FITS. Fails when FIT_CHOICES is dropped from the
+    option (any name accepted, and FITS[name] fails after the traces are rendered)."""
+    with pytest.raises(SystemExit) as stopped:
+        main(["paper", "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "cache"), "--fit", "loose"])
+    assert stopped.value.code == 2
+    assert "invalid choice: 'loose'" in capsys.readouterr().err
     assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
 
 
