@@ -3,8 +3,10 @@
 Runs ``coherence report SCENE --size N`` once to warm the trace cache and
 time a whole warm run (``T``), then ``--runs`` more, each sent one SIGINT
 after a delay drawn uniformly (seeded) from ``[0, T)``. A run is clean when
-it dies by SIGINT (a shell reports 130) and its stderr, beside the
-report's warnings, is the one line ``coherence report: interrupted``. Prints each run that is not clean and
+it dies by SIGINT (a shell reports 130) and its stderr, beside what the
+report says anyway (warnings, the files it wrote), is the one line
+``coherence report: interrupted`` (``coherence: interrupted`` while the
+command line is still loading). Prints each run that is not clean and
 the tally; a run that ended before its SIGINT was sent is counted apart.
 
     python benchmarks/bench_interrupts.py [--runs 50] [--seed 0] [--scene balls] [--size 64] [--cache DIR]
@@ -35,6 +37,11 @@ def _interruptible():
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _said(err: str) -> list[str]:
+    """stderr's lines beside what a report says anyway: its warnings and the files it wrote."""
+    return [line for line in err.strip().splitlines() if not line.startswith(("coherence: warning:", "wrote "))]
+
+
 def interrupted_run(args, folder: Path, delay: float) -> tuple[str, int, str]:
     """One report sent SIGINT ``delay`` seconds after its start: (outcome, return code, stderr)."""
     process = _report(args, folder)
@@ -46,8 +53,9 @@ def interrupted_run(args, folder: Path, delay: float) -> tuple[str, int, str]:
         outcome = None
     _, err = process.communicate(timeout=600)
     if outcome is None:
-        said = [line for line in err.strip().splitlines() if not line.startswith("coherence: warning:")]
-        clean = process.returncode == -signal.SIGINT and said == ["coherence report: interrupted"]
+        said = _said(err)
+        clean = process.returncode == -signal.SIGINT and said in (["coherence report: interrupted"],
+                                                                   ["coherence: interrupted"])
         outcome = "clean" if clean else f"exit {process.returncode}"
     return outcome, process.returncode, err
 
@@ -78,7 +86,7 @@ def main():
             outcome, code, err = interrupted_run(args, folder, delay)
             tally[outcome] = tally.get(outcome, 0) + 1
             if outcome not in ("clean", "ended first"):
-                lines = [line for line in err.strip().splitlines() if not line.startswith("coherence: warning:")]
+                lines = _said(err)
                 print(f"run {number} at {delay:.2f} s: rc {code}, {len(lines)} stderr lines: "
                       f"{' | '.join(lines[-6:])[-600:]}", flush=True)
     interrupted = args.runs - tally.get("ended first", 0)

@@ -1222,3 +1222,31 @@ def test_a_finished_command_line_leaves_before_pythons_teardown():
     """
     done = _python(_LATE_INTERRUPT)
     assert (done.returncode, done.stderr) == (0, "")
+
+
+_LOADING_INTERRUPT = textwrap.dedent('''
+    import runpy, signal, sys
+
+    class InterruptWhileLoading:
+        """Ctrl-C as the command line imports its interrupt handling."""
+        def find_spec(self, name, path=None, target=None):
+            if name == "analyses.interrupts" and not hasattr(self, "done"):
+                self.done = signal.raise_signal(signal.SIGINT)
+            return None
+
+    sys.meta_path.insert(0, InterruptWhileLoading())
+    sys.argv = ["coherence", "--version"]
+    runpy.run_module("analyses", run_name="__main__", alter_sys=True)
+''')
+
+
+def test_ctrl_c_while_python_m_analyses_loads_prints_one_line():
+    """``python -m analyses`` interrupted while it imports the command line prints one line and dies by SIGINT.
+
+    Fails (a KeyboardInterrupt traceback) if ``analyses/__main__.py`` no longer catches KeyboardInterrupt
+    around its import of ``analyses.cli``.
+    """
+    import signal
+
+    done = _python(_LOADING_INTERRUPT)
+    assert (done.returncode, done.stderr) == (-signal.SIGINT, "coherence: interrupted\n")
