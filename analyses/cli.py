@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "analyses.commands.report",
     "analyses.commands.whatif",
     "analyses.commands.paper",
+    "analyses.commands.robustness",
 )
 
 

@@ -1,0 +1,277 @@
+"""The verdict under uncertainty: a global sensitivity study of "load balance or coherence?".
+
+>>> from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness     # doctest: +SKIP
+>>> result = robustness(ROBUSTNESS_EXPERIMENT, scenes=["tetra"], trajectories=10, seed=1)
+>>> result.summary["scenes"]["tetra"]["p_load_balance"]                     # doctest: +SKIP
+
+For each scene the trace is rendered once (through the trace cache of
+:mod:`analyses.traces`) and every sample only replays it. The samples are
+Morris trajectories (:func:`analyses.robustness_factors.morris_design`)
+over every unknown the toolkit has a mechanism for
+(:data:`analyses.robustness_factors.FACTORS`); one sample is one
+:func:`coherence.study` of every mapping at one process and at
+:data:`analyses.verdict.VERDICT_PROCESSES`, on the sample's machine,
+caches, memory image and cost model, so the mappings of a sample share all
+its values and seeds. Every run is simulated in full: none is re-costed
+from stored miss counts.
+
+From each sample (:data:`SAMPLE_COLUMNS`): the one-process time of B and DB
+relative to S's (``(T_B - T_S) / T_S``), every mapping's coherence and
+imbalance loss at 8 processes, the verdict and its margin: the largest
+imbalance loss of any mapping minus the largest coherence or dispatch loss,
+positive when the verdict is "load balance". Morris's ``mu_star`` of the
+margin ranks the unknowns; the flip region is a threshold on each of the
+top three (:func:`flip_thresholds`).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from analyses.experiment import Experiment
+from analyses.paper_study import PAPER_EXPERIMENT
+from analyses.robustness_factors import (FACTORS, LEFT_OUT, MORRIS_LEVELS, factor_values, morris_design,
+                                         morris_indices, sample_setup)
+from analyses.verdict import VERDICT_PROCESSES
+from rtcommon.validate import require_int
+
+__all__ = ["ROBUSTNESS_EXPERIMENT", "RobustnessResult", "robustness", "sample_outputs", "scene_summary",
+           "flip_thresholds", "trajectory_seeds", "SAMPLE_COLUMNS", "PERCENTILES", "TOP"]
+
+#: The base of every sample: the paper's study-era reproduction (workload,
+#: machine) at 128 x 128, one process and the verdict's process count.
+ROBUSTNESS_EXPERIMENT = replace(PAPER_EXPERIMENT, size=128, n_processes=(1, VERDICT_PROCESSES), progress=False)
+
+#: Percentiles of every distribution the summary gives.
+PERCENTILES = (5, 50, 95)
+
+#: How many of the highest-ranked unknowns the summary and the flip region name.
+TOP = 3
+
+#: Columns of the samples table before the per-mapping losses and the factors' values.
+SAMPLE_COLUMNS = ("scene", "sample", "trajectory", "seed", "b_minus_s", "db_minus_s", "decided_by",
+                  "load_balance", "margin")
+
+
+@dataclass
+class RobustnessResult:
+    """Everything ``coherence robustness`` writes.
+
+    Attributes
+    ----------
+    samples : DataFrame
+        One row per (scene, sample): :data:`SAMPLE_COLUMNS`, then
+        ``coherence_loss_<M>`` and ``imbalance_loss_<M>`` per mapping M at
+        the verdict's process count, then each factor's value.
+    indices : DataFrame
+        One row per (scene, factor): ``mu_star``, ``mu``, ``sigma`` of the
+        margin and ``rank`` (1 = largest ``mu_star``).
+    summary : dict
+        ``parameters`` (the base's, the scenes, trajectories, seed, factors
+        and left-out unknowns) and ``scenes``: per scene what
+        :func:`scene_summary` gives.
+    """
+
+    samples: pd.DataFrame
+    indices: pd.DataFrame
+    summary: dict = field(default_factory=dict)
+
+
+def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), trajectories: int = 10,
+               seed: int = 0, executor=None) -> RobustnessResult:
+    """Morris screening of the verdict over every unknown with a mechanism, per scene.
+
+    Parameters
+    ----------
+    base : analyses.experiment.Experiment
+        Size, workload, mappings, process counts (the verdict's count is
+        needed; 1 is always added), trace cache and everything not sampled.
+    scenes : sequence of str
+        The study's scenes.
+    trajectories : int
+        Morris trajectories, >= 2; each is ``len(FACTORS) + 1`` samples.
+    seed : int
+        Seed of the design, the page placements and the other users' streams.
+    executor : concurrent.futures.Executor, optional
+        Simulate the runs there (a Dask client's executor).
+
+    Returns
+    -------
+    RobustnessResult
+    """
+    from analyses.paper_study import check_scenes
+
+    if not isinstance(base, Experiment):
+        raise ValueError(f"robustness needs an analyses.experiment.Experiment, got {type(base).__name__}")
+    require_int("trajectories", trajectories, 2)
+    require_int("seed", seed, 0)
+    if VERDICT_PROCESSES not in base.n_processes:
+        raise ValueError(f"Experiment.n_processes must include {VERDICT_PROCESSES}, the verdict's process count; "
+                         f"got {list(base.n_processes)}")
+    scenes = check_scenes(scenes)
+    names = [entry.name for entry in FACTORS]
+    design = morris_design(names, trajectories, seed)
+    seeds = trajectory_seeds(seed, trajectories)
+    frames, index_rows, summaries = [], [], {}
+    for scene in scenes:
+        frame = pd.DataFrame(_scene_samples(replace(base, scene=scene), design, seeds, executor))
+        indices = morris_indices(names, design, frame["margin"].to_numpy(), seed)
+        ranked = sorted(names, key=lambda name: -indices["mu_star"][name])
+        for name in names:
+            index_rows.append({"scene": scene, "factor": name, **{k: indices[k][name] for k in indices},
+                               "rank": ranked.index(name) + 1})
+        summaries[scene] = scene_summary(frame, ranked, indices["mu_star"], base.mapping_names())
+        frames.append(frame)
+    parameters = {**base.as_parameters(), "scenes": scenes, "trajectories": int(trajectories), "seed": int(seed),
+                  "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS,
+                  "factors": [{"name": e.name, "distribution": e.distribution, "low": e.low, "high": e.high,
+                               "choices": list(e.choices), "unit": e.unit} for e in FACTORS],
+                  "left_out": dict(LEFT_OUT), "re_costed": "none: every run is simulated in full"}
+    for key in ("hierarchy", "cost", "layout", "background_load", "background_footprint", "page_placement",
+                "page_seed", "scene"):
+        parameters.pop(key)  # sampled per run, recorded per sample
+    return RobustnessResult(pd.concat(frames, ignore_index=True), pd.DataFrame(index_rows),
+                            {"parameters": parameters, "scenes": summaries})
+
+
+def trajectory_seeds(seed: int, trajectories: int) -> list[int]:
+    """One seed per trajectory: the samples of a trajectory differ only in the factor it steps."""
+    return [int(np.random.default_rng([int(seed), t]).integers(0, 2**31 - 1)) for t in range(int(trajectories))]
+
+
+def _scene_samples(base: Experiment, design: np.ndarray, seeds, executor) -> list[dict]:
+    from analyses.traces import cached_trace
+    from coherence.studies import Execution
+
+    scene, trace, info = cached_trace(base.scene, base.size, cache_dir=base.cache_dir, kd=base.kd_builder(),
+                                      max_depth=base.max_depth, progress=base.progress, workload=base.workload)
+    execution = Execution(executor=executor, trace_folder=f"{info['path']}/trace")
+    per_trajectory = design.shape[0] // len(seeds)
+    rows = []
+    with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
+        warnings.simplefilter("always")
+        for index, unit_row in enumerate(design):
+            trajectory = index // per_trajectory
+            rows.append(_sample_row(base, (scene, trace, execution), unit_row, index, seeds[trajectory],
+                                    trajectory))
+    for message in dict.fromkeys(str(warning.message) for warning in caught):
+        warnings.warn(message, stacklevel=3)
+    return rows
+
+
+def _sample_row(base: Experiment, replay, unit_row, index: int, seed: int, trajectory: int) -> dict:
+    """Simulate one sample on ``replay`` = (scene, trace, execution) and return its row."""
+    from coherence.studies import study
+
+    scene, trace, execution = replay
+    setup = sample_setup(base, factor_values(unit_row), seed)
+    experiment = setup.experiment
+    result = study(trace, experiment.mapping_objects(), experiment.n_processes,
+                   hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),
+                   cost=experiment.cost_model(), machine=setup.machine, scene=scene, progress=False,
+                   execution=execution)
+    return {"scene": scene.name, "sample": index, "trajectory": trajectory, "seed": seed,
+            **sample_outputs(result.runs), **setup.values}
+
+
+def sample_outputs(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES) -> dict:
+    """One sample's outputs from its run table (:attr:`coherence.StudyResult.runs`).
+
+    ``b_minus_s`` and ``db_minus_s`` (one-process user time of B and DB
+    relative to S's, NaN when one of them did not run), ``decided_by`` and
+    ``load_balance`` (the verdict at ``n_processes``), ``margin``, and
+    ``coherence_loss_<M>`` and ``imbalance_loss_<M>`` per mapping M.
+    """
+    from analyses.verdict import verdict
+
+    one = runs[runs["n_processes"] == 1].set_index("mapping")["user_cycles_max"]
+    judged = verdict(runs, n_processes)
+    worst = {column: value for column, (_, value) in judged.worst.items()}
+    out = {}
+    for mapping, key in (("B", "b_minus_s"), ("DB", "db_minus_s")):
+        out[key] = float(one[mapping] / one["S"] - 1.0) if mapping in one and "S" in one else float("nan")
+    out["decided_by"] = judged.decided_by
+    out["load_balance"] = judged.decided_by == "load balance"
+    out["margin"] = float(worst["imbalance_loss"] - max(worst["coherence_loss"], worst["dispatch_loss"]))
+    for row in runs[runs["n_processes"] == n_processes].itertuples(index=False):
+        out[f"coherence_loss_{row.mapping}"] = float(row.coherence_loss)
+        out[f"imbalance_loss_{row.mapping}"] = float(row.imbalance_loss)
+    return out
+
+
+def _percentiles(values) -> dict:
+    values = np.asarray(values, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return {f"p{p}": None for p in PERCENTILES}
+    return {f"p{p}": float(np.percentile(values, p)) for p in PERCENTILES}
+
+
+def scene_summary(frame: pd.DataFrame, ranked, mu_star: dict, mappings) -> dict:
+    """The summary of one scene's samples.
+
+    ``n_evaluations``; percentiles (:data:`PERCENTILES`) of ``b_minus_s``,
+    ``db_minus_s`` and ``margin``; per mapping its coherence and imbalance
+    losses (median and the 5-95% interval); ``p_load_balance``, the
+    fraction of samples whose verdict is "load balance"; ``mu_star`` of
+    every factor, ``top`` (the :data:`TOP` largest) and ``flip``
+    (:func:`flip_thresholds` on the top ones).
+    """
+    losses = {}
+    for mapping in mappings:
+        losses[mapping] = {kind: _percentiles(frame[f"{kind}_loss_{mapping}"]) for kind in ("coherence", "imbalance")
+                           if f"{kind}_loss_{mapping}" in frame}
+    top = list(ranked[:TOP])
+    return {"n_evaluations": int(len(frame)),
+            "b_minus_s": _percentiles(frame["b_minus_s"]), "db_minus_s": _percentiles(frame["db_minus_s"]),
+            "losses": losses, "p_load_balance": float(frame["load_balance"].mean()),
+            "margin": _percentiles(frame["margin"]),
+            "mu_star": {name: float(mu_star[name]) for name in ranked}, "top": top,
+            "flip": flip_thresholds(frame, top)}
+
+
+def flip_thresholds(frame: pd.DataFrame, factors) -> dict:
+    """Where the verdict flips, per factor: a threshold, a set of choices, or ``"none in range"``.
+
+    For a numeric factor: the value ``t`` (midway between two sampled
+    values) and side such that "load balance exactly when the factor is
+    above (below) ``t``" agrees with the most samples; for a categorical
+    one: the choices where most samples say "load balance". ``agreement``
+    is the fraction of samples the rule classifies right. A rule that
+    agrees with no more samples than "always the commoner verdict" (which
+    is every case where all samples agree) is ``"none in range"``.
+    """
+    verdicts = frame["load_balance"].to_numpy(dtype=bool)
+    baseline = max(verdicts.mean(), 1.0 - verdicts.mean())
+    by_name = {entry.name: entry for entry in FACTORS}
+    out = {}
+    for name in factors:
+        entry = by_name[name]
+        values = frame[name].to_numpy()
+        rule = _choice_rule(entry, values, verdicts) if entry.distribution == "categorical" else \
+            _threshold_rule(values.astype(np.float64), verdicts)
+        out[name] = rule if rule is not None and rule["agreement"] > baseline + 1e-12 else "none in range"
+    return out
+
+
+def _threshold_rule(values: np.ndarray, verdicts: np.ndarray) -> dict | None:
+    levels = np.unique(values)
+    best = None
+    for low, high in zip(levels[:-1], levels[1:]):
+        threshold = 0.5 * (low + high)
+        above = values > threshold
+        for side, says in (("above", above), ("below", ~above)):
+            agreement = float(np.mean(says == verdicts))
+            if best is None or agreement > best["agreement"]:
+                best = {"threshold": float(threshold), "load_balance_when": side, "agreement": agreement}
+    return best
+
+
+def _choice_rule(entry, values: np.ndarray, verdicts: np.ndarray) -> dict:
+    chosen = [choice for choice in entry.choices if (values == choice).any()
+              and verdicts[values == choice].mean() > 0.5]
+    says = np.isin(values, chosen)
+    return {"load_balance_choices": chosen, "agreement": float(np.mean(says == verdicts))}

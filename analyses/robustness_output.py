@@ -1,0 +1,113 @@
+"""What ``coherence robustness`` writes: samples and indices as CSV, the summary as JSON, one HTML page.
+
+Files (:data:`ROBUSTNESS_FILES`), written together to temporary names and
+then renamed (:func:`rtcommon.files.write_files_atomic`):
+
+``samples.csv``
+    One row per (scene, sample): its outputs and every sampled value
+    (:attr:`analyses.robustness.RobustnessResult.samples`).
+``indices.csv``
+    Morris ``mu_star``, ``mu``, ``sigma`` and rank of every (scene, factor).
+``robustness.json``
+    Parameters, seed, package versions (SALib's included) and per scene the
+    summary of :func:`analyses.robustness.scene_summary`.
+``index.html``
+    One self-contained page: per scene the verdict's probability, the
+    percentiles, the flip region and a tornado chart of ``mu_star``.
+
+The same inputs and seed give byte-identical files.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from analyses.html import figure_png, render_page
+from analyses.output import prepare_output_folder
+from rtcommon.files import write_files_atomic
+from rtcommon.jsonio import plain
+
+__all__ = ["ROBUSTNESS_FILES", "robustness_summary", "plot_tornado", "write_robustness"]
+
+#: The files :func:`write_robustness` writes, by what they hold.
+ROBUSTNESS_FILES = {"samples": "samples.csv", "indices": "indices.csv", "summary": "robustness.json",
+                    "page": "index.html"}
+
+
+def robustness_summary(result) -> dict:
+    """What ``robustness.json`` holds: parameters, versions and the per-scene summaries, as plain JSON data."""
+    from importlib.metadata import version
+
+    from coherence.provenance import provenance
+
+    meta = provenance(**result.summary["parameters"])
+    versions = {**meta["versions"], "SALib": version("SALib")}
+    return plain({"parameters": meta["parameters"], "versions": versions, "scenes": result.summary["scenes"]}, 10)
+
+
+def plot_tornado(df, ax=None, *, title=None):
+    """Horizontal bars of ``mu_star`` per factor, the largest on top.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Columns ``factor`` and ``mu_star``, one row per factor of one scene.
+    """
+    from analyses.plots import _axes
+
+    ax = _axes(ax, (6.0, 4.0))
+    rows = df.sort_values("mu_star", ascending=True, kind="stable")
+    ax.barh(rows["factor"], rows["mu_star"], color="tab:blue")
+    ax.set_xlabel("Morris mu* of the verdict's margin")
+    if title:
+        ax.set_title(title)
+    return ax
+
+
+def _tornado_png(indices: pd.DataFrame, scene: str) -> bytes:
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(6.0, 4.0))
+    plot_tornado(indices[indices["scene"] == scene], ax=figure.subplots(), title=scene)
+    return figure_png(figure)
+
+
+def _csv(frame: pd.DataFrame) -> str:
+    return frame.to_csv(index=False, lineterminator="\n", float_format="%.10g")
+
+
+def _flip_text(rule) -> str:
+    if isinstance(rule, str):
+        return rule
+    if "threshold" in rule:
+        return f"load balance when {rule['load_balance_when']} {rule['threshold']:.4g} " \
+               f"(agrees with {100 * rule['agreement']:.0f}% of samples)"
+    return f"load balance with {', '.join(rule['load_balance_choices']) or 'no choice'} " \
+           f"(agrees with {100 * rule['agreement']:.0f}% of samples)"
+
+
+def _scene_tables(summary: dict) -> dict:
+    spread = pd.DataFrame([{"quantity": name, **summary[name]} for name in ("b_minus_s", "db_minus_s", "margin")])
+    losses = pd.DataFrame([{"mapping": mapping, "loss": kind, **values}
+                           for mapping, kinds in summary["losses"].items() for kind, values in kinds.items()])
+    flip = pd.DataFrame([{"factor": name, "flip region": _flip_text(rule)} for name, rule in summary["flip"].items()])
+    return {"spread": spread, "losses": losses, "flip": flip}
+
+
+def write_robustness(result, out) -> Path:
+    """Write :data:`ROBUSTNESS_FILES` into ``out`` as one unit; return the folder."""
+    path = prepare_output_folder(out)
+    summary = robustness_summary(result)
+    scenes = []
+    for scene, scene_summary in summary["scenes"].items():
+        scenes.append({"name": scene, "summary": scene_summary, "tables": _scene_tables(scene_summary),
+                       "tornado": _tornado_png(result.indices, scene)})
+    page = render_page("robustness.html.j2", p=summary["parameters"], scenes=scenes)
+    files = {path / ROBUSTNESS_FILES["samples"]: _csv(result.samples),
+             path / ROBUSTNESS_FILES["indices"]: _csv(result.indices),
+             path / ROBUSTNESS_FILES["summary"]: json.dumps(summary, indent=2, allow_nan=False) + "\n",
+             path / ROBUSTNESS_FILES["page"]: page}
+    write_files_atomic(files)
+    return path

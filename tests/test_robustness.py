@@ -1,0 +1,174 @@
+"""coherence robustness: unit coordinates to values, samples inside the documented ranges, Morris and Sobol on a
+synthetic model, the flip rule, and a seeded study that gives the same files twice."""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analyses.robustness import ROBUSTNESS_EXPERIMENT, flip_thresholds, robustness
+from analyses.robustness_factors import (FACTORS, LEFT_OUT, factor_value, factor_values, morris_design,
+                                         morris_indices, sample_setup, sobol_design, sobol_indices)
+from analyses.robustness_output import ROBUSTNESS_FILES, write_robustness
+from coherence.unknowns import UNKNOWNS, Unknown, unknown
+
+NAMES = [entry.name for entry in FACTORS]
+
+
+def test_categorical_and_integer_coordinates_by_hand():
+    """Four choices split [0, 1] in quarters, u = 1 is the last; an integer range 0..8 has nine equal cells.
+    Fails if factor_value's ``min(..., count - 1)`` is dropped (u = 1 indexes past the choices) or if the
+    integer cell count loses its ``+ 1`` (8 is then only reached at u = 1)."""
+    placement = unknown("page_placement")
+    assert placement.choices == ("contiguous", "colouring", "bin-hopping", "random")
+    expected = {0.0: "contiguous", 0.24: "contiguous", 0.25: "colouring", 0.5: "bin-hopping", 0.74: "bin-hopping",
+                0.75: "random", 0.999: "random", 1.0: "random"}
+    for u, choice in expected.items():
+        assert factor_value(placement, u) == choice
+    image = unknown("memory_image")  # three choices: Morris's levels 0, 1/3, 2/3, 1 reach each
+    assert [factor_value(image, u) for u in (0.0, 1 / 3, 2 / 3, 1.0)] == ["compact", "alpha1997", "malloc1997",
+                                                                          "malloc1997"]
+    load = unknown("background_load")
+    assert [factor_value(load, u) for u in (0.0, 0.11, 0.12, 0.5, 0.88, 0.89, 1.0)] == [0, 0, 1, 4, 7, 8, 8]
+    with pytest.raises(ValueError, match="page_placement.*\\[0, 1\\]"):
+        factor_value(placement, 1.5)
+
+
+def test_numeric_coordinates_against_their_distributions():
+    """log-uniform: u = 1/2 is the geometric mean of the bounds; uniform: the arithmetic mean. Fails if
+    factor_value's log-uniform branch is made linear (``low + u * (high - low)``)."""
+    latency = unknown("memory_latency")
+    assert factor_value(latency, 0.0) == pytest.approx(latency.low)
+    assert factor_value(latency, 1.0) == pytest.approx(latency.high)
+    assert factor_value(latency, 0.5) == pytest.approx(math.sqrt(latency.low * latency.high))
+    bcache = unknown("bcache_latency")
+    assert factor_value(bcache, 0.5) == pytest.approx(0.5 * (bcache.low + bcache.high))
+
+
+def test_every_sample_lies_in_the_documented_ranges_and_reaches_the_objects():
+    """Every value of a seeded Morris design lies in its unknown's range, and the sample's Experiment,
+    Machine, hierarchy and cost model carry it. Fails if sample_setup drops one replacement (for example
+    the ``tlb=tlb`` of the hierarchy, so the DTB miss cost stays at its default)."""
+    base = replace(ROBUSTNESS_EXPERIMENT, size=32)
+    design = morris_design(NAMES, 6, seed=11)
+    assert design.shape == (6 * (len(NAMES) + 1), len(NAMES))
+    seen = {name: set() for name in NAMES}
+    for row in design:
+        values = factor_values(row)
+        for entry in FACTORS:
+            assert entry.contains(values[entry.name]), (entry.name, values[entry.name])
+            seen[entry.name].add(values[entry.name])
+        setup = sample_setup(base, values, seed=5)
+        experiment, machine = setup.experiment, setup.machine
+        hierarchy, cost = experiment.hierarchy_object(), experiment.cost_model()
+        assert hierarchy.memory_latency == values["memory_latency"]
+        assert hierarchy.levels[2].latency == values["bcache_latency"]
+        assert (hierarchy.tlb is not None) == (values["data_tlb"] == "on")
+        if hierarchy.tlb is not None:
+            assert hierarchy.tlb.miss_cycles == values["dtb_miss_cycles"]
+        assert experiment.layout_object().name == values["memory_image"]
+        assert machine.page_placement.policy == values["page_placement"]
+        assert machine.page_placement.seed == 5 and machine.background_seed == 5
+        assert machine.background_load == values["background_load"]
+        assert machine.background_footprint == round(values["background_footprint"])
+        assert machine.quantum_cycles == values["quantum_cycles"]
+        for field, name in (("node_visit", "cost_node_visit"), ("test_sphere", "cost_test_sphere"),
+                            ("test_triangle", "cost_test_triangle"), ("light_read", "cost_light_read"),
+                            ("ray", "cost_ray"), ("test_root", "square_root_cycles")):
+            assert getattr(cost, field) == pytest.approx(values[name]), field
+        assert (experiment.scene, experiment.size, experiment.workload) == (base.scene, 32, base.workload)
+    for entry in FACTORS:  # the design reaches both ends of every range
+        if entry.distribution == "categorical":
+            assert seen[entry.name] == set(entry.choices), entry.name
+        else:
+            assert min(seen[entry.name]) == pytest.approx(entry.low) and max(seen[entry.name]) == pytest.approx(entry.high)
+    assert {entry.name for entry in UNKNOWNS} == set(NAMES) | set(LEFT_OUT)
+
+
+def _one_factor_model(unit: np.ndarray) -> np.ndarray:
+    """Only the fourth coordinate matters (a steep nonlinear function of it)."""
+    return np.exp(3.0 * unit[:, 3]) + 0.0 * unit.sum(axis=1)
+
+
+def test_morris_ranks_the_only_factor_that_matters_first():
+    """On a synthetic model of the unit design where only one factor matters, its mu* is first and every other
+    is zero. Fails if morris_indices reverses the design's columns (``design[:, ::-1]``) before SALib."""
+    names = NAMES[:6]
+    design = morris_design(names, 10, seed=2)
+    indices = morris_indices(names, design, _one_factor_model(design), seed=2)
+    ranked = sorted(names, key=lambda name: -indices["mu_star"][name])
+    assert ranked[0] == names[3]
+    assert all(indices["mu_star"][name] == 0.0 for name in names if name != names[3])
+
+
+def test_sobol_total_index_of_the_only_factor_that_matters():
+    """Sobol over four factors of a model where only one matters: its total index > 0.9, the others' < 0.05.
+    Fails if sobol_indices zips the names with reversed results."""
+    names = NAMES[:4]
+    design = sobol_design(names, 256, seed=4)
+    indices = sobol_indices(names, _one_factor_model(design), seed=4)
+    assert indices["ST"][names[3]] > 0.9
+    assert all(abs(indices["ST"][name]) < 0.05 for name in names[:3])
+
+
+def test_flip_threshold_on_a_synthetic_verdict():
+    """The verdict is "load balance" exactly when memory latency is below 100 cycles: the rule says below, the
+    threshold lies between the nearest sampled latencies on each side, and it agrees with every sample; a
+    categorical factor names the choices; with one verdict everywhere, none in range. Fails if
+    _threshold_rule swaps its ``above`` and ``below`` sides."""
+    rng = np.random.default_rng(0)
+    latency = rng.uniform(51, 150, 200)
+    image = rng.choice(["compact", "alpha1997", "malloc1997"], 200)
+    frame = pd.DataFrame({"memory_latency": latency, "memory_image": image, "load_balance": latency < 100})
+    flip = flip_thresholds(frame, ["memory_latency", "memory_image"])
+    rule = flip["memory_latency"]
+    assert rule["load_balance_when"] == "below" and rule["agreement"] == 1.0
+    assert latency[latency < 100].max() < rule["threshold"] < latency[latency >= 100].min()
+    frame["load_balance"] = frame["memory_image"] == "malloc1997"
+    assert flip_thresholds(frame, ["memory_image"])["memory_image"]["load_balance_choices"] == ["malloc1997"]
+    frame["load_balance"] = True
+    assert flip_thresholds(frame, ["memory_latency", "memory_image"]) == {"memory_latency": "none in range",
+                                                                           "memory_image": "none in range"}
+
+
+@pytest.fixture(scope="module")
+def small_study(tmp_path_factory):
+    base = replace(ROBUSTNESS_EXPERIMENT, size=32, cache_dir=str(tmp_path_factory.mktemp("cache")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 32x32
+        first = robustness(base, scenes=["tetra"], trajectories=2, seed=3)
+        second = robustness(base, scenes=["tetra"], trajectories=2, seed=3)
+    return first, second, tmp_path_factory.mktemp("out")
+
+
+def test_study_is_reproducible_with_a_seed(small_study):
+    """Two studies with one seed give equal tables and byte-identical files. Fails if trajectory_seeds draws
+    from an unseeded generator (``np.random.default_rng()``)."""
+    first, second, out = small_study
+    pd.testing.assert_frame_equal(first.samples, second.samples)
+    a = write_robustness(first, out / "a")
+    b = write_robustness(second, out / "b")
+    for name in ROBUSTNESS_FILES.values():
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_study_outputs_agree_with_the_samples(small_study):
+    """n_evaluations counts the samples; the verdict's probability is the fraction of "load balance" rows; a
+    positive margin is that verdict; each trajectory shares one seed. Fails if sample_outputs takes the
+    smaller of the coherence and dispatch losses (``min``) for the margin."""
+    result = small_study[0]
+    samples = result.samples
+    summary = result.summary["scenes"]["tetra"]
+    assert summary["n_evaluations"] == len(samples) == 2 * (len(NAMES) + 1)
+    assert summary["p_load_balance"] == pytest.approx(samples["load_balance"].mean())
+    assert ((samples["margin"] > 0) == samples["load_balance"]).all()
+    losses = samples[[f"coherence_loss_{m}" for m in ("S", "P", "R", "B", "DB")]].max(axis=1)
+    imbalance = samples[[f"imbalance_loss_{m}" for m in ("S", "P", "R", "B", "DB")]].max(axis=1)
+    assert np.all(samples["margin"] <= imbalance - losses + 1e-12)
+    assert samples.groupby("trajectory")["seed"].nunique().eq(1).all()
+    assert len(summary["top"]) == 3 and set(summary["flip"]) == set(summary["top"])
+    assert summary["b_minus_s"]["p5"] <= summary["b_minus_s"]["p50"] <= summary["b_minus_s"]["p95"]
