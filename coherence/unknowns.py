@@ -11,9 +11,10 @@ rows (``tests/test_unknowns.py`` checks the two agree row by row).
 
 Defaults are read from the code, not copied: when a default of the model
 moves outside its documented range, the test of this module fails.
-A default of ``None`` marks a cost that today is fitted to the study's
-sequential times (bounds :data:`coherence.calibration.STUDY_BOUNDS`), so it
-has no value before a fit.
+A default of ``None`` marks a cost that is fitted to the study's
+sequential times (by default within the range given here,
+:data:`coherence.calibration.STUDY1997_PRIOR_COSTS`), so it has no value
+before a fit.
 """
 from __future__ import annotations
 
