@@ -21,7 +21,10 @@ imbalance loss at 8 processes, the verdict and its margin: the largest
 imbalance loss of any mapping minus the largest coherence or dispatch loss,
 positive when the verdict is "load balance". Morris's ``mu_star`` of the
 margin ranks the unknowns; the flip region is a threshold on each of the
-top three (:func:`flip_thresholds`).
+top three (:func:`flip_thresholds`). With ``sobol=N``, Saltelli's design of
+``N (k + 2)`` samples over the :data:`SOBOL_FACTORS` highest-ranked unknowns
+(the others at the middle of their unit range, :data:`HELD_AT`) gives their
+first-order and total Sobol indices of the margin.
 """
 from __future__ import annotations
 
@@ -34,9 +37,9 @@ import pandas as pd
 from analyses.experiment import Experiment
 from analyses.paper_study import PAPER_EXPERIMENT
 from analyses.robustness_factors import (FACTORS, LEFT_OUT, MORRIS_LEVELS, factor_values, morris_design,
-                                         morris_indices, sample_setup)
+                                         morris_indices, sample_setup, sobol_design, sobol_indices)
 from analyses.verdict import VERDICT_PROCESSES
-from rtcommon.validate import require_int
+from rtcommon.validate import require_int, require_power_of_two
 
 __all__ = ["ROBUSTNESS_EXPERIMENT", "RobustnessResult", "robustness", "sample_outputs", "scene_summary",
            "flip_thresholds", "trajectory_seeds", "SAMPLE_COLUMNS", "PERCENTILES", "TOP"]
@@ -50,6 +53,13 @@ PERCENTILES = (5, 50, 95)
 
 #: How many of the highest-ranked unknowns the summary and the flip region name.
 TOP = 3
+
+#: How many of the highest-ranked unknowns (by Morris mu*) Sobol's indices are computed for.
+SOBOL_FACTORS = 4
+
+#: Unit coordinate of every unknown Sobol's design does not vary: the middle
+#: of its range (the geometric mean of a log-uniform one, the middle choice).
+HELD_AT = 0.5
 
 #: Columns of the samples table before the per-mapping losses and the factors' values.
 SAMPLE_COLUMNS = ("scene", "sample", "trajectory", "seed", "b_minus_s", "db_minus_s", "decided_by",
@@ -65,10 +75,12 @@ class RobustnessResult:
     samples : DataFrame
         One row per (scene, sample): :data:`SAMPLE_COLUMNS`, then
         ``coherence_loss_<M>`` and ``imbalance_loss_<M>`` per mapping M at
-        the verdict's process count, then each factor's value.
+        the verdict's process count, each factor's value, and ``design``
+        (``morris`` or ``sobol``).
     indices : DataFrame
         One row per (scene, factor): ``mu_star``, ``mu``, ``sigma`` of the
-        margin and ``rank`` (1 = largest ``mu_star``).
+        margin and ``rank`` (1 = largest ``mu_star``); with Sobol, ``S1``
+        and ``ST`` (NaN for a factor Sobol's design held).
     summary : dict
         ``parameters`` (the base's, the scenes, trajectories, seed, factors
         and left-out unknowns) and ``scenes``: per scene what
@@ -81,7 +93,7 @@ class RobustnessResult:
 
 
 def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), trajectories: int = 10,
-               seed: int = 0, executor=None) -> RobustnessResult:
+               seed: int = 0, sobol: int = 0, executor=None) -> RobustnessResult:
     """Morris screening of the verdict over every unknown with a mechanism, per scene.
 
     Parameters
@@ -95,6 +107,9 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
         Morris trajectories, >= 2; each is ``len(FACTORS) + 1`` samples.
     seed : int
         Seed of the design, the page placements and the other users' streams.
+    sobol : int
+        Base samples ``N`` of Sobol's design (a power of two), or 0 for
+        Morris screening only.
     executor : concurrent.futures.Executor, optional
         Simulate the runs there (a Dask client's executor).
 
@@ -108,6 +123,8 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
         raise ValueError(f"robustness needs an analyses.experiment.Experiment, got {type(base).__name__}")
     require_int("trajectories", trajectories, 2)
     require_int("seed", seed, 0)
+    if require_int("sobol", sobol, 0):
+        require_power_of_two("sobol", sobol)
     if VERDICT_PROCESSES not in base.n_processes:
         raise ValueError(f"Experiment.n_processes must include {VERDICT_PROCESSES}, the verdict's process count; "
                          f"got {list(base.n_processes)}")
@@ -124,9 +141,19 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
             index_rows.append({"scene": scene, "factor": name, **{k: indices[k][name] for k in indices},
                                "rank": ranked.index(name) + 1})
         summaries[scene] = scene_summary(frame, ranked, indices["mu_star"], base.mapping_names())
-        frames.append(frame)
+        frames.append(frame.assign(design="morris"))
+        if sobol:
+            top = ranked[:SOBOL_FACTORS]
+            sobol_frame, sobol_result = _sobol(replace(base, scene=scene), top, sobol, seed, executor)
+            for row in index_rows[-len(names):]:
+                row.update({key: sobol_result[key].get(row["factor"], np.nan) for key in ("S1", "ST")})
+            summaries[scene]["sobol"] = {"factors": top, "base_samples": int(sobol),
+                                         "n_evaluations": int(len(sobol_frame)),
+                                         **{key: sobol_result[key] for key in ("S1", "ST")}}
+            frames.append(sobol_frame.assign(design="sobol"))
     parameters = {**base.as_parameters(), "scenes": scenes, "trajectories": int(trajectories), "seed": int(seed),
-                  "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS,
+                  "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS, "sobol": int(sobol),
+                  "sobol_held_at": HELD_AT,
                   "factors": [{"name": e.name, "distribution": e.distribution, "low": e.low, "high": e.high,
                                "choices": list(e.choices), "unit": e.unit} for e in FACTORS],
                   "left_out": dict(LEFT_OUT), "re_costed": "none: every run is simulated in full"}
@@ -140,6 +167,17 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
 def trajectory_seeds(seed: int, trajectories: int) -> list[int]:
     """One seed per trajectory: the samples of a trajectory differ only in the factor it steps."""
     return [int(np.random.default_rng([int(seed), t]).integers(0, 2**31 - 1)) for t in range(int(trajectories))]
+
+
+def _sobol(base: Experiment, top, base_samples: int, seed: int, executor):
+    """Sobol's samples of one scene over the unknowns ``top`` (the rest held at :data:`HELD_AT`), and the indices."""
+    names = [entry.name for entry in FACTORS]
+    partial = sobol_design(top, base_samples, seed)
+    design = np.full((partial.shape[0], len(names)), HELD_AT)
+    design[:, [names.index(name) for name in top]] = partial
+    # every Sobol sample shares one seed: the indices see no noise of the placement's draw
+    frame = pd.DataFrame(_scene_samples(base, design, trajectory_seeds(seed, 1), executor))
+    return frame, sobol_indices(top, frame["margin"].to_numpy(), seed)
 
 
 def _scene_samples(base: Experiment, design: np.ndarray, seeds, executor) -> list[dict]:

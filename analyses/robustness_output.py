@@ -4,10 +4,12 @@ Files (:data:`ROBUSTNESS_FILES`), written together to temporary names and
 then renamed (:func:`rtcommon.files.write_files_atomic`):
 
 ``samples.csv``
-    One row per (scene, sample): its outputs and every sampled value
+    One row per (scene, sample): its outputs and every sampled value, and
+    the design it belongs to, ``morris`` or ``sobol``
     (:attr:`analyses.robustness.RobustnessResult.samples`).
 ``indices.csv``
-    Morris ``mu_star``, ``mu``, ``sigma`` and rank of every (scene, factor).
+    Morris ``mu_star``, ``mu``, ``sigma`` and rank of every (scene, factor),
+    with Sobol's ``S1`` and ``ST`` for the factors Sobol's design varied.
 ``robustness.json``
     Parameters, seed, package versions (SALib's included) and per scene the
     summary of :func:`analyses.robustness.scene_summary`.
@@ -93,7 +95,12 @@ def _scene_tables(summary: dict) -> dict:
     losses = pd.DataFrame([{"mapping": mapping, "loss": kind, **values}
                            for mapping, kinds in summary["losses"].items() for kind, values in kinds.items()])
     flip = pd.DataFrame([{"factor": name, "flip region": _flip_text(rule)} for name, rule in summary["flip"].items()])
-    return {"spread": spread, "losses": losses, "flip": flip}
+    tables = {"spread": spread, "losses": losses, "flip": flip}
+    if "sobol" in summary:
+        sobol = summary["sobol"]
+        tables["sobol"] = pd.DataFrame([{"factor": name, "first order": sobol["S1"][name], "total": sobol["ST"][name]}
+                                        for name in sobol["factors"]])
+    return tables
 
 
 def write_robustness(result, out) -> Path:

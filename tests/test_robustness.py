@@ -140,8 +140,8 @@ def small_study(tmp_path_factory):
     base = replace(ROBUSTNESS_EXPERIMENT, size=32, cache_dir=str(tmp_path_factory.mktemp("cache")))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 32x32
-        first = robustness(base, scenes=["tetra"], trajectories=2, seed=3)
-        second = robustness(base, scenes=["tetra"], trajectories=2, seed=3)
+        first = robustness(base, scenes=["tetra"], trajectories=2, seed=3, sobol=4)
+        second = robustness(base, scenes=["tetra"], trajectories=2, seed=3, sobol=4)
     return first, second, tmp_path_factory.mktemp("out")
 
 
@@ -161,7 +161,7 @@ def test_study_outputs_agree_with_the_samples(small_study):
     positive margin is that verdict; each trajectory shares one seed. Fails if sample_outputs takes the
     smaller of the coherence and dispatch losses (``min``) for the margin."""
     result = small_study[0]
-    samples = result.samples
+    samples = result.samples[result.samples["design"] == "morris"]
     summary = result.summary["scenes"]["tetra"]
     assert summary["n_evaluations"] == len(samples) == 2 * (len(NAMES) + 1)
     assert summary["p_load_balance"] == pytest.approx(samples["load_balance"].mean())
@@ -172,3 +172,23 @@ def test_study_outputs_agree_with_the_samples(small_study):
     assert samples.groupby("trajectory")["seed"].nunique().eq(1).all()
     assert len(summary["top"]) == 3 and set(summary["flip"]) == set(summary["top"])
     assert summary["b_minus_s"]["p5"] <= summary["b_minus_s"]["p50"] <= summary["b_minus_s"]["p95"]
+
+
+def test_sobol_samples_vary_the_top_factors_only(small_study):
+    """Sobol's samples of a scene vary the top four unknowns by Morris mu* over their ranges and hold every
+    other at the middle of its range; the indices table has S1 and ST for those four only. Fails if _sobol
+    leaves out ``design[:, columns] = partial`` (every factor held)."""
+    result = small_study[0]
+    summary = result.summary["scenes"]["tetra"]
+    top = summary["sobol"]["factors"]
+    assert top == sorted(summary["mu_star"], key=lambda name: -summary["mu_star"][name])[:4]
+    sobol = result.samples[result.samples["design"] == "sobol"]
+    assert len(sobol) == summary["sobol"]["n_evaluations"] == 4 * (len(top) + 2)
+    for entry in FACTORS:
+        values = sobol[entry.name]
+        if entry.name in top:
+            assert values.nunique() > 1, entry.name
+        else:
+            assert (values == factor_value(entry, 0.5)).all(), entry.name
+    indices = result.indices.set_index("factor")
+    assert indices["ST"].notna().sum() == 4 and set(indices.index[indices["ST"].notna()]) == set(top)

@@ -15,11 +15,12 @@ cost, five operation costs) is sampled over its documented range by Morris
 trajectories (SALib, four levels); the study-era tree variants are not varied
 yet. Each scene's trace is rendered once (study-era workload) and every
 sample replays it: every mapping at 1 and 8 processes, all sharing the
-sample's values and seeds. Every run is simulated in full.
+sample's values and seeds. Every run is simulated in full. With --sobol N,
+first-order and total Sobol indices of the top four unknowns follow.
 
 Output folder (default robustness):
   samples.csv       one row per scene x sample: outputs and sampled values
-  indices.csv       Morris mu*, mu, sigma and rank of every scene x unknown
+  indices.csv       Morris mu*, mu, sigma, rank (and Sobol S1, ST) per scene x unknown
   robustness.json   parameters, seed, versions and per scene the summary
   index.html        one self-contained page with tornado charts
 The same inputs and --seed give byte-identical files.
@@ -27,6 +28,7 @@ The same inputs and --seed give byte-identical files.
 examples:
   coherence robustness --scenes tetra --size 64 --trajectories 4
   coherence robustness --size 256 --trajectories 10 --json
+  coherence robustness --scenes balls --size 64 --trajectories 4 --sobol 16
 """
 
 
@@ -42,6 +44,9 @@ def register(subparsers) -> None:
                         help="Morris trajectories, >= 2 (default 10); each is one sample per unknown plus one")
     parser.add_argument("--seed", type=int, default=0, metavar="S",
                         help="seed of the design, the page placements and the other users' streams (default 0)")
+    parser.add_argument("--sobol", type=int, default=0, metavar="N",
+                        help="then Sobol indices over the top 4 unknowns by Morris mu*, from N (k + 2) samples per "
+                             "scene, N a power of two (default 0: none)")
     parser.add_argument("--out", metavar="DIR", default="robustness", help="output folder (default robustness)")
     parser.add_argument("--json", action="store_true", help="print robustness.json to stdout")
     parser.set_defaults(func=run)
@@ -59,10 +64,13 @@ def run(args: argparse.Namespace) -> int:
     from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness
     from analyses.robustness_output import ROBUSTNESS_FILES, robustness_summary, write_robustness
     from analyses.traces import check_cache_dir
+    from rtcommon.validate import require_power_of_two
     from tracer.scenes.catalog import PAPER_SCENES
 
     # every user error surfaces here, before any rendering
-    check_at_least(args, size=1, trajectories=2, seed=0)
+    check_at_least(args, size=1, trajectories=2, seed=0, sobol=0)
+    if args.sobol:
+        require_power_of_two("--sobol", args.sobol)
     if args.dask:
         require_distributed()
     check_memory("--size", args.size)
@@ -71,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder(args.out)
     base = replace(ROBUSTNESS_EXPERIMENT, size=args.size, cache_dir=args.cache)
     with dask_executor(args.dask) as executor:
-        result = robustness(base, scenes=scenes, trajectories=args.trajectories, seed=args.seed, executor=executor)
+        result = robustness(base, scenes=scenes, trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
+                            executor=executor)
     path = write_robustness(result, args.out)
     print(f"wrote {path / ROBUSTNESS_FILES['page']}, "
           f"{', '.join(name for role, name in ROBUSTNESS_FILES.items() if role != 'page')}", file=sys.stderr)
