@@ -112,6 +112,6 @@ def test_uses_index_weighs_the_ways_against_the_stream():
     """Fails if ``uses_index`` ignores the stream's length: a pixel's few accesses would build a
     65,536-way index each time."""
     geometry = CacheState(Hierarchy((CacheLevel("FA", 4 << 20, 64, "full"),))).geometry
-    assert uses_index(geometry, 1024) and not uses_index(geometry, 1023)
+    assert uses_index(geometry, 4096) and not uses_index(geometry, 4095)
     small = CacheState(Hierarchy((CacheLevel("FA", 64 * 64, 64, "full"),))).geometry
     assert not uses_index(small, 10**6)
