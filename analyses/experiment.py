@@ -30,6 +30,7 @@ from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.page_placement import PAGE_PLACEMENTS
 from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
 from rtcommon.validate import require_bool, require_int
+from tracer.rendering.tree_variants import STUDY_TREE_VARIANT
 
 __all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
 
@@ -53,6 +54,11 @@ class Experiment:
         Image width and height in pixels, >= 1.
     workload : str
         The tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`).
+    tree_variant : str
+        The study-era tree rule, by name
+        (:data:`tracer.rendering.tree_variants.TREE_VARIANTS`); the default,
+        the study's own rule, is the only one a workload other than
+        ``study1997`` or a ``kd`` builder other than its median takes.
     kd : str, optional
         kd-tree builder (:data:`tracer.kd.tree.BUILDERS`); None: the
         workload's.
@@ -102,6 +108,7 @@ class Experiment:
     scene: object = "balls"
     size: int = 512
     workload: str = "modern"
+    tree_variant: str = STUDY_TREE_VARIANT
     kd: str | None = None
     max_depth: int | None = None
     mappings: tuple = tuple(DEFAULT_MAPPINGS)
@@ -122,6 +129,7 @@ class Experiment:
     def __post_init__(self):
         from coherence.mappings import get_mapping
         from tracer.kd.tree import BUILDERS
+        from tracer.rendering.tree_variants import TREE_VARIANTS, workload_with_tree
         from tracer.rendering.workload import WORKLOADS
 
         if not isinstance(self.scene, (str, os.PathLike)) or not os.fspath(self.scene):
@@ -130,6 +138,15 @@ class Experiment:
         _choose("workload", self.workload, WORKLOADS)
         if self.kd is not None:
             _choose("kd", self.kd, BUILDERS)
+        _choose("tree_variant", self.tree_variant, TREE_VARIANTS)
+        try:
+            workload_with_tree(self.workload, self.tree_variant)
+        except ValueError as error:
+            raise ValueError(f"Experiment.tree_variant: {error}") from None
+        variant = TREE_VARIANTS[self.tree_variant]
+        if self.tree_variant != STUDY_TREE_VARIANT and self.kd_builder() != variant.builder:
+            raise ValueError(f"Experiment.kd must be None or {variant.builder} for tree_variant {self.tree_variant}, "
+                             f"got {self.kd!r}")
         if self.max_depth is not None:
             require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH_LIMIT)
         mappings = (self.mappings,) if isinstance(self.mappings, str) else tuple(self.mappings)
@@ -203,6 +220,13 @@ class Experiment:
 
         return self.kd or get_workload(self.workload).kd_config.builder
 
+    def tree_variant_used(self) -> str | None:
+        """``tree_variant`` when it names the tree built (the ``study1997`` workload's own builder), else None."""
+        from tracer.rendering.tree_variants import TREE_VARIANT_WORKLOADS, TREE_VARIANTS
+
+        builds = self.workload in TREE_VARIANT_WORKLOADS and self.kd_builder() == TREE_VARIANTS[self.tree_variant].builder
+        return self.tree_variant if builds else None
+
     def as_parameters(self) -> dict:
         """The choices that decide the results, as plain JSON data.
 
@@ -211,9 +235,10 @@ class Experiment:
         ``n_processes``, ``hierarchy`` and ``cost`` (their fields, so a file
         or a custom object is recorded too), ``layout`` (its name),
         ``n_cpus``, ``background_load``, ``background_footprint``,
-        ``page_placement`` and ``page_seed``. ``cache_dir``, ``dask``,
-        ``memory_budget`` and ``progress`` are left out: no result depends
-        on them.
+        ``page_placement``, ``page_seed`` and ``tree_variant``
+        (:meth:`tree_variant_used`: None where no variant is built).
+        ``cache_dir``, ``dask``, ``memory_budget`` and ``progress`` are
+        left out: no result depends on them.
         """
         return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
                 "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
@@ -221,7 +246,7 @@ class Experiment:
                 "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
                 "n_cpus": int(self.n_cpus), "background_load": int(self.background),
                 "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,
-                "page_seed": int(self.page_seed)}
+                "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used()}
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:

@@ -171,6 +171,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
             one = replace(experiment, scene=name)
             scene, trace, info = cached_trace(one.scene, one.size, cache_dir=one.cache_dir, kd=one.kd,
                                               max_depth=one.max_depth, progress=progress, workload=one.workload,
+                                              tree_variant=one.tree_variant,
                                               memory_budget=shares["render_records"])
             loaded[name] = (scene, None, info)
             info_out[name] = {"trace_key": info["key"], "cached": bool(info.get("cached"))}

@@ -8,7 +8,8 @@ trace by everything that decides its content:
 - the scene: its name for a built-in scene (``balls`` ...), or the SHA-256 of
   the file's bytes for an NFF/OBJ path (so editing the file misses the cache);
 - the image size, the kd-tree builder, the ray-tree depth and the workload
-  (:data:`tracer.rendering.workload.WORKLOADS`, with its parameters);
+  (:data:`tracer.rendering.workload.WORKLOADS`, with its parameters, the
+  tree of its tree variant included: :mod:`tracer.rendering.tree_variants`);
 - the package version, the trace format version and a digest of the
   ``tracer`` package's source files (an editable checkout changes the
   renderer without changing the version).
@@ -17,7 +18,8 @@ The cache folder is ``cache_dir`` when given (the CLI's ``--cache``), else
 the ``COHERENCE_CACHE`` environment variable, else
 ``~/.cache/raytrace-coherence``; whichever names it, its layout is the same::
 
-    <cache>/traces/<scene>-<size>[-<workload>]-<kd>-d<depth>-<hash>/   (workload left out for "modern")
+    <cache>/traces/<scene>-<size>[-<workload>][-<tree variant>]-<kd>-d<depth>-<hash>/
+                   (workload left out for "modern", tree variant for the default)
         trace/         the AccessTrace (pixel_offsets.npy, records.npy, ...,
                        meta.json with a checksum of every array and header,
                        meta.json.xxh3 with meta.json's)
@@ -160,7 +162,8 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
     return label, f"file:{content}"
 
 
-def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workload: str = "modern") -> str:
+def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workload: str = "modern",
+              tree_variant: str | None = None) -> str:
     """Folder name of a cache entry: readable prefix plus a hash of every ingredient.
 
     Parameters
@@ -174,24 +177,30 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
         The ray-tree depth actually rendered (the scene's when not overridden).
     workload : str
         A :data:`tracer.rendering.workload.WORKLOADS` name; its parameters are hashed too.
+    tree_variant : str, optional
+        A :data:`tracer.rendering.tree_variants.TREE_VARIANTS` name: the
+        workload's tree is that rule's (hashed with the workload); None or
+        the default leaves the key as it was.
     """
     from coherence import __version__
     from tracer.trace.access import FORMAT_VERSION
-    from tracer.rendering.workload import get_workload
+    from tracer.rendering.tree_variants import STUDY_TREE_VARIANT, workload_with_tree
 
     label, identity = _scene_identity(name_or_path)
-    preset = get_workload(workload)
+    preset = workload_with_tree(workload, tree_variant)
     ingredients = {"scene": identity, "size": int(size), "kd": kd, "max_depth": int(max_depth),
                    "workload": preset.to_dict(),
                    "version": __version__, "format_version": FORMAT_VERSION, "tracer_source": _source_digest()}
     digest = hashlib.sha256(json.dumps(ingredients, sort_keys=True).encode()).hexdigest()[:16]
     named = "" if preset.name == "modern" else f"-{preset.name}"
+    if tree_variant not in (None, STUDY_TREE_VARIANT):
+        named += f"-{tree_variant}"
     return f"{label}-{int(size)}{named}-{kd}-d{int(max_depth)}-{digest}"
 
 
 def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | None = None,
                  max_depth: int | None = None, progress: bool = True, workload: str = "modern",
-                 memory_budget: int | None = None):
+                 memory_budget: int | None = None, tree_variant: str | None = None):
     """The scene and its access trace at ``size`` x ``size``, rendered once and then loaded.
 
     Parameters
@@ -215,6 +224,10 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     memory_budget : int, optional
         Bytes of records a render holds in RAM before it writes them to the
         entry in chunks (default :data:`tracer.rendering.render.DEFAULT_MEMORY_BUDGET`).
+    tree_variant : str, optional
+        The workload's tree rule by name
+        (:data:`tracer.rendering.tree_variants.TREE_VARIANTS`); default the
+        workload's own.
 
     Returns
     -------
@@ -223,19 +236,22 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
         Records memory-mapped from the cache.
     render_info : dict
         ``key``, ``path`` (the entry folder), ``png`` (image path), ``cached``
-        (whether it was loaded), ``size``, ``kd``, ``max_depth``, ``workload``, ``tree``
+        (whether it was loaded), ``size``, ``kd``, ``max_depth``, ``workload``, ``tree_variant``
+        (as asked, None when not), ``tree``
         (statistics), ``kd_config``, ``totals`` (counter sums), ``timings``
         (seconds of the original render).
 
     Raises
     ------
     ValueError
-        Unknown scene name or workload, bad size or builder, malformed scene file.
+        Unknown scene name, workload or tree variant, bad size or builder, a tree variant with another
+        builder, malformed scene file.
     FileNotFoundError
         A scene path that does not exist.
     """
     from tracer.scenes.catalog import load
     from tracer.trace.access import AccessTrace
+    from tracer.rendering.tree_variants import workload_with_tree
     from tracer.rendering.workload import WORKLOADS
 
     from tracer.trace.access import TraceIntegrityError
@@ -243,14 +259,18 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     size = require_int("size", size, 1)
     if workload not in WORKLOADS:
         raise ValueError(f"workload must be one of {', '.join(WORKLOADS)}, got {workload!r}")
+    preset = workload_with_tree(workload, tree_variant)
     if kd is None:
-        kd = WORKLOADS[workload].kd_config.builder
+        kd = preset.kd_config.builder
     elif kd not in _KD_BUILDERS:
         raise ValueError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
-    explicit_kd = kd if kd != WORKLOADS[workload].kd_config.builder else None
+    explicit_kd = kd if kd != preset.kd_config.builder else None
+    if explicit_kd and preset is not WORKLOADS[workload]:
+        raise ValueError(f"tree variant {tree_variant} is a {preset.kd_config.builder} tree; kd {kd} builds another")
     root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
-    key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload)
+    key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload,
+                    tree_variant=tree_variant)
     entry = root / "traces" / key
     remove_stale_temporaries(entry.parent)  # on a hit too: a killed run's leftovers go at the next run
     try:
@@ -271,7 +291,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
             warnings.warn(f"damaged trace cache entry {key}: a file, not a folder; "
                           "evicting it and rendering again", stacklevel=2)
             _remove(entry)
-        _render_entry(scene, size, kd, explicit_kd, workload, key, entry, progress, memory_budget)
+        _render_entry(scene, size, kd, explicit_kd, preset, key, entry, progress, memory_budget, tree_variant)
         info = _read_entry(entry)
         if info is None:
             raise RuntimeError(f"trace cache entry {entry} was not written completely")
@@ -359,9 +379,10 @@ def _complete(entry: Path) -> bool:
         return False
 
 
-def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: str, entry: Path,
-                  progress: bool, memory_budget: int | None) -> None:
-    # explicit_kd: a builder other than the workload's, with its defaults
+def _render_entry(scene, size: int, kd: str, explicit_kd, workload, key: str, entry: Path,
+                  progress: bool, memory_budget: int | None, tree_variant: str | None) -> None:
+    # explicit_kd: a builder other than the workload's, with its defaults; workload: the Workload object,
+    # its tree the variant's; tree_variant: the name asked for, recorded as asked
     from tqdm.auto import tqdm
 
     from tracer.kd.tree import KdTreeConfig
@@ -394,7 +415,7 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload: str, key: st
         save_png(result.image, tmp / _IMAGE)
         info = {
             "key": key, "scene": scene.name, "size": size, "kd": kd, "max_depth": int(scene.max_depth),
-            "workload": workload,
+            "workload": workload.name, "tree_variant": tree_variant,
             "tree": result.tree.stats, "kd_config": result.tree.config.to_dict(), "totals": result.totals(),
             "timings": {**result.timings, "wall": seconds},
             "image_checksum": xxhash.xxh3_64_hexdigest((tmp / _IMAGE).read_bytes()),

@@ -65,8 +65,8 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 
 #: Fields of the base :class:`~analyses.experiment.Experiment` a study file or
 #: :meth:`WhatIf.of` may set.
-BASE_FIELDS = ("scene", "size", "workload", "kd", "max_depth", "mappings", "n_processes", "hierarchy", "layout",
-               "cost", "n_cpus", "background", "memory_budget")
+BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
+               "layout", "cost", "n_cpus", "background", "memory_budget")
 
 
 @dataclass(frozen=True)
@@ -427,7 +427,8 @@ def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
     for key in dict.fromkeys(_scene_key(point) for point in points):
         scene = study.scene if key is None else _sized_scene_file(study.scene, key, cache_dir)
         _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, kd=base.kd, max_depth=base.max_depth,
-                                  progress=progress, workload=base.workload, memory_budget=records_budget)
+                                  progress=progress, workload=base.workload, memory_budget=records_budget,
+                                  tree_variant=base.tree_variant)
         folders[key] = str(Path(info["path"]) / "trace")
     return folders
 

@@ -171,7 +171,7 @@ def _unknowns() -> tuple:
                 source="instruction-counts", unit="cycles"),
         Unknown("cost_ray", "CostModel.ray", None, "log-uniform", 75.0, 300.0,
                 source="instruction-counts", unit="cycles"),
-        Unknown("tree_variant", "Workload.kd_config", _study_tree_rule_name(), "categorical",
+        Unknown("tree_variant", "Experiment.tree_variant, --tree-variant", _study_tree_rule_name(), "categorical",
                 choices=TREE_VARIANTS, source="tree-search"),
     )
 

@@ -173,3 +173,178 @@ def test_plausible_keeps_variants_within_a_quarter_on_every_scene():
     table = pd.DataFrame(rows, columns=["variant", "scene", "size", "ratio"])
     assert check.plausible(table, 128) == ["a", "d"]
     assert check.plausible(table, 32) == []
+
+
+# the option: Experiment field, command line, trace cache
+
+
+def test_the_experiment_holds_the_variant_and_records_it_where_it_builds_the_tree():
+    """Default the study's rule; recorded for study1997, None for modern or another builder.
+
+    Fails when the record ignores the workload: checked by returning ``self.tree_variant`` always from
+    ``Experiment.tree_variant_used``.
+    """
+    from analyses.experiment import Experiment
+
+    assert Experiment().tree_variant == STUDY_TREE_VARIANT
+    assert Experiment().as_parameters()["tree_variant"] is None
+    study = Experiment(scene="tetra", workload="study1997", tree_variant="d15-l48-box-longest-todepth-nearest")
+    assert study.as_parameters()["tree_variant"] == "d15-l48-box-longest-todepth-nearest"
+    assert Experiment(workload="study1997").as_parameters()["tree_variant"] == STUDY_TREE_VARIANT
+    assert Experiment(workload="study1997", kd="sah").as_parameters()["tree_variant"] is None
+
+
+@pytest.mark.parametrize("fields, words", [
+    ({"workload": "study1997", "tree_variant": "d99"}, ["Experiment.tree_variant must be one of", *TREE_VARIANTS]),
+    ({"tree_variant": "d17-l48-box-cycle-todepth-nearest"}, ["Experiment.tree_variant", "study1997 workload only"]),
+    ({"workload": "study1997", "tree_variant": "d17-l48-box-cycle-todepth-nearest", "kd": "sah"},
+     ["Experiment.kd must be None or median"]),
+])
+def test_the_experiment_refuses_a_bad_variant_naming_the_field(fields, words):
+    """Fails when a variant is dropped silently: checked by deleting the ``workload_with_tree`` call of
+    ``Experiment.__post_init__`` (modern takes any variant), and the kd check after it (sah takes one)."""
+    from analyses.experiment import Experiment
+
+    with pytest.raises(ValueError) as error:
+        Experiment(**fields)
+    for word in words:
+        assert word in str(error.value)
+
+
+def test_the_command_line_option_reaches_the_experiment_and_refuses_bad_names(capsys):
+    """``--tree-variant`` sets the field; a bad name is refused listing the choices.
+
+    Fails when the option is not mapped: checked by deleting ``"tree_variant": "tree_variant"`` from
+    ``EXPERIMENT_OPTIONS``.
+    """
+    from analyses.cli import build_parser
+    from analyses.commands.options import experiment_from_args
+
+    parser = build_parser()
+    args = parser.parse_args(["report", "tetra", "--workload", "study1997", "--tree-variant",
+                              "d17-l32-box-cycle-todepth-nearest"])
+    assert experiment_from_args(args).tree_variant == "d17-l32-box-cycle-todepth-nearest"
+    assert experiment_from_args(parser.parse_args(["report", "tetra"])).tree_variant == STUDY_TREE_VARIANT
+    with pytest.raises(SystemExit):
+        parser.parse_args(["report", "tetra", "--tree-variant", "d16"])
+    message = capsys.readouterr().err
+    assert "--tree-variant" in message and all(name in message for name in TREE_VARIANTS)
+
+
+def test_a_variant_gets_its_own_trace_key_and_tree(tmp_path):
+    """balls at 4 x 4: the default's key is the key of before, a variant's key names it and differs, and
+    its entry holds the variant's tree.
+
+    Fails when the key ignores the variant: checked by leaving ``tree_variant=tree_variant`` out of
+    ``cached_trace``'s call of ``trace_key`` (both entries get one key, and the second load returns the
+    first tree).
+    """
+    from analyses.traces import cached_trace, trace_key
+
+    variant = "d17-l48-box-cycle-todepth-nearest"
+    _, _, default = cached_trace("balls", 4, cache_dir=tmp_path, progress=False, workload="study1997")
+    _, _, other = cached_trace("balls", 4, cache_dir=tmp_path, progress=False, workload="study1997",
+                               tree_variant=variant)
+    assert default["key"] == trace_key("balls", 4, kd="median", max_depth=2, workload="study1997")
+    assert variant not in default["key"] and variant in other["key"] and other["key"] != default["key"]
+    assert not other["cached"]
+    assert other["kd_config"] == TREE_VARIANTS[variant].to_dict() != default["kd_config"]
+    assert other["tree"]["nodes"] != default["tree"]["nodes"]
+    assert (other["tree_variant"], other["workload"]) == (variant, "study1997")
+    with pytest.raises(ValueError, match="median tree; kd sah"):
+        cached_trace("balls", 4, cache_dir=tmp_path, workload="study1997", tree_variant=variant, kd="sah")
+
+
+class _Asked(Exception):
+    pass
+
+
+def _stop_at_the_trace(monkeypatch):
+    """Make ``analyses.traces.cached_trace`` record its keyword arguments and stop the run there."""
+    import analyses.traces
+
+    asked = {}
+
+    def fake(*args, **kwargs):
+        asked.update(kwargs)
+        raise _Asked
+
+    monkeypatch.setattr(analyses.traces, "cached_trace", fake)
+    return asked
+
+
+def test_report_paper_and_whatif_pass_the_variant_to_the_trace(monkeypatch, tmp_path):
+    """Fails when a command drops the variant: checked by deleting ``tree_variant=experiment.tree_variant``
+    in analyses/report.py, ``tree_variant=one.tree_variant`` in analyses/paper.py and
+    ``tree_variant=base.tree_variant`` in analyses/whatif.py (each alone)."""
+    from dataclasses import replace
+
+    from analyses.experiment import Experiment
+    from analyses.paper import reproduce
+    from analyses.paper_study import PAPER_EXPERIMENT
+    from analyses.report import build_report
+    from analyses.whatif import WhatIf, _traces_for
+
+    variant = "d15-l32-box-longest-todepth-nearest"
+    asked = _stop_at_the_trace(monkeypatch)
+    experiment = Experiment(scene="tetra", size=8, workload="study1997", tree_variant=variant, cache_dir=tmp_path,
+                            dask="tcp://127.0.0.1:9", progress=False)
+    with pytest.raises(_Asked):
+        build_report(experiment)
+    assert asked.pop("tree_variant") == variant
+    with pytest.raises(_Asked):
+        reproduce(replace(PAPER_EXPERIMENT, size=8, tree_variant=variant, cache_dir=tmp_path, progress=False),
+                  scenes=["tetra"])
+    assert asked.pop("tree_variant") == variant
+    study = WhatIf.of("latency", {"memory_latency": [40, 80]}, scene="tetra", size=8, workload="study1997",
+                      tree_variant=variant)
+    with pytest.raises(_Asked):
+        _traces_for(study, study.points(), tmp_path, False)
+    assert asked.pop("tree_variant") == variant
+
+
+def test_render_takes_the_variant_and_refuses_it_beside_kd():
+    """``render --tree-variant`` builds the variant's workload; with ``--kd`` (which would build a default
+    tree instead) it is refused.
+
+    Fails when ``workload_from_args`` ignores the option: checked by returning ``get_workload(args.workload)``.
+    """
+    from analyses.cli import build_parser
+    from analyses.commands.options import workload_from_args
+    from rtcommon.validate import InputError
+
+    parser = build_parser()
+    args = parser.parse_args(["render", "balls", "--workload", "study1997", "--tree-variant",
+                              "d17-l48-box-cycle-todepth-nearest"])
+    assert workload_from_args(args).kd_config == TREE_VARIANTS["d17-l48-box-cycle-todepth-nearest"]
+    assert workload_from_args(parser.parse_args(["render", "balls"])) is WORKLOADS["modern"]
+    with pytest.raises(InputError, match="drop --kd median"):
+        workload_from_args(parser.parse_args(["render", "balls", "--workload", "study1997", "--kd", "median",
+                                              "--tree-variant", "d17-l48-box-cycle-todepth-nearest"]))
+
+
+def test_the_documented_check_table_names_the_plausible_set():
+    """docs/unknowns.md's tree-variant table marks exactly :data:`PLAUSIBLE_TREE_VARIANTS` plausible, each
+    "yes" row within 25% of the study's on every scene at 128 x 128, and lists every registered variant.
+
+    Fails when the registry and the measured table part: checked by keeping every variant in
+    ``PLAUSIBLE_TREE_VARIANTS`` (d14, 1.27 on balls, becomes plausible).
+    """
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "unknowns.md").read_text(encoding="utf-8")
+    section = text[text.index("### tree_variant"):text.index("## Sources")]
+    header = "| variant | balls 32 | balls 128 | tetra 32 | tetra 128 | shell 32 | shell 128 | plausible |"
+    lines = section[section.index(header):].splitlines()[2:]
+    rows = {}
+    for line in lines:
+        if not line.startswith("|"):
+            break
+        cells = [cell.strip().strip("`") for cell in line.strip("|").split("|")]
+        rows[cells[0]] = cells
+    assert list(rows) == list(TREE_VARIANTS)
+    marked = [name for name, cells in rows.items() if cells[7] == "yes"]
+    assert marked == list(PLAUSIBLE_TREE_VARIANTS)
+    for name, cells in rows.items():
+        inside = all(abs(float(cells[k]) - 1) <= 0.25 for k in (2, 4, 6))
+        assert inside == (name in marked), name

@@ -24,7 +24,8 @@ from rtcommon.validate import InputError
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
            "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
            "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS", "PAGE_PLACEMENTS",
-           "WORKLOADS", "workload_options", "EXPERIMENT_OPTIONS", "experiment_from_args"]
+           "WORKLOADS", "TREE_VARIANTS", "workload_options", "workload_from_args", "EXPERIMENT_OPTIONS",
+           "experiment_from_args"]
 
 
 class RegistryNames(Sequence):
@@ -78,6 +79,7 @@ LAYOUTS = RegistryNames("coherence.layout", "LAYOUTS")
 COST_MODELS = RegistryNames("coherence.cost", "COST_MODELS")
 KD_BUILDERS = RegistryNames("tracer.kd.tree", "BUILDERS")
 WORKLOADS = RegistryNames("tracer.rendering.workload", "WORKLOADS")
+TREE_VARIANTS = RegistryNames("tracer.rendering.tree_variants", "TREE_VARIANTS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
 SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
 PAGE_PLACEMENTS = RegistryNames("coherence.page_placement", "PAGE_PLACEMENTS")
@@ -197,14 +199,42 @@ def tree_options(depth_help: str = "ray-tree depth, primary = 1 (default: the sc
 
 
 def workload_options(default: str = "modern", why: str = "") -> argparse.ArgumentParser:
-    """``--workload NAME``: the tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`); ``why`` explains the default."""
+    """``--workload NAME``: the tracer imitated (:data:`tracer.rendering.workload.WORKLOADS`); ``why`` explains the default.
+
+    Also ``--tree-variant NAME``, the study-era tree rule
+    (:data:`tracer.rendering.tree_variants.TREE_VARIANTS`); left at None,
+    the workload's own tree.
+    """
     parent = _parent()
     parent.add_argument("--workload", default=default, choices=WORKLOADS, metavar="NAME",
                         help="tracer imitated: %(choices)s; modern = today's SAH tracer, study1997 = the "
                              "study's mid-1990s BSP tracer (one median-tree rule for every scene, shadow rays "
                              "that find the nearest hit, its own per-ray data logged) (default %(default)s"
                              + (f": {why})" if why else ")"))
+    parent.add_argument("--tree-variant", choices=TREE_VARIANTS, metavar="NAME",
+                        help="tree rule of the study1997 workload, named d<depth limit>-l<leaf size>-box-<axis "
+                             "rule>-todepth-nearest: %(choices)s (default: the study's own rule, the first; "
+                             "see docs/unknowns.md, tree_variant)")
     return parent
+
+
+def workload_from_args(args: argparse.Namespace):
+    """The :class:`tracer.rendering.workload.Workload` of ``--workload`` with the tree of ``--tree-variant``.
+
+    Raises
+    ------
+    InputError
+        A tree variant for another workload, or beside ``--kd``.
+    """
+    from tracer.rendering.tree_variants import workload_with_tree
+
+    variant = getattr(args, "tree_variant", None)
+    if variant is not None and getattr(args, "kd", None):
+        raise InputError(f"--tree-variant {variant} sets the tree; drop --kd {args.kd}")
+    try:
+        return workload_with_tree(args.workload, variant)
+    except ValueError as error:
+        raise InputError(f"--tree-variant: {error}") from None
 
 
 def size_options(default: int | None = 512, why: str = "the study's 512x512") -> argparse.ArgumentParser:
@@ -281,7 +311,8 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
 
 
 #: Option (``args`` attribute) -> :class:`analyses.experiment.Experiment` field it sets.
-EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", "kd": "kd", "max_depth": "max_depth",
+EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", "tree_variant": "tree_variant",
+                      "kd": "kd", "max_depth": "max_depth",
                       "mappings": "mappings", "processes": "n_processes", "hierarchy": "hierarchy", "layout": "layout",
                       "cost": "cost", "cpus": "n_cpus", "background": "background",
                       "background_footprint": "background_footprint", "page_placement": "page_placement",

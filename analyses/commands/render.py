@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from analyses.commands.options import (HelpFormatter, check_at_least, scene_options, size_options, tree_options,
-                                       workload_options)
+                                       workload_from_args, workload_options)
 from rtcommon.files import write_bytes_atomic
 from rtcommon.validate import InputError
 
@@ -179,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
     if args.trace:
         checks.check_trace_folder("--trace", args.trace)
     checks.check_scene_argument(args.scene)
+    workload = workload_from_args(args)
     samples = args.size + 1 if args.corner_rays else args.size
     # without --trace the records are counted, not kept: no trace is held in memory
     checks.check_memory("--size", samples, bytes_per_pixel=checks.RENDER_BYTES_PER_PIXEL)
@@ -187,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
     kd_config = KdTreeConfig(builder=args.kd) if args.kd else None
     options = RenderOptions(size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
                             keep_records=args.trace is not None, kd_config=kd_config, memory_budget=budget,
-                            epsilon=args.epsilon, workload=args.workload, texture_filter=args.texture_filter)
+                            epsilon=args.epsilon, workload=workload, texture_filter=args.texture_filter)
     tree = None
     if args.trace:
         pilot = render(scene, options=replace(options, size=checks.PILOT_SIZE, corner_rays=False,
