@@ -138,10 +138,6 @@ def _main(argv: list[str] | None) -> int:
             return _quiet_broken_pipe()
         print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
         return 2
-    except ValueError as error:
-        # Until every check of the toolkit raises InputError, a bare ValueError is still taken for one.
-        print(f"{name}: error: {_error_text(error)}", file=sys.stderr)
-        return 2
     except MemoryError:
         hint = "; try a smaller --size" if getattr(args, "size", None) is not None else ""
         print(f"{name}: error: out of memory{hint}", file=sys.stderr)

@@ -29,7 +29,7 @@ import pandas as pd
 from analyses.verdict import VERDICT_PROCESSES
 from cachesim.config import DEFAULT_HIERARCHY
 from coherence.layout import DEFAULT_LAYOUT
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 #: Default grid: record bytes x1 .. x64, memory latency x1 .. x64; the fine mappings held against S.
 RECORD_SCALES = (1, 4, 16, 64)
@@ -40,7 +40,7 @@ FINE_MAPPINGS = ("P", "R")
 def _scales(name: str, values) -> list:
     values = [float(v) for v in values]
     if not values or any(not np.isfinite(v) or v < 1 for v in values) or values != sorted(set(values)):
-        raise ValueError(f"{name} must be increasing numbers >= 1, got {values}")
+        raise InputError(f"{name} must be increasing numbers >= 1, got {values}")
     return values
 
 

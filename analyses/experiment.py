@@ -29,7 +29,7 @@ from coherence.layout import DEFAULT_LAYOUT
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.page_placement import PAGE_PLACEMENTS
 from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
-from rtcommon.validate import require_bool, require_int
+from rtcommon.validate import InputError, require_bool, require_int
 from tracer.rendering.tree_variants import STUDY_TREE_VARIANT
 
 __all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
@@ -133,7 +133,7 @@ class Experiment:
         from tracer.rendering.workload import WORKLOADS
 
         if not isinstance(self.scene, (str, os.PathLike)) or not os.fspath(self.scene):
-            raise ValueError(f"Experiment.scene must be a scene name or a .nff/.obj path, got {self.scene!r}")
+            raise InputError(f"Experiment.scene must be a scene name or a .nff/.obj path, got {self.scene!r}")
         require_int("Experiment.size", self.size, 1)
         _choose("workload", self.workload, WORKLOADS)
         if self.kd is not None:
@@ -142,10 +142,10 @@ class Experiment:
         try:
             workload_with_tree(self.workload, self.tree_variant)
         except ValueError as error:
-            raise ValueError(f"Experiment.tree_variant: {error}") from None
+            raise InputError(f"Experiment.tree_variant: {error}") from None
         variant = TREE_VARIANTS[self.tree_variant]
         if self.tree_variant != STUDY_TREE_VARIANT and self.kd_builder() != variant.builder:
-            raise ValueError(f"Experiment.kd must be None or {variant.builder} for tree_variant {self.tree_variant}, "
+            raise InputError(f"Experiment.kd must be None or {variant.builder} for tree_variant {self.tree_variant}, "
                              f"got {self.kd!r}")
         if self.max_depth is not None:
             require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH_LIMIT)
@@ -155,29 +155,29 @@ class Experiment:
             try:
                 names.append(get_mapping(mapping).name)
             except ValueError as error:
-                raise ValueError(f"Experiment.mappings: {error}") from None
+                raise InputError(f"Experiment.mappings: {error}") from None
         if not names or len(set(names)) != len(names):
-            raise ValueError(f"Experiment.mappings must name at least one mapping, each once; got {names}")
+            raise InputError(f"Experiment.mappings must name at least one mapping, each once; got {names}")
         object.__setattr__(self, "mappings", mappings)
         counts = (self.n_processes,) if isinstance(self.n_processes, int) else tuple(self.n_processes)
         counts = tuple(sorted({require_int("Experiment.n_processes", n, 1) for n in counts}))
         if not counts:
-            raise ValueError("Experiment.n_processes must hold at least one process count >= 1")
+            raise InputError("Experiment.n_processes must hold at least one process count >= 1")
         object.__setattr__(self, "n_processes", counts)
         for name, resolve in (("hierarchy", _hierarchy), ("layout", _layout), ("cost", _cost)):
             try:
                 resolve(getattr(self, name))
             except (ValueError, OSError) as error:
-                raise ValueError(f"Experiment.{name}: {error}") from None
+                raise InputError(f"Experiment.{name}: {error}") from None
         require_int("Experiment.n_cpus", self.n_cpus, 1)
         require_int("Experiment.background", self.background, 0)
         require_int("Experiment.background_footprint", self.background_footprint, 0)
         _choose("page_placement", self.page_placement, PAGE_PLACEMENTS)
         require_int("Experiment.page_seed", self.page_seed, 0)
         if self.cache_dir is not None and not isinstance(self.cache_dir, (str, os.PathLike)):
-            raise ValueError(f"Experiment.cache_dir must be a folder path or None, got {self.cache_dir!r}")
+            raise InputError(f"Experiment.cache_dir must be a folder path or None, got {self.cache_dir!r}")
         if isinstance(self.dask, str) and not self.dask.strip():
-            raise ValueError("Experiment.dask must be a scheduler address (tcp://host:8786), a Client or None")
+            raise InputError("Experiment.dask must be a scheduler address (tcp://host:8786), a Client or None")
         require_int("Experiment.memory_budget", self.memory_budget, MIN_MEMORY_BUDGET)
         require_bool("Experiment.progress", self.progress)
 
@@ -255,7 +255,7 @@ class Experiment:
 
 def _choose(name: str, value, allowed) -> None:
     if not isinstance(value, str) or value not in allowed:
-        raise ValueError(f"Experiment.{name} must be one of {', '.join(allowed)}, got {value!r}")
+        raise InputError(f"Experiment.{name} must be one of {', '.join(allowed)}, got {value!r}")
 
 
 def _hierarchy(value):

@@ -64,6 +64,7 @@ from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_
                                   STUDY_SIZE, STUDY_TABLE, PaperResult, check_process_counts, check_scenes)
 from analyses.verdict import LOSSES, VERDICT_PROCESSES, format_speedup, verdict, verdict_process_count
 from coherence.cost import OPERATIONS
+from rtcommon.validate import InputError
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
            "PAPER_EXPERIMENT", "PaperResult", "reproduce", "sequential_predictions", "scene_verdicts", "side_by_side", "speedup_figure", "write_paper",
@@ -128,7 +129,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
 
     # every argument is checked before rendering anything
     if not isinstance(experiment, Experiment):
-        raise ValueError(f"reproduce needs an analyses.experiment.Experiment, got {type(experiment).__name__}")
+        raise InputError(f"reproduce needs an analyses.experiment.Experiment, got {type(experiment).__name__}")
     experiment = replace(experiment, **choices) if choices else experiment
     scenes = check_scenes(PAPER_SCENES if scenes is None else scenes)
     counts = sorted({1, *experiment.n_processes})
@@ -140,7 +141,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     names = [m.name for m in mapping_objects]
     costs = STUDY1997_PRIOR_COSTS if costs is None else costs
     if not isinstance(costs, CostStructure):
-        raise ValueError(f"costs must be a coherence.calibration.CostStructure, got {type(costs).__name__}")
+        raise InputError(f"costs must be a coherence.calibration.CostStructure, got {type(costs).__name__}")
     hierarchy = experiment.hierarchy_object()
     layout = experiment.layout_object()
     machine = experiment.machine()
@@ -438,7 +439,7 @@ def scene_verdicts(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES,
         rows = runs[runs["scene"] == scene]
         at = rows[rows["n_processes"] == n_processes]
         if at.empty:
-            raise ValueError(f"{scene}: no runs with n_processes == {n_processes}")
+            raise InputError(f"{scene}: no runs with n_processes == {n_processes}")
         judged = verdict(rows, n_processes, order=order)
         at = at.set_index("mapping")
         best = at["speedup_user"].astype(float).idxmax()

@@ -15,7 +15,7 @@ from analyses.experiment import Experiment
 from coherence.cost import CLOCK_HZ
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.simulation import STUDY_CPUS
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.scenes.study import PAPER_SCENES, STUDY_SCENES, canonical_scene_name
 
 __all__ = ["STUDY_TABLE", "STUDY_SIZE", "DEFAULT_BACKGROUND", "DEFAULT_PROCESSES", "DEFAULT_MAPPINGS",
@@ -125,11 +125,11 @@ def check_scenes(scenes) -> list[str]:
     for scene in scenes:
         key = canonical_scene_name(scene)
         if key not in PAPER_SCENES:
-            raise ValueError(f"unknown scene {scene!r}: the study has {', '.join(PAPER_SCENES)}")
+            raise InputError(f"unknown scene {scene!r}: the study has {', '.join(PAPER_SCENES)}")
         if key not in names:
             names.append(key)
     if not names:
-        raise ValueError("give at least one scene")
+        raise InputError("give at least one scene")
     return names
 
 

@@ -56,7 +56,7 @@ from analyses.report_tables import (MISS_MAP_FILES, RESULT_COLUMNS, SECTIONS, Re
 from analyses.warmup import simulation_warm_up
 from coherence.mappings import DEFAULT_MAPPINGS
 from rtcommon.files import write_files_atomic
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 __all__ = ["Report", "build_report", "write_report", "make_report", "check_output_folder", "prepare_output_folder",
            "parse_miss_map", "RESULT_COLUMNS", "SECTIONS", "DEFAULT_MAPPINGS", "REPORT_FILES", "MISS_MAP_FILES",
@@ -126,15 +126,15 @@ def parse_miss_map(value, option: str = "miss_map"):
     if isinstance(value, str):
         name, colon, count = value.rpartition(":")
         if not colon or not name or not count.strip().isdigit():
-            raise ValueError(f"{option} must be MAPPING:N, a mapping and a process count such as P:8, "
+            raise InputError(f"{option} must be MAPPING:N, a mapping and a process count such as P:8, "
                              f"got {value!r}")
         value = (name, int(count))
     if not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise ValueError(f"{option} must be 'MAPPING:N' or a (mapping, n_processes) pair, got {value!r}")
+        raise InputError(f"{option} must be 'MAPPING:N' or a (mapping, n_processes) pair, got {value!r}")
     try:
         mapping = get_mapping(value[0])
     except ValueError as error:
-        raise ValueError(f"{option}: {error}") from None
+        raise InputError(f"{option}: {error}") from None
     return mapping, require_int(f"{option} process count", value[1], 1)
 
 
@@ -188,7 +188,7 @@ def build_report(experiment: Experiment, *, out=None, miss_map=None) -> Report:
     from analyses.traces import _scene_identity, cached_trace, check_cache_dir
 
     if not isinstance(experiment, Experiment):
-        raise ValueError(f"build_report needs an analyses.experiment.Experiment, got {type(experiment).__name__}; "
+        raise InputError(f"build_report needs an analyses.experiment.Experiment, got {type(experiment).__name__}; "
                          "make_report(scene, out, **choices) builds one")
     # everything that can be wrong with the arguments fails here, before rendering
     pixels = experiment.size * experiment.size

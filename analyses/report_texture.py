@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from analyses.plots import _axes, _bytes_text
+from rtcommon.validate import InputError
 
 #: texel orders the section compares (TextureLayout labels)
 LAYOUTS = ("linear", "tiled4", "morton", "blocked4x8")
@@ -50,7 +51,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     from coherence.texture_layout import TextureLayout
 
     if not trace.metadata.get("textures"):
-        raise ValueError("texture_section: the trace has no textures")
+        raise InputError("texture_section: the trace has no textures")
     base = layout.texels.label
     labels = [base, *[label for label in LAYOUTS if label != base]]
     placements = {label: place_layout(layout.with_texels(TextureLayout.from_label(label)), trace, scene)

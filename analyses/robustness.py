@@ -39,7 +39,7 @@ from analyses.paper_study import PAPER_EXPERIMENT
 from analyses.robustness_factors import (FACTORS, LEFT_OUT, MORRIS_LEVELS, factor_values, morris_design,
                                          morris_indices, sample_setup, sobol_design, sobol_indices)
 from analyses.verdict import VERDICT_PROCESSES
-from rtcommon.validate import require_int, require_power_of_two
+from rtcommon.validate import InputError, require_int, require_power_of_two
 
 __all__ = ["ROBUSTNESS_EXPERIMENT", "RobustnessResult", "robustness", "sample_outputs", "scene_summary",
            "flip_thresholds", "trajectory_seeds", "SAMPLE_COLUMNS", "PERCENTILES", "TOP"]
@@ -120,13 +120,13 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     from analyses.paper_study import check_scenes
 
     if not isinstance(base, Experiment):
-        raise ValueError(f"robustness needs an analyses.experiment.Experiment, got {type(base).__name__}")
+        raise InputError(f"robustness needs an analyses.experiment.Experiment, got {type(base).__name__}")
     require_int("trajectories", trajectories, 2)
     require_int("seed", seed, 0)
     if require_int("sobol", sobol, 0):
         require_power_of_two("sobol", sobol)
     if VERDICT_PROCESSES not in base.n_processes:
-        raise ValueError(f"Experiment.n_processes must include {VERDICT_PROCESSES}, the verdict's process count; "
+        raise InputError(f"Experiment.n_processes must include {VERDICT_PROCESSES}, the verdict's process count; "
                          f"got {list(base.n_processes)}")
     scenes = check_scenes(scenes)
     names = [entry.name for entry in FACTORS]

@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from coherence.unknowns import UNKNOWNS
+from rtcommon.validate import InputError
 
 __all__ = ["LEFT_OUT", "FACTORS", "SampleSetup", "factor_value", "factor_values", "sample_setup",
            "morris_design", "morris_indices", "sobol_design", "sobol_indices"]
@@ -60,7 +61,7 @@ def factor_value(entry, u: float):
     """
     u = float(u)
     if not 0.0 <= u <= 1.0:
-        raise ValueError(f"unit coordinate of {entry.name} must lie in [0, 1], got {u!r}")
+        raise InputError(f"unit coordinate of {entry.name} must lie in [0, 1], got {u!r}")
     if entry.distribution == "categorical":
         count = len(entry.choices)
         return entry.choices[min(int(math.floor(u * count)), count - 1)]
@@ -76,7 +77,7 @@ def factor_values(unit_row, factors=FACTORS) -> dict:
     """Unknown name -> value of one sample, from its unit coordinates ``unit_row`` (len(factors),)."""
     unit_row = np.asarray(unit_row, dtype=np.float64)
     if unit_row.shape != (len(factors),):
-        raise ValueError(f"a sample needs {len(factors)} unit coordinates, got shape {unit_row.shape}")
+        raise InputError(f"a sample needs {len(factors)} unit coordinates, got shape {unit_row.shape}")
     return {entry.name: factor_value(entry, u) for entry, u in zip(factors, unit_row)}
 
 
@@ -116,7 +117,7 @@ def sample_setup(base, values: dict, seed: int) -> SampleSetup:
     """
     missing = sorted({entry.name for entry in FACTORS} - set(values))
     if missing:
-        raise ValueError(f"sample_setup: no value for {', '.join(missing)}")
+        raise InputError(f"sample_setup: no value for {', '.join(missing)}")
     experiment = replace(base, hierarchy=_hierarchy(values), cost=_cost(values), layout=values["memory_image"],
                          page_placement=values["page_placement"], page_seed=int(seed),
                          background=int(values["background_load"]),

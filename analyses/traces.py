@@ -60,7 +60,7 @@ import xxhash
 
 from rtcommon.files import make_temp_dir, remove_stale_temporaries
 from rtcommon.jsonio import json_default
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.trace.check import META_CHECKSUM
 
 __all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir", "trace_key", "CACHE_ENV"]
@@ -154,7 +154,7 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
     path = Path(text)
     if not path.is_file():
         if path.suffix.lower() not in (".nff", ".obj"):
-            raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(NAMED_SCENES)} "
+            raise InputError(f"unknown scene {text!r}: expected one of {', '.join(NAMED_SCENES)} "
                              "or a path to a .nff or .obj file")
         raise FileNotFoundError(f"no such scene file: {text!r}")
     content = hashlib.sha256(path.read_bytes()).hexdigest()
@@ -258,15 +258,15 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
 
     size = require_int("size", size, 1)
     if workload not in WORKLOADS:
-        raise ValueError(f"workload must be one of {', '.join(WORKLOADS)}, got {workload!r}")
+        raise InputError(f"workload must be one of {', '.join(WORKLOADS)}, got {workload!r}")
     preset = workload_with_tree(workload, tree_variant)
     if kd is None:
         kd = preset.kd_config.builder
     elif kd not in _KD_BUILDERS:
-        raise ValueError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
+        raise InputError(f"kd must be one of {_KD_BUILDERS}, got {kd!r}")
     explicit_kd = kd if kd != preset.kd_config.builder else None
     if explicit_kd and preset is not WORKLOADS[workload]:
-        raise ValueError(f"tree variant {tree_variant} is a {preset.kd_config.builder} tree; kd {kd} builds another")
+        raise InputError(f"tree variant {tree_variant} is a {preset.kd_config.builder} tree; kd {kd} builds another")
     root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload,

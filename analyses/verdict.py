@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from coherence.simulation import STUDY_CPUS
+from rtcommon.validate import InputError
 
 __all__ = ["Verdict", "verdict", "format_percent", "format_speedup", "LOSSES"]
 
@@ -113,7 +114,7 @@ def verdict(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES, order=None
     """
     rows = runs[runs["n_processes"] == n_processes]
     if rows.empty:
-        raise ValueError(f"no runs with n_processes == {n_processes}; have {sorted(set(runs['n_processes']))}")
+        raise InputError(f"no runs with n_processes == {n_processes}; have {sorted(set(runs['n_processes']))}")
     names = list(dict.fromkeys(rows["mapping"]))
     if order is not None:
         names = [name for name in order if name in names] + [name for name in names if name not in order]

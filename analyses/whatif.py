@@ -100,17 +100,17 @@ class WhatIf:
 
     def __post_init__(self):
         if not isinstance(self.experiment, Experiment):
-            raise ValueError(f"WhatIf.experiment must be an analyses.experiment.Experiment, got "
+            raise InputError(f"WhatIf.experiment must be an analyses.experiment.Experiment, got "
                              f"{type(self.experiment).__name__}")
         if len(self.experiment.n_processes) != 1:
-            raise ValueError(f"WhatIf.experiment.n_processes must be one process count (vary it with the grid's "
+            raise InputError(f"WhatIf.experiment.n_processes must be one process count (vary it with the grid's "
                              f"n_processes), got {list(self.experiment.n_processes)}")
         if not self.grid:
-            raise ValueError("WhatIf.grid must vary at least one parameter")
+            raise InputError("WhatIf.grid must vary at least one parameter")
         for key, values in self.grid.items():
             _check_parameter(key)
             if not isinstance(values, (list, tuple)) or not values:
-                raise ValueError(f"grid[{key!r}] must be a non-empty list of values")
+                raise InputError(f"grid[{key!r}] must be a non-empty list of values")
         base = self.base_hierarchy()
         for point in self.points():  # every point must make a valid configuration
             configure(self, point, base)
@@ -120,7 +120,7 @@ class WhatIf:
         """A study whose base is :data:`WHATIF_EXPERIMENT` with ``choices`` (fields of :data:`BASE_FIELDS`)."""
         unknown = sorted(set(choices) - set(BASE_FIELDS))
         if unknown:
-            raise ValueError(f"unknown what-if base keys {unknown}; allowed: {list(BASE_FIELDS)}")
+            raise InputError(f"unknown what-if base keys {unknown}; allowed: {list(BASE_FIELDS)}")
         return cls(name=name, experiment=replace(WHATIF_EXPERIMENT, **choices), grid=grid)
 
     # the base's choices, read through
@@ -149,7 +149,7 @@ def _check_parameter(key: str) -> None:
     level, _, attribute = key.partition(".")
     if attribute in LEVEL_FIELDS and level:
         return
-    raise ValueError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE)} or "
+    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE)} or "
                      f"<level>.{{{','.join(LEVEL_FIELDS)}}}")
 
 
@@ -168,7 +168,7 @@ def parse_grid_flag(flag: str) -> tuple[str, list]:
     """``"L3.size=1MB,4MB"`` -> ``("L3.size", [1048576, 4194304])``."""
     key, sep, values = flag.partition("=")
     if not sep or not values.strip():
-        raise ValueError(f"--grid {flag!r}: expected NAME=VALUE[,VALUE...], e.g. L3.size=1MB,4MB")
+        raise InputError(f"--grid {flag!r}: expected NAME=VALUE[,VALUE...], e.g. L3.size=1MB,4MB")
     key = key.strip()
     _check_parameter(key)
     return key, [parse_value(value) for value in values.split(",")]
@@ -183,22 +183,22 @@ def load_study_file(path) -> WhatIf:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML: {error}") from None
+        raise InputError(f"{path}: not valid TOML: {error}") from None
     grid = data.pop("grid", None)
     if not isinstance(grid, dict):
-        raise ValueError(f"{path}: needs a [grid] table of parameter = [values]")
+        raise InputError(f"{path}: needs a [grid] table of parameter = [values]")
     grid = {key: [parse_value(v) if isinstance(v, str) else v for v in values] if isinstance(values, list)
             else values for key, values in grid.items()}
     known = {"name", *BASE_FIELDS}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(known)} and [grid]")
+        raise InputError(f"{path}: unknown keys {unknown}; allowed: {sorted(known)} and [grid]")
     if isinstance(data.get("mappings"), list):
         data["mappings"] = tuple(data["mappings"])
     try:
         return WhatIf.of(data.pop("name", "custom"), grid, **data)
     except (ValueError, TypeError) as error:
-        raise ValueError(f"{path}: {error}") from None
+        raise InputError(f"{path}: {error}") from None
 
 
 def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
@@ -218,7 +218,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
         elif "." in key:
             name, attribute = key.split(".", 1)
             if name not in levels:
-                raise ValueError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
+                raise InputError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
             updates.setdefault(name, {})[attribute] = value
     try:
         if updates:
@@ -227,11 +227,11 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
         if "memory_latency" in point:
             hierarchy = replace(hierarchy, memory_latency=point["memory_latency"])
     except ValueError as error:
-        raise ValueError(f"what-if point {point}: {error}") from None
+        raise InputError(f"what-if point {point}: {error}") from None
     cost = get_cost_model(point.get("cost", study.cost))
     scale = require_number("compute_scale", point.get("compute_scale", 1.0), 0)
     if scale == 0:
-        raise ValueError("compute_scale must be a finite number > 0, got 0")
+        raise InputError("compute_scale must be a finite number > 0, got 0")
     if scale != 1.0:
         from coherence.cost import OPERATIONS
 
@@ -379,7 +379,7 @@ def exact_lru_curves(study: WhatIf, *, progress: bool = False, **choices) -> pd.
             streams.append(np.asarray(trace.records)[index])
         for level_name, sizes in sized.items():
             if level_name not in levels:
-                raise ValueError(f"what-if parameter {level_name}.size: the hierarchy has levels {list(levels)}")
+                raise InputError(f"what-if parameter {level_name}.size: the hierarchy has levels {list(levels)}")
             line_size = levels[level_name].line_size
             accesses = 0
             misses = np.zeros(len(sizes), dtype=np.int64)
@@ -443,7 +443,7 @@ def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
     generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells}
     key = canonical_scene_name(name)
     if key not in generators:
-        raise ValueError(f"scene_size applies to the SPD scenes {sorted(generators)}, not {name!r}")
+        raise InputError(f"scene_size applies to the SPD scenes {sorted(generators)}, not {name!r}")
     size_factor = require_int("scene_size (an SPD size factor)", size_factor, 1)
     scene = generators[key](size_factor)
     scene.max_depth = PAPER_DEPTH[key]

@@ -17,7 +17,7 @@ from pathlib import Path
 from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import read_text_file, write_text_atomic
-from rtcommon.validate import require_bool, require_int, require_number, require_power_of_two
+from rtcommon.validate import InputError, require_bool, require_int, require_number, require_power_of_two
 
 POLICIES = ("lru", "fifo", "random")
 INCLUSIONS = ("non-inclusive", "inclusive", "exclusive")
@@ -64,26 +64,26 @@ class CacheLevel:
     def __post_init__(self):
         owner = f"CacheLevel({self.name!r})" if isinstance(self.name, str) else "CacheLevel"
         if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"CacheLevel.name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"CacheLevel.name must be a non-empty string, got {self.name!r}")
         object.__setattr__(self, "size", require_int(f"{owner}.size", self.size, 1))
         object.__setattr__(self, "line_size", require_int(f"{owner}.line_size", self.line_size, 1))
         require_power_of_two(f"{owner}.line_size", self.line_size)
         if self.line_size > self.size:
-            raise ValueError(f"{owner}.line_size ({self.line_size}) must not exceed size ({self.size})")
+            raise InputError(f"{owner}.line_size ({self.line_size}) must not exceed size ({self.size})")
         if isinstance(self.assoc, str):
             if self.assoc.lower() != "full":
-                raise ValueError(f"{owner}.assoc must be a positive integer or 'full', got {self.assoc!r}")
+                raise InputError(f"{owner}.assoc must be a positive integer or 'full', got {self.assoc!r}")
             object.__setattr__(self, "assoc", "full")
         else:
             object.__setattr__(self, "assoc", require_int(f"{owner}.assoc", self.assoc, 1))
         ways = self.ways
         if self.size % (self.line_size * ways) != 0:
-            raise ValueError(
+            raise InputError(
                 f"{owner}.size ({self.size}) must be a multiple of line_size * assoc "
                 f"({self.line_size} * {ways} = {self.line_size * ways}) so that the sets are whole"
             )
         if not isinstance(self.policy, str) or self.policy.lower() not in POLICIES:
-            raise ValueError(f"{owner}.policy must be one of {', '.join(POLICIES)}; got {self.policy!r}")
+            raise InputError(f"{owner}.policy must be one of {', '.join(POLICIES)}; got {self.policy!r}")
         object.__setattr__(self, "policy", self.policy.lower())
         object.__setattr__(self, "latency", require_number(f"{owner}.latency", self.latency, 0, "cycles"))
         object.__setattr__(self, "seed", require_int(f"{owner}.seed", self.seed, 0))
@@ -167,45 +167,45 @@ class Hierarchy:
     def __post_init__(self):
         levels = tuple(self.levels) if isinstance(self.levels, (list, tuple)) else None
         if not levels:
-            raise ValueError("Hierarchy.levels must be a non-empty sequence of CacheLevel")
+            raise InputError("Hierarchy.levels must be a non-empty sequence of CacheLevel")
         if len(levels) > MAX_LEVELS:
-            raise ValueError(f"Hierarchy.levels may hold at most {MAX_LEVELS} levels, got {len(levels)}")
+            raise InputError(f"Hierarchy.levels may hold at most {MAX_LEVELS} levels, got {len(levels)}")
         for index, level in enumerate(levels):
             if not isinstance(level, CacheLevel):
-                raise ValueError(f"Hierarchy.levels[{index}] must be a CacheLevel, got {type(level).__name__}")
+                raise InputError(f"Hierarchy.levels[{index}] must be a CacheLevel, got {type(level).__name__}")
         object.__setattr__(self, "levels", levels)
         names = [level.name for level in levels]
         if len(set(names)) != len(names):
-            raise ValueError(f"Hierarchy.levels must have distinct names, got {names}")
+            raise InputError(f"Hierarchy.levels must have distinct names, got {names}")
         object.__setattr__(self, "memory_latency", require_number("Hierarchy.memory_latency", self.memory_latency, 0, "cycles"))
         if not isinstance(self.inclusion, str) or self.inclusion.lower() not in INCLUSIONS:
-            raise ValueError(f"Hierarchy.inclusion must be one of {', '.join(INCLUSIONS)}; got {self.inclusion!r}")
+            raise InputError(f"Hierarchy.inclusion must be one of {', '.join(INCLUSIONS)}; got {self.inclusion!r}")
         object.__setattr__(self, "inclusion", self.inclusion.lower())
         for upper, lower in zip(levels, levels[1:]):
             if lower.line_size < upper.line_size:
-                raise ValueError(
+                raise InputError(
                     f"Hierarchy: line_size may only grow towards memory, but {lower.name} has "
                     f"{lower.line_size} B lines below {upper.name} with {upper.line_size} B"
                 )
             if self.inclusion == "inclusive" and upper.write_allocate and not lower.write_allocate:
-                raise ValueError(
+                raise InputError(
                     f"Hierarchy: in an inclusive hierarchy a level that allocates on writes ({upper.name}) "
                     f"cannot sit above one that does not ({lower.name}): the line it takes would not be below it"
                 )
             if self.inclusion == "exclusive" and lower.line_size != upper.line_size:
-                raise ValueError(
+                raise InputError(
                     f"Hierarchy: exclusive levels must share one line size; {upper.name} has "
                     f"{upper.line_size} B and {lower.name} {lower.line_size} B"
                 )
         if self.inclusion == "exclusive":
             for level in levels:
                 if not level.write_allocate:
-                    raise ValueError(f"Hierarchy: exclusive levels must allocate on writes; "
+                    raise InputError(f"Hierarchy: exclusive levels must allocate on writes; "
                                      f"{level.name} has write_allocate=False")
         if not isinstance(self.name, str):
-            raise ValueError(f"Hierarchy.name must be a string, got {self.name!r}")
+            raise InputError(f"Hierarchy.name must be a string, got {self.name!r}")
         if self.tlb is not None and not isinstance(self.tlb, Tlb):
-            raise ValueError(f"Hierarchy.tlb must be a Tlb or None, got {type(self.tlb).__name__}")
+            raise InputError(f"Hierarchy.tlb must be a Tlb or None, got {type(self.tlb).__name__}")
 
     @property
     def level_names(self) -> list[str]:
@@ -227,50 +227,50 @@ class Hierarchy:
         ``source`` names the file or object in error messages.
         """
         if not isinstance(data, dict):
-            raise ValueError(f"{source}: expected a table with 'levels', got {type(data).__name__}")
+            raise InputError(f"{source}: expected a table with 'levels', got {type(data).__name__}")
         unknown = set(data) - {"name", "memory_latency", "inclusion", "levels", "tlb"}
         if unknown:
-            raise ValueError(f"{source}: unknown field(s) {sorted(unknown)}; "
+            raise InputError(f"{source}: unknown field(s) {sorted(unknown)}; "
                              "allowed: name, memory_latency, inclusion, levels, tlb")
         raw_levels = data.get("levels")
         if not isinstance(raw_levels, list) or not raw_levels:
-            raise ValueError(f"{source}: 'levels' must be a non-empty list of tables")
+            raise InputError(f"{source}: 'levels' must be a non-empty list of tables")
         levels = []
         allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed", "write_allocate"}
         for index, raw in enumerate(raw_levels):
             where = f"{source}: levels[{index}]"
             if not isinstance(raw, dict):
-                raise ValueError(f"{where} must be a table")
+                raise InputError(f"{where} must be a table")
             extra = set(raw) - allowed
             if extra:
-                raise ValueError(f"{where}: unknown field(s) {sorted(extra)}; allowed: {', '.join(sorted(allowed))}")
+                raise InputError(f"{where}: unknown field(s) {sorted(extra)}; allowed: {', '.join(sorted(allowed))}")
             missing = {"name", "size", "line_size"} - set(raw)
             if missing:
-                raise ValueError(f"{where}: missing field(s) {sorted(missing)}")
+                raise InputError(f"{where}: missing field(s) {sorted(missing)}")
             try:
                 levels.append(CacheLevel(**raw))
             except ValueError as error:
-                raise ValueError(f"{where}: {error}") from None
+                raise InputError(f"{where}: {error}") from None
         kwargs = {key: data[key] for key in ("name", "memory_latency", "inclusion") if key in data}
         if data.get("tlb") is not None:
             raw = data["tlb"]
             allowed_tlb = {"name", "entries", "page_size", "policy", "miss_cycles"}
             if not isinstance(raw, dict):
-                raise ValueError(f"{source}: 'tlb' must be a table")
+                raise InputError(f"{source}: 'tlb' must be a table")
             if set(raw) - allowed_tlb:
-                raise ValueError(f"{source}: tlb: unknown field(s) {sorted(set(raw) - allowed_tlb)}; "
+                raise InputError(f"{source}: tlb: unknown field(s) {sorted(set(raw) - allowed_tlb)}; "
                                  f"allowed: {', '.join(sorted(allowed_tlb))}")
             missing = {"entries", "page_size", "miss_cycles"} - set(raw)
             if missing:
-                raise ValueError(f"{source}: tlb: missing field(s) {sorted(missing)}")
+                raise InputError(f"{source}: tlb: missing field(s) {sorted(missing)}")
             try:
                 kwargs["tlb"] = Tlb(**raw)
             except ValueError as error:
-                raise ValueError(f"{source}: tlb: {error}") from None
+                raise InputError(f"{source}: tlb: {error}") from None
         try:
             return cls(levels=tuple(levels), **kwargs)
         except ValueError as error:
-            raise ValueError(f"{source}: {error}") from None
+            raise InputError(f"{source}: {error}") from None
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write to ``.toml`` or ``.json`` (chosen by suffix), atomically."""
@@ -283,7 +283,7 @@ class Hierarchy:
         elif suffix == ".json":
             text = json.dumps(self.to_dict(), indent=2) + "\n"
         else:
-            raise ValueError(f"{path}: hierarchy files must end in .toml or .json")
+            raise InputError(f"{path}: hierarchy files must end in .toml or .json")
         write_text_atomic(path, text)
         return path
 
@@ -301,11 +301,11 @@ class Hierarchy:
             elif suffix == ".json":
                 data = json.loads(text)
             else:
-                raise ValueError(f"{path}: hierarchy files must end in .toml or .json")
+                raise InputError(f"{path}: hierarchy files must end in .toml or .json")
         except tomllib.TOMLDecodeError as error:
-            raise ValueError(f"{path}: not valid TOML: {error}") from None
+            raise InputError(f"{path}: not valid TOML: {error}") from None
         except json.JSONDecodeError as error:
-            raise ValueError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
+            raise InputError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
         return cls.from_dict(data, source=str(path))
 
 
@@ -405,5 +405,5 @@ def get_hierarchy(name_or_path: str | os.PathLike | Hierarchy) -> Hierarchy:
     path = Path(key)
     if path.suffix.lower() in (".toml", ".json"):
         return Hierarchy.load(path)
-    raise ValueError(f"unknown hierarchy {key!r}: use a preset ({', '.join(PRESETS)}) or a .toml/.json file")
+    raise InputError(f"unknown hierarchy {key!r}: use a preset ({', '.join(PRESETS)}) or a .toml/.json file")
 

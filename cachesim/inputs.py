@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from rtcommon.validate import InputError
 
 
 def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
@@ -16,17 +17,17 @@ def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
         try:
             array = np.asarray(addresses)
         except (OverflowError, ValueError, TypeError) as error:
-            raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+            raise InputError(f"{name} must be non-negative integers below 2**64: {error}") from None
         if array.dtype == object:
             try:
                 array = np.array([int(value) for value in array.ravel()], dtype=np.uint64)
             except (OverflowError, ValueError, TypeError) as error:
-                raise ValueError(f"{name} must be non-negative integers below 2**64: {error}") from None
+                raise InputError(f"{name} must be non-negative integers below 2**64: {error}") from None
     if array.ndim != 1:
         if array.size == 0:
             array = array.reshape(0)
         else:
-            raise ValueError(f"{name} must be one-dimensional, got shape {array.shape}")
+            raise InputError(f"{name} must be one-dimensional, got shape {array.shape}")
     if array.size == 0:
         return np.zeros(0, dtype=np.uint64)
     if array.dtype.kind == "u":
@@ -34,9 +35,9 @@ def as_addresses(addresses, name: str = "addresses") -> np.ndarray:
     if array.dtype.kind == "i":
         lowest = array.min()
         if lowest < 0:
-            raise ValueError(f"{name} must be non-negative; found {lowest} at index {int(np.argmin(array))}")
+            raise InputError(f"{name} must be non-negative; found {lowest} at index {int(np.argmin(array))}")
         return np.ascontiguousarray(array, dtype=np.uint64)
-    raise ValueError(f"{name} must be integers (got dtype {array.dtype}); byte addresses are whole numbers")
+    raise InputError(f"{name} must be integers (got dtype {array.dtype}); byte addresses are whole numbers")
 
 
 def as_writes(writes, n_accesses: int, name: str = "writes") -> np.ndarray:
@@ -50,12 +51,12 @@ def as_writes(writes, n_accesses: int, name: str = "writes") -> np.ndarray:
     array = np.asarray(writes)
     if array.dtype != np.bool_:
         if array.dtype.kind in "iu" and array.size and not np.isin(array, (0, 1)).all():
-            raise ValueError(f"{name} must be booleans (or 0/1), one per address; found other values")
+            raise InputError(f"{name} must be booleans (or 0/1), one per address; found other values")
         if array.dtype.kind not in "iub" and array.size:
-            raise ValueError(f"{name} must be booleans, one per address; got dtype {array.dtype}")
+            raise InputError(f"{name} must be booleans, one per address; got dtype {array.dtype}")
         array = array.astype(np.bool_)
     if array.ndim != 1 or array.size != n_accesses:
-        raise ValueError(f"{name} must have shape ({n_accesses},), one flag per address; got {array.shape}")
+        raise InputError(f"{name} must have shape ({n_accesses},), one flag per address; got {array.shape}")
     if not array.any():
         return np.zeros(0, dtype=np.bool_)
     return np.ascontiguousarray(array)

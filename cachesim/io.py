@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from cachesim.simulate import as_addresses
+from rtcommon.validate import InputError
 
 #: Bytes of text parsed per call of the kernel (whole lines: a block ends after its last ``\n``).
 BLOCK_BYTES = 1 << 20
@@ -59,7 +60,7 @@ def read_addresses(path: str | os.PathLike) -> np.ndarray:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such address file")
     if path.is_dir():
-        raise ValueError(f"{path}: is a folder; expected a .npy or text file of addresses")
+        raise InputError(f"{path}: is a folder; expected a .npy or text file of addresses")
     if path.suffix.lower() == ".npy":
         return _read_npy(path)
     return _read_text(path)
@@ -69,13 +70,13 @@ def _read_npy(path: Path) -> np.ndarray:
     try:
         array = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as error:
-        raise ValueError(f"{path}: not a readable .npy array ({error})") from None
+        raise InputError(f"{path}: not a readable .npy array ({error})") from None
     if not isinstance(array, np.ndarray):
-        raise ValueError(f"{path}: holds several arrays; expected one array of addresses")
+        raise InputError(f"{path}: holds several arrays; expected one array of addresses")
     try:
         return as_addresses(array, name=str(path))
     except ValueError as error:
-        raise ValueError(str(error)) from None
+        raise InputError(str(error)) from None
 
 
 def _blocks(stream):
@@ -116,22 +117,22 @@ def _read_text(path: Path) -> np.ndarray:
         if not store:
             out = np.empty(n_out, dtype=np.uint64)
     if n_out != out.shape[0]:
-        raise ValueError(f"{path}: changed while being read ({out.shape[0]} addresses, then {n_out})")
+        raise InputError(f"{path}: changed while being read ({out.shape[0]} addresses, then {n_out})")
     return out
 
 
 def _raise_parse_error(path, block, offset, line, outcome, start, stop):
     token = bytes(block[start:stop]).decode("ascii", errors="replace")
     if outcome == _BAD_TOKEN:
-        raise ValueError(f"{path}:{line}: expected one decimal or 0x-hex address, got {token!r}")
+        raise InputError(f"{path}:{line}: expected one decimal or 0x-hex address, got {token!r}")
     if outcome == _TOO_BIG:
-        raise ValueError(f"{path}:{line}: address {token} does not fit in 64 bits")
+        raise InputError(f"{path}:{line}: address {token} does not fit in 64 bits")
     if outcome == _NOT_ASCII:
         position = offset + start
         utf16 = " (a UTF-16 byte-order mark: save the file as ASCII or UTF-8)" if (
             position == 0 and bytes(block[:2]) in (b"\xff\xfe", b"\xfe\xff")) else ""
-        raise ValueError(f"{path}:{line}: not a text file of addresses (byte {position} is not ASCII){utf16}")
-    raise ValueError(f"{path}: changed while being read (more addresses than at first)")
+        raise InputError(f"{path}:{line}: not a text file of addresses (byte {position} is not ASCII){utf16}")
+    raise InputError(f"{path}: changed while being read (more addresses than at first)")
 
 
 @njit(cache=True)

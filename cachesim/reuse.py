@@ -26,7 +26,7 @@ from numba import njit
 
 from cachesim.simulate import as_addresses
 from rtcommon.jit import NO_REFCOUNTS
-from rtcommon.validate import require_power_of_two
+from rtcommon.validate import InputError, require_power_of_two
 
 #: First size of the reuse kernel's Fenwick tree (it grows with the distinct lines): large
 #: enough that renumbering, which sorts the live times, runs rarely (every 60,000 or more
@@ -255,11 +255,11 @@ class ReuseCounter:
         """
         addresses = as_addresses(addresses)
         if self._shift == 0 and addresses.size and addresses.max() >= 2**63:
-            raise ValueError("with 1-byte lines, addresses must be below 2**63")
+            raise InputError("with 1-byte lines, addresses must be below 2**63")
         if distances is None:
             distances = np.empty(0, dtype=np.int64)
         elif distances.shape != addresses.shape or distances.dtype != np.int64:
-            raise ValueError(f"distances must be int64 of shape {addresses.shape}")
+            raise InputError(f"distances must be int64 of shape {addresses.shape}")
         self._state = _reuse_pass(addresses, self._shift, distances, self._state)
         return self
 
@@ -332,7 +332,7 @@ class ReuseProfile:
         """
         capacity = np.asarray(capacity_lines, dtype=np.int64)
         if np.any(capacity < 0):
-            raise ValueError("capacity_lines must be >= 0")
+            raise InputError("capacity_lines must be >= 0")
         # tail[c] = accesses with distance >= c
         tail = np.concatenate((np.cumsum(self.histogram[::-1])[::-1], [0])).astype(np.int64)
         index = np.minimum(capacity, tail.size - 1)

@@ -21,6 +21,7 @@ from cachesim import kernels as K
 from cachesim import tlb as T
 from cachesim.config import Hierarchy
 from cachesim.inputs import as_addresses, as_writes
+from rtcommon.validate import InputError
 
 __all__ = ["CacheState", "SimulationResult", "as_addresses", "as_writes", "cache_geometry", "simulate",
            "simulate_many", "tlb_geometry"]
@@ -80,7 +81,7 @@ class CacheState:
 
     def __init__(self, hierarchy: Hierarchy):
         if not isinstance(hierarchy, Hierarchy):
-            raise ValueError(f"CacheState needs a Hierarchy, got {type(hierarchy).__name__}")
+            raise InputError(f"CacheState needs a Hierarchy, got {type(hierarchy).__name__}")
         self.hierarchy = hierarchy
         self._geometry = cache_geometry(hierarchy)
         self._tlb_geometry = tlb_geometry(hierarchy)
@@ -287,7 +288,7 @@ def _check_line_range(addresses: np.ndarray, hierarchy: Hierarchy) -> None:
     # Line numbers are kept as int64; with 1-byte lines an address >= 2**63
     # would not fit.
     if hierarchy.levels[0].line_size == 1 and addresses.size and addresses.max() >= 2**63:
-        raise ValueError("with a 1-byte first-level line, addresses must be below 2**63")
+        raise InputError("with a 1-byte first-level line, addresses must be below 2**63")
 
 
 def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None,
@@ -363,7 +364,7 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
     if writes is not None:
         writes = list(writes)
         if len(writes) != len(streams):
-            raise ValueError(f"simulate_many got {len(streams)} streams but {len(writes)} write-flag arrays")
+            raise InputError(f"simulate_many got {len(streams)} streams but {len(writes)} write-flag arrays")
         flags = [as_writes(flag, stream.size, name=f"writes[{index}]")
                  for index, (flag, stream) in enumerate(zip(writes, streams))]
         if any(flag.size for flag in flags):
@@ -376,18 +377,18 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
         all_writes = np.zeros(0, dtype=np.bool_)
     if states is None:
         if hierarchy is None:
-            raise ValueError("simulate_many needs a hierarchy or a list of states")
+            raise InputError("simulate_many needs a hierarchy or a list of states")
         states = [CacheState(hierarchy) for _ in streams]
     if len(states) != len(streams):
-        raise ValueError(f"simulate_many got {len(streams)} streams but {len(states)} states")
+        raise InputError(f"simulate_many got {len(streams)} streams but {len(states)} states")
     if not streams:
         return []
     reference = states[0].hierarchy
     if hierarchy is not None and hierarchy != reference:
-        raise ValueError("simulate_many: the states were made for another hierarchy than the one given")
+        raise InputError("simulate_many: the states were made for another hierarchy than the one given")
     for index, state in enumerate(states):
         if state.hierarchy != reference:
-            raise ValueError(f"simulate_many: states[{index}] has another hierarchy than states[0]")
+            raise InputError(f"simulate_many: states[{index}] has another hierarchy than states[0]")
         _check_line_range(streams[index], reference)
     lengths = np.array([stream.size for stream in streams], dtype=np.int64)
     starts = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rtcommon.validate import require_int, require_number, require_power_of_two
+from rtcommon.validate import InputError, require_int, require_number, require_power_of_two
 
 TLB_POLICIES = ("nlu", "lru", "fifo")
 
@@ -49,10 +49,10 @@ class Tlb:
         require_power_of_two("Tlb.page_size", self.page_size)
         object.__setattr__(self, "miss_cycles", require_number("Tlb.miss_cycles", self.miss_cycles, 0, "cycles"))
         if not isinstance(self.policy, str) or self.policy.lower() not in TLB_POLICIES:
-            raise ValueError(f"Tlb.policy must be one of {', '.join(TLB_POLICIES)}; got {self.policy!r}")
+            raise InputError(f"Tlb.policy must be one of {', '.join(TLB_POLICIES)}; got {self.policy!r}")
         object.__setattr__(self, "policy", self.policy.lower())
         if not isinstance(self.name, str) or not self.name.strip():
-            raise ValueError(f"Tlb.name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"Tlb.name must be a non-empty string, got {self.name!r}")
 
     def to_dict(self) -> dict:
         return {"name": self.name, "entries": self.entries, "page_size": self.page_size,

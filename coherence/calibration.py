@@ -48,6 +48,7 @@ import pandas as pd
 
 from coherence.cost import CLOCK_HZ, OPERATIONS, SQUARE_ROOT_CYCLES_21164, CostModel
 from coherence.unknowns import unknown
+from rtcommon.validate import InputError
 
 #: Floating-point operations (+, -, *, /, sqrt and compares each count one)
 #: on the full path of each routine, counted by hand in this project's code.
@@ -100,16 +101,16 @@ class FittedCost:
 
     def __post_init__(self):
         if not self.multiples:
-            raise ValueError(f"FittedCost {self.name!r}: multiples must name at least one operation")
+            raise InputError(f"FittedCost {self.name!r}: multiples must name at least one operation")
         for operation, multiple in self.multiples.items():
             if operation not in OPERATIONS:
-                raise ValueError(f"FittedCost {self.name!r}: unknown operation {operation!r}; "
+                raise InputError(f"FittedCost {self.name!r}: unknown operation {operation!r}; "
                                  f"use {sorted(OPERATIONS)}")
             if not (np.isfinite(multiple) and multiple > 0):
-                raise ValueError(f"FittedCost {self.name!r}: multiple of {operation} must be > 0, got {multiple!r}")
+                raise InputError(f"FittedCost {self.name!r}: multiple of {operation} must be > 0, got {multiple!r}")
         low, high = (float(b) for b in self.bounds)
         if not (np.isfinite(low) and np.isfinite(high) and 0 <= low < high):
-            raise ValueError(f"FittedCost {self.name!r}: bounds must be finite with 0 <= low < high, "
+            raise InputError(f"FittedCost {self.name!r}: bounds must be finite with 0 <= low < high, "
                              f"got {self.bounds!r}")
         object.__setattr__(self, "bounds", (low, high))
 
@@ -135,23 +136,23 @@ class CostStructure:
     def __post_init__(self):
         object.__setattr__(self, "fitted", tuple(self.fitted))
         if not self.fitted:
-            raise ValueError("CostStructure.fitted must hold at least one FittedCost")
+            raise InputError("CostStructure.fitted must hold at least one FittedCost")
         seen = {}
         for cost in self.fitted:
             for operation in cost.multiples:
                 if operation in seen:
-                    raise ValueError(f"CostStructure: {operation} is tied to both {seen[operation]!r} "
+                    raise InputError(f"CostStructure: {operation} is tied to both {seen[operation]!r} "
                                      f"and {cost.name!r}")
                 seen[operation] = cost.name
         both = sorted(set(seen) & set(self.fixed))
         if both:
-            raise ValueError(f"CostStructure: {both} are both fitted and fixed")
+            raise InputError(f"CostStructure: {both} are both fitted and fixed")
         missing = sorted(set(OPERATIONS) - set(seen) - set(self.fixed))
         if missing:
-            raise ValueError(f"CostStructure: operations {missing} are neither fitted nor fixed")
+            raise InputError(f"CostStructure: operations {missing} are neither fitted nor fixed")
         for operation, cycles in self.fixed.items():
             if operation not in OPERATIONS or not (np.isfinite(cycles) and cycles >= 0):
-                raise ValueError(f"CostStructure.fixed: {operation!r} must be an operation with cycles >= 0")
+                raise InputError(f"CostStructure.fixed: {operation!r} must be an operation with cycles >= 0")
 
     def model(self, values, *, clock_hz: float, name: str) -> CostModel:
         """The cost model with fitted cost ``values[i]`` for ``self.fitted[i]``."""
@@ -189,7 +190,7 @@ PRIOR_UNKNOWNS = {"test_sphere": "cost_test_sphere", "test_triangle": "cost_test
 def prior_range(operation: str) -> tuple[float, float]:
     """Lowest and highest cycles of ``operation`` in its prior (:data:`PRIOR_UNKNOWNS`)."""
     if operation not in PRIOR_UNKNOWNS:
-        raise ValueError(f"no prior range for operation {operation!r}; priors exist for {sorted(PRIOR_UNKNOWNS)}")
+        raise InputError(f"no prior range for operation {operation!r}; priors exist for {sorted(PRIOR_UNKNOWNS)}")
     entry = unknown(PRIOR_UNKNOWNS[operation])
     return float(entry.low), float(entry.high)
 
@@ -272,12 +273,12 @@ def fit_costs(measurements: pd.DataFrame, structure: CostStructure = STUDY1997_C
 
 def _system(measurements: pd.DataFrame, structure: CostStructure, clock_hz: float):
     if "seconds" not in measurements:
-        raise ValueError("fit_costs: measurements need a 'seconds' column")
+        raise InputError("fit_costs: measurements need a 'seconds' column")
     seconds = measurements["seconds"].to_numpy(dtype=np.float64)
     if np.any(~np.isfinite(seconds)) or np.any(seconds <= 0):
-        raise ValueError("fit_costs: 'seconds' must be finite and > 0")
+        raise InputError("fit_costs: 'seconds' must be finite and > 0")
     if not (np.isfinite(clock_hz) and clock_hz > 0):
-        raise ValueError(f"fit_costs: clock_hz must be > 0, got {clock_hz!r}")
+        raise InputError(f"fit_costs: clock_hz must be > 0, got {clock_hz!r}")
     memory = (measurements["memory_cycles"].to_numpy(dtype=np.float64) if "memory_cycles" in measurements
               else np.zeros(len(measurements)))
     totals = _operation_totals(measurements)
@@ -313,7 +314,7 @@ def leave_one_out(measurements: pd.DataFrame, structure: CostStructure = STUDY19
         reference operation).
     """
     if len(measurements) < 2:
-        raise ValueError("leave_one_out: needs at least two runs")
+        raise InputError("leave_one_out: needs at least two runs")
     rows = []
     for left_out in range(len(measurements)):
         keep = np.arange(len(measurements)) != left_out

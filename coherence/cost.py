@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from rtcommon.resident import drop_pages, mapping_of
-from rtcommon.validate import require_number
+from rtcommon.validate import InputError, require_number
 
 #: rows of counters :meth:`CostModel.compute_cycles` converts at a time (6.5 MB of float64 for 25 counters)
 COMPUTE_ROWS = 1 << 15
@@ -105,7 +105,7 @@ class CostModel:
         for name in (*OPERATIONS, "clock_hz"):
             require_number(f"CostModel.{name}", getattr(self, name), 0)
         if self.clock_hz <= 0:
-            raise ValueError(f"CostModel.clock_hz must be > 0, got {self.clock_hz}")
+            raise InputError(f"CostModel.clock_hz must be > 0, got {self.clock_hz}")
 
     def weights(self, counter_names) -> np.ndarray:
         """Cycles per unit of each counter, float64 (K,), in ``counter_names`` order."""
@@ -163,14 +163,14 @@ class CostModel:
             Per run: measured and fitted seconds, residual and relative error.
         """
         if "seconds" not in measurements:
-            raise ValueError("calibrate: measurements need a 'seconds' column")
+            raise InputError("calibrate: measurements need a 'seconds' column")
         fixed = dict(fixed or {})
         unknown = sorted(set(fixed) - set(OPERATIONS))
         if unknown:
-            raise ValueError(f"calibrate: unknown operations in fixed: {unknown}; use {sorted(OPERATIONS)}")
+            raise InputError(f"calibrate: unknown operations in fixed: {unknown}; use {sorted(OPERATIONS)}")
         seconds = measurements["seconds"].to_numpy(dtype=np.float64)
         if np.any(~np.isfinite(seconds)) or np.any(seconds <= 0):
-            raise ValueError("calibrate: 'seconds' must be finite and > 0")
+            raise InputError("calibrate: 'seconds' must be finite and > 0")
         target = seconds * clock_hz
         if "memory_cycles" in measurements:
             target = target - measurements["memory_cycles"].to_numpy(dtype=np.float64)
@@ -184,7 +184,7 @@ class CostModel:
             elif total.any():
                 columns[operation] = total
         if not columns:
-            raise ValueError("calibrate: no operation counters to fit (all missing, zero or fixed)")
+            raise InputError("calibrate: no operation counters to fit (all missing, zero or fixed)")
         from scipy.optimize import nnls
 
         matrix = np.column_stack(list(columns.values()))
@@ -232,5 +232,5 @@ def get_cost_model(name_or_model) -> CostModel:
     try:
         return COST_MODELS[str(name_or_model)]()
     except KeyError:
-        raise ValueError(f"unknown cost model {name_or_model!r}: use one of {', '.join(COST_MODELS)}") from None
+        raise InputError(f"unknown cost model {name_or_model!r}: use one of {', '.join(COST_MODELS)}") from None
 

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtcommon.validate import require_bool, require_int
+from rtcommon.validate import InputError, require_bool, require_int
 
 from .curves import CURVES, curve_order, hilbert_order, morton_keys
 from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping, _check_dynamic, _dynamic, _static
@@ -28,7 +28,7 @@ class CurveSegments(Mapping):
 
     def __post_init__(self):
         if self.curve not in CURVES:
-            raise ValueError(f"CurveSegments.curve must be one of {sorted(CURVES)}, got {self.curve!r}")
+            raise InputError(f"CurveSegments.curve must be one of {sorted(CURVES)}, got {self.curve!r}")
 
     @property
     def name(self) -> str:
@@ -68,11 +68,11 @@ class CurveTiles(Mapping):
     def __post_init__(self):
         require_int("CurveTiles.tile", self.tile, 1)
         if self.inner not in ("morton", "scan"):
-            raise ValueError(f"CurveTiles.inner must be 'morton' or 'scan', got {self.inner!r}")
+            raise InputError(f"CurveTiles.inner must be 'morton' or 'scan', got {self.inner!r}")
         object.__setattr__(self, "dynamic", require_bool("CurveTiles.dynamic", self.dynamic))
         _check_dynamic("CurveTiles", self.dispatch_cycles, self.take_ahead)
         if not self.dynamic and self.take_ahead != 0:
-            raise ValueError("CurveTiles.take_ahead applies to dynamic=True only; it must be 0 when static")
+            raise InputError("CurveTiles.take_ahead applies to dynamic=True only; it must be 0 when static")
 
     @property
     def name(self) -> str:

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 __all__ = [
     "CURVES",
@@ -55,7 +55,7 @@ def _check_size(width, height) -> tuple[int, int]:
     for name, value in (("width", width), ("height", height)):
         require_int(name, value, 1)
         if value >= _MAX_SIDE:
-            raise ValueError(f"{name} must be < 2**31, got {value}")
+            raise InputError(f"{name} must be < 2**31, got {value}")
     return int(width), int(height)
 
 
@@ -275,5 +275,5 @@ def curve_order(curve: str, width: int, height: int) -> np.ndarray:
     try:
         fn = CURVES[curve]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown curve {curve!r}; choose one of {sorted(CURVES)}") from None
+        raise InputError(f"unknown curve {curve!r}; choose one of {sorted(CURVES)}") from None
     return fn(width, height)

@@ -8,6 +8,7 @@ import numpy as np
 
 from .distribution import _check_coverage, _csr_from_labels, _int_array, _pixel_text
 from .mapping_base import Mapping, _static
+from rtcommon.validate import InputError
 
 __all__ = ["CustomMapping", "from_owner_image"]
 
@@ -38,9 +39,9 @@ class CustomMapping(Mapping):
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"CustomMapping.name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"CustomMapping.name must be a non-empty string, got {self.name!r}")
         if not callable(self.fn):
-            raise ValueError(f"CustomMapping.fn must be callable as fn(width, height, n), got {self.fn!r}")
+            raise InputError(f"CustomMapping.fn must be callable as fn(width, height, n), got {self.fn!r}")
 
     def _build(self, width, height, n):
         owner = f"mapping {self.name!r}"
@@ -48,7 +49,7 @@ class CustomMapping(Mapping):
         process = np.arange(n, dtype=np.int64)
         if isinstance(result, (list, tuple)):
             if len(result) != n:
-                raise ValueError(
+                raise InputError(
                     f"{owner}: fn returned {len(result)} pixel arrays; expected one per process ({n})"
                 )
             parts = [
@@ -61,7 +62,7 @@ class CustomMapping(Mapping):
             _check_coverage(owner, pixels, width, height)  # names missing / duplicated pixels
             return _static(self.name, width, height, n, offsets, pixels, process)
         if not isinstance(result, np.ndarray):
-            raise ValueError(
+            raise InputError(
                 f"{owner}: fn must return a (height, width) array of process ids or a list of "
                 f"pixel-index arrays per process, got {type(result).__name__}"
             )
@@ -74,15 +75,15 @@ def _owner_labels(owner: str, image, width: int, height: int, n: int) -> np.ndar
     """Validated flat process ids from a ``(height, width)`` owner image."""
     image = np.asarray(image)
     if image.shape != (height, width):
-        raise ValueError(
+        raise InputError(
             f"{owner}: the owner image must have shape (height, width) = ({height}, {width}), got {image.shape}"
         )
     if image.dtype.kind not in "iu":
-        raise ValueError(f"{owner}: the owner image must hold integer process ids, got dtype {image.dtype}")
+        raise InputError(f"{owner}: the owner image must hold integer process ids, got dtype {image.dtype}")
     ids = image.astype(np.int64).ravel()
     bad = np.flatnonzero((ids < 0) | (ids >= n))
     if bad.size:
-        raise ValueError(
+        raise InputError(
             f"{owner}: process ids must be in [0, {n}); {bad.size} pixels are not "
             f"(first: {_pixel_text(bad[0], width)} has id {int(ids[bad[0]])})"
         )
@@ -99,7 +100,7 @@ class _FixedOwner:
     def __call__(self, width, height, n):
         h, w = self.owner.shape
         if (width, height) != (w, h):
-            raise ValueError(
+            raise InputError(
                 f"mapping {self.name!r} is a fixed {w}x{h} owner image; cannot build it for {width}x{height}"
             )
         return self.owner
@@ -117,8 +118,8 @@ def from_owner_image(name: str, owner) -> CustomMapping:
     """
     arr = np.array(owner, copy=True)
     if arr.ndim != 2:
-        raise ValueError(f"from_owner_image: owner must be a (height, width) array, got shape {arr.shape}")
+        raise InputError(f"from_owner_image: owner must be a (height, width) array, got shape {arr.shape}")
     if arr.dtype.kind not in "iu":
-        raise ValueError(f"from_owner_image: owner must hold integer process ids, got dtype {arr.dtype}")
+        raise InputError(f"from_owner_image: owner must hold integer process ids, got dtype {arr.dtype}")
     arr.flags.writeable = False
     return CustomMapping(name, _FixedOwner(name, arr))

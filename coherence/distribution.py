@@ -22,7 +22,7 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import InputError, require_int, require_number
 
 __all__ = ["Distribution"]
 
@@ -51,9 +51,9 @@ def _int_array(owner: str, name: str, value, ndim: int) -> np.ndarray:
         if arr.size == 0 and arr.dtype.kind == "f":
             arr = arr.astype(np.int64)  # np.array([]) is float64 by default
         else:
-            raise ValueError(f"{owner}: {name} must hold integers, got dtype {arr.dtype}")
+            raise InputError(f"{owner}: {name} must hold integers, got dtype {arr.dtype}")
     if arr.ndim != ndim:
-        raise ValueError(f"{owner}: {name} must be {ndim}-dimensional, got shape {arr.shape}")
+        raise InputError(f"{owner}: {name} must be {ndim}-dimensional, got shape {arr.shape}")
     # A private, read-only, contiguous int64 copy: a validated distribution
     # must not change under its users (several simulations share one). An
     # array a mapping has just built and handed over (_hand_over) is private
@@ -102,7 +102,7 @@ def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> 
     n_pixels = width * height
     if pixels.size and (pixels.min() < 0 or pixels.max() >= n_pixels):
         bad = pixels[(pixels < 0) | (pixels >= n_pixels)]
-        raise ValueError(
+        raise InputError(
             f"{owner}: {bad.size} pixel indices outside [0, {n_pixels}) for a "
             f"{width}x{height} image (first: {int(bad[0])})"
         )
@@ -117,7 +117,7 @@ def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> 
                 f"{n_repeated} pixels assigned more than once "
                 f"(first: {_pixel_text(first_repeated, width)}, {times})"
             )
-        raise ValueError(
+        raise InputError(
             f"{owner}: every pixel of the {width}x{height} image must be in exactly one task; "
             + "; ".join(parts)
         )
@@ -125,7 +125,7 @@ def _check_coverage(owner: str, pixels: np.ndarray, width: int, height: int) -> 
 
 def _validate_distribution(d: "Distribution") -> None:
     if not isinstance(d.name, str) or not d.name:
-        raise ValueError(f"Distribution.name must be a non-empty string, got {d.name!r}")
+        raise InputError(f"Distribution.name must be a non-empty string, got {d.name!r}")
     owner = f"Distribution {d.name!r}"
     width = require_int(f"{owner}.width", d.width, 1)
     height = require_int(f"{owner}.height", d.height, 1)
@@ -134,17 +134,17 @@ def _validate_distribution(d: "Distribution") -> None:
     pixels = _int_array(owner, "task_pixels", d.task_pixels, 1)
     n_pixels = width * height
     if offsets.size < 2:
-        raise ValueError(f"{owner}: task_offsets must have at least 2 entries (one task), got {offsets.size}")
+        raise InputError(f"{owner}: task_offsets must have at least 2 entries (one task), got {offsets.size}")
     if offsets[0] != 0 or offsets[-1] != pixels.size:
-        raise ValueError(
+        raise InputError(
             f"{owner}: task_offsets must start at 0 and end at len(task_pixels) = {pixels.size}, "
             f"got {int(offsets[0])} .. {int(offsets[-1])}"
         )
     if np.any(np.diff(offsets) < 0):
         t = int(np.flatnonzero(np.diff(offsets) < 0)[0])
-        raise ValueError(f"{owner}: task_offsets must be non-decreasing; task {t} has negative length")
+        raise InputError(f"{owner}: task_offsets must be non-decreasing; task {t} has negative length")
     if pixels.size != n_pixels:
-        raise ValueError(
+        raise InputError(
             f"{owner}: task_pixels must hold width*height = {n_pixels} pixels, got {pixels.size}"
         )
     _check_coverage(owner, pixels, width, height)
@@ -154,19 +154,19 @@ def _validate_distribution(d: "Distribution") -> None:
     else:
         process = _int_array(owner, "task_process", d.task_process, 1)
         if process.size != n_tasks:
-            raise ValueError(
+            raise InputError(
                 f"{owner}: task_process must have one entry per task ({n_tasks}), got {process.size}"
             )
         bad = np.flatnonzero((process < 0) | (process >= n))
         if bad.size:
-            raise ValueError(
+            raise InputError(
                 f"{owner}: task_process must be in [0, {n}); task {int(bad[0])} "
                 f"has process {int(process[bad[0]])} ({bad.size} bad entries)"
             )
     dispatch = require_number(f"{owner}.dispatch_cycles", d.dispatch_cycles, 0, "cycles")
     take_ahead = require_int(f"{owner}.take_ahead", d.take_ahead, 0)
     if process is not None and (dispatch != 0.0 or take_ahead != 0):
-        raise ValueError(
+        raise InputError(
             f"{owner}: dispatch_cycles and take_ahead apply to dynamic distributions only "
             f"(task_process=None); got {dispatch} and {take_ahead} for a static one"
         )
@@ -263,7 +263,7 @@ class Distribution:
         """Pixel indices of task ``t`` in render order (a read-only view)."""
         t = require_int(f"Distribution {self.name!r}.task", t, 0)
         if t >= self.n_tasks:
-            raise ValueError(f"task must be < n_tasks = {self.n_tasks}, got {t}")
+            raise InputError(f"task must be < n_tasks = {self.n_tasks}, got {t}")
         return self.task_pixels[self.task_offsets[t]:self.task_offsets[t + 1]]
 
     @cached_property
@@ -273,7 +273,7 @@ class Distribution:
 
     def _require_static(self, what: str) -> np.ndarray:
         if self.task_process is None:
-            raise ValueError(
+            raise InputError(
                 f"{what} is defined for static distributions only; {self.name!r} is dynamic "
                 "(tasks are handed out at run time)"
             )
@@ -282,7 +282,7 @@ class Distribution:
     def _require_process(self, p) -> int:
         p = require_int(f"Distribution {self.name!r}.process", p, 0)
         if p >= self.n_processes:
-            raise ValueError(f"process must be < n_processes = {self.n_processes}, got {p}")
+            raise InputError(f"process must be < n_processes = {self.n_processes}, got {p}")
         return p
 
     def process_tasks(self, p: int) -> np.ndarray:

@@ -19,6 +19,7 @@ from cachesim import Hierarchy
 from cachesim.simulate import simulate
 from coherence.layout import PlacedLayout
 from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, RecordKind
+from rtcommon.validate import InputError
 
 
 def process_pixels(distribution, task_owner=None) -> list[np.ndarray]:
@@ -38,7 +39,7 @@ def process_pixels(distribution, task_owner=None) -> list[np.ndarray]:
     """
     owner = np.asarray(distribution.task_process if task_owner is None else task_owner, dtype=np.int64)
     if owner.shape != (distribution.n_tasks,) or (owner.size and owner.min() < 0):
-        raise ValueError("process_pixels: a dynamic distribution needs the task owners of a run (task_owner)")
+        raise InputError("process_pixels: a dynamic distribution needs the task owners of a run (task_owner)")
     sizes = np.diff(distribution.task_offsets)
     pixel_owner = np.repeat(owner, sizes)
     pixels = np.asarray(distribution.task_pixels, dtype=np.int64)

@@ -39,7 +39,7 @@ from coherence.malloc_image import HEAP_KINDS, CreationOrder, HeapModel, heap_bl
 from coherence.page_placement import PagePlacement, PageTable, identity_pages, translate_addresses
 from coherence.texture_layout import TextureLayout
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
-from rtcommon.validate import require_int, require_power_of_two
+from rtcommon.validate import InputError, require_int, require_power_of_two
 from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_is_write, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
@@ -67,7 +67,7 @@ class RecordLayout:
         for name in ("size", "align", "per_vertex"):
             require_int(f"RecordLayout.{name}", getattr(self, name), 0)
         if self.size + self.per_vertex < 1:
-            raise ValueError("RecordLayout.size must be >= 1 byte")
+            raise InputError("RecordLayout.size must be >= 1 byte")
         require_power_of_two("RecordLayout.align", self.align)
 
 
@@ -134,22 +134,22 @@ class MemoryLayout:
         if isinstance(self.records, dict):
             object.__setattr__(self, "records", {**_TEXTURE_DEFAULTS, **self.records})
         if not isinstance(self.texels, TextureLayout):
-            raise ValueError(f"MemoryLayout.texels must be a TextureLayout, got {self.texels!r}")
+            raise InputError(f"MemoryLayout.texels must be a TextureLayout, got {self.texels!r}")
         given = set(self.records)
         if given != expected:
             missing = sorted(expected - given)
             unknown = sorted(given - expected)
-            raise ValueError(f"MemoryLayout.records must name every record kind; missing {missing}, "
+            raise InputError(f"MemoryLayout.records must name every record kind; missing {missing}, "
                              f"unknown {unknown}")
         for name, record in self.records.items():
             if not isinstance(record, RecordLayout):
-                raise ValueError(f"MemoryLayout.records[{name!r}] must be a RecordLayout")
+                raise InputError(f"MemoryLayout.records[{name!r}] must be a RecordLayout")
             if record.per_vertex and RecordKind[name.upper()] not in _VARIABLE:
-                raise ValueError(f"MemoryLayout.records[{name!r}].per_vertex is only for polygons and patches")
+                raise InputError(f"MemoryLayout.records[{name!r}].per_vertex is only for polygons and patches")
         require_int("MemoryLayout.base", self.base, 0, 2**48 - 1)
         require_power_of_two("MemoryLayout.region_align", self.region_align)
         if self.heap is not None and not isinstance(self.heap, HeapModel):
-            raise ValueError(f"MemoryLayout.heap must be a HeapModel or None, got {self.heap!r}")
+            raise InputError(f"MemoryLayout.heap must be a HeapModel or None, got {self.heap!r}")
 
     def scaled(self, factor: int) -> "MemoryLayout":
         """This layout with every record ``factor`` times as many bytes (alignments kept).
@@ -172,10 +172,10 @@ class MemoryLayout:
     def _texel_starts(self, count: int, stride: int, textures):
         """Offsets of ``count`` texels from their region's start, and the region's bytes."""
         if textures is None:
-            raise ValueError("the layout needs the textures' level sizes (textures=...) to place texels")
+            raise InputError("the layout needs the textures' level sizes (textures=...) to place texels")
         offsets = self.texels.texel_offsets(textures)
         if offsets.shape[0] != count:
-            raise ValueError(f"record_counts has {count} texels but the textures' levels hold {offsets.shape[0]}")
+            raise InputError(f"record_counts has {count} texels but the textures' levels hold {offsets.shape[0]}")
         return offsets * stride, (int(offsets.max()) + 1) * stride
 
     def record(self, kind: RecordKind | str) -> RecordLayout:
@@ -208,7 +208,7 @@ class MemoryLayout:
         PlacedLayout
         """
         if (creation is None) != (self.heap is None):
-            raise ValueError(f"layout {self.name!r}: " + ("a heap layout places records in their creation order; "
+            raise InputError(f"layout {self.name!r}: " + ("a heap layout places records in their creation order; "
                              "give creation=, or use coherence.studies.place_layout(layout, trace, scene)"
                              if creation is None else "creation= is only for a layout with a heap"))
         counts = _by_kind(record_counts, "record_counts")
@@ -222,12 +222,12 @@ class MemoryLayout:
         for kind in sorted(RecordKind, key=lambda k: (k == RecordKind.TEXEL, k)):
             count = int(counts.get(kind, 0))
             if count < 0:
-                raise ValueError(f"record_counts[{kind.name.lower()}] must be >= 0, got {count}")
+                raise InputError(f"record_counts[{kind.name.lower()}] must be >= 0, got {count}")
             record = self.record(kind)
             if kind in vertices:
                 n_vertices = np.asarray(vertices[kind], dtype=np.int64)
                 if n_vertices.shape != (count,) or (count and n_vertices.min() < 3):
-                    raise ValueError(f"vertex_counts[{kind.name.lower()}] must hold {count} counts >= 3")
+                    raise InputError(f"vertex_counts[{kind.name.lower()}] must hold {count} counts >= 3")
             else:
                 n_vertices = np.full(count, 4, dtype=np.int64)
             size = np.full(count, record.size, dtype=np.int64) + record.per_vertex * n_vertices
@@ -253,11 +253,11 @@ class MemoryLayout:
     def _place_heap(self, creation, record_start, record_size, kind_first, heap_start) -> int:
         """Move the heap kinds' records of ``record_start`` into heap blocks; returns the heap's end."""
         if not isinstance(creation, CreationOrder):
-            raise ValueError(f"creation must be a coherence.malloc_image.CreationOrder, got {type(creation).__name__}")
+            raise InputError(f"creation must be a coherence.malloc_image.CreationOrder, got {type(creation).__name__}")
         kind = np.asarray(creation.kind, dtype=np.int64)
         index = np.asarray(creation.index, dtype=np.int64)
         if kind.shape != index.shape or kind.ndim != 1:
-            raise ValueError("creation: kind and index must be 1-d arrays of one length")
+            raise InputError("creation: kind and index must be 1-d arrays of one length")
         counts = np.diff(kind_first)
         heap_kinds = np.array([int(k) for k in HEAP_KINDS], dtype=np.int64)
         expected = int(counts[heap_kinds].sum())
@@ -266,7 +266,7 @@ class MemoryLayout:
         rows = kind_first[kind[good]] + index[good]
         if not good.all() or kind.size != expected or np.unique(rows).size != expected:
             names = ", ".join(f"{RecordKind(k).name.lower()} {int(counts[k])}" for k in heap_kinds)
-            raise ValueError(f"creation must name every record of the heap's kinds once ({names}); it names "
+            raise InputError(f"creation must name every record of the heap's kinds once ({names}); it names "
                              f"{kind.size} allocations, {int(good.sum())} of them records of those kinds, "
                              f"{np.unique(rows).size} distinct")
         blocks = heap_blocks(self.heap, record_size[rows], heap_start)
@@ -341,12 +341,12 @@ class PlacedLayout:
         one entry per page as it would on virtual addresses.
         """
         if not isinstance(placement, PagePlacement):
-            raise ValueError(f"placement must be a PagePlacement, got {type(placement).__name__}")
+            raise InputError(f"placement must be a PagePlacement, got {type(placement).__name__}")
         if not placement.translates:
             return self
         tlb = getattr(hierarchy, "tlb", None)
         if placement.translates and tlb is not None and tlb.page_size != placement.page_size:
-            raise ValueError(f"page placement with {placement.page_size}-byte pages needs a TLB of the same page "
+            raise InputError(f"page placement with {placement.page_size}-byte pages needs a TLB of the same page "
                              f"size; {tlb.name} has {tlb.page_size}-byte pages")
         shift = placement.page_size.bit_length() - 1
         first_page = int(self.layout.base) >> shift
@@ -379,8 +379,8 @@ class PlacedLayout:
             return
         kind = int(records[first]) >> KIND_SHIFT
         if kind >= N_KINDS:
-            raise ValueError(f"record {first} has kind {kind}, which is not a RecordKind")
-        raise ValueError(f"record {first} is {RecordKind(kind).name.lower()} {int(records[first]) & INDEX_MASK}, "
+            raise InputError(f"record {first} has kind {kind}, which is not a RecordKind")
+        raise InputError(f"record {first} is {RecordKind(kind).name.lower()} {int(records[first]) & INDEX_MASK}, "
                          f"but the layout holds only {int(limit[kind])} of that kind")
 
     def addresses(self, records, line_size: int) -> np.ndarray:
@@ -421,7 +421,7 @@ def _by_kind(mapping, what: str) -> dict:
         try:
             kind = key if isinstance(key, RecordKind) else RecordKind[str(key).upper()]
         except KeyError:
-            raise ValueError(f"{what}: unknown record kind {key!r}") from None
+            raise InputError(f"{what}: unknown record kind {key!r}") from None
         result[kind] = value
     return result
 
@@ -621,4 +621,4 @@ def get_layout(name_or_layout) -> MemoryLayout:
     try:
         return LAYOUTS[str(name_or_layout)]()
     except KeyError:
-        raise ValueError(f"unknown memory layout {name_or_layout!r}: use one of {', '.join(LAYOUTS)}") from None
+        raise InputError(f"unknown memory layout {name_or_layout!r}: use one of {', '.join(LAYOUTS)}") from None

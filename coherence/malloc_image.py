@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from rtcommon.validate import require_int, require_power_of_two
+from rtcommon.validate import InputError, require_int, require_power_of_two
 from tracer.kd.nodes import LINK_WORD, FLAG_BITS, FLAG_MASK, LEAF_FLAG, OFFSET_WORD
 from tracer.trace.records import RecordKind
 
@@ -69,21 +69,21 @@ class HeapModel:
     def __post_init__(self):
         require_int("HeapModel.header", self.header, 0, 4096)
         if self.header % 8:
-            raise ValueError(f"HeapModel.header must be a multiple of 8 bytes, got {self.header}")
+            raise InputError(f"HeapModel.header must be a multiple of 8 bytes, got {self.header}")
         require_power_of_two("HeapModel.smallest_block", self.smallest_block)
         if self.smallest_block <= self.header:
-            raise ValueError(f"HeapModel.smallest_block must be larger than the header ({self.header}), "
+            raise InputError(f"HeapModel.smallest_block must be larger than the header ({self.header}), "
                              f"got {self.smallest_block}")
         require_power_of_two("HeapModel.page_size", self.page_size)
         if self.page_size < self.smallest_block:
-            raise ValueError(f"HeapModel.page_size must be >= smallest_block ({self.smallest_block}), "
+            raise InputError(f"HeapModel.page_size must be >= smallest_block ({self.smallest_block}), "
                              f"got {self.page_size}")
 
     def block_sizes(self, request) -> np.ndarray:
         """Block bytes (int64, shape (B,)) for requests of ``request`` bytes (shape (B,))."""
         request = np.asarray(request, dtype=np.int64)
         if request.size and request.min() < 1:
-            raise ValueError("HeapModel.block_sizes: every request must be >= 1 byte")
+            raise InputError("HeapModel.block_sizes: every request must be >= 1 byte")
         return _block_sizes(request, self.header, self.smallest_block)
 
 
@@ -127,19 +127,19 @@ def creation_order(scene, nodes, primitive_indices) -> CreationOrder:
     """
     nodes = np.ascontiguousarray(nodes, dtype=np.uint32)
     if nodes.ndim != 2 or nodes.shape[1] != 2:
-        raise ValueError(f"creation_order: nodes must have shape (N, 2), got {nodes.shape}")
+        raise InputError(f"creation_order: nodes must have shape (N, 2), got {nodes.shape}")
     n_entries = int(np.asarray(primitive_indices).shape[0])
     n_lights = int(scene.light_position.shape[0])
     n_materials = int(scene.material_kd.shape[0])
     element_material = np.ascontiguousarray(scene.element_material, dtype=np.int64)
     if element_material.size and (element_material.min() < 0 or element_material.max() >= n_materials):
-        raise ValueError(f"creation_order: Scene.element_material must name materials 0..{n_materials - 1}")
+        raise InputError(f"creation_order: Scene.element_material must name materials 0..{n_materials - 1}")
     scene_kind, scene_index = _scene_order(n_lights, np.ascontiguousarray(scene.element_kind, dtype=np.int64),
                                            np.ascontiguousarray(scene.element_index, dtype=np.int64),
                                            element_material, n_materials)
     tree_kind, tree_index, n_walked = _tree_order(nodes, n_entries)
     if n_walked != nodes.shape[0] or tree_kind.shape[0] != nodes.shape[0] + n_entries:
-        raise ValueError(f"creation_order: the tree's {nodes.shape[0]} nodes and {n_entries} entries do not form "
+        raise InputError(f"creation_order: the tree's {nodes.shape[0]} nodes and {n_entries} entries do not form "
                          f"one tree from node 0 (a walk reaches {n_walked} nodes)")
     return CreationOrder(np.concatenate([scene_kind, tree_kind]), np.concatenate([scene_index, tree_index]))
 
@@ -163,7 +163,7 @@ def heap_blocks(model: HeapModel, request, heap_start: int) -> np.ndarray:
         bytes later.
     """
     if not isinstance(model, HeapModel):
-        raise ValueError(f"heap_blocks: model must be a HeapModel, got {type(model).__name__}")
+        raise InputError(f"heap_blocks: model must be a HeapModel, got {type(model).__name__}")
     sizes = model.block_sizes(request)
     start = require_int("heap_blocks: heap_start", heap_start, 0, 2**48 - 1)
     start = -(-start // model.page_size) * model.page_size
@@ -185,12 +185,12 @@ def trace_creation_order(trace, scene=None) -> CreationOrder:
     metadata = getattr(trace, "metadata", None) or {}
     counts, config = metadata.get("record_counts"), metadata.get("kd_config")
     if not counts or not config:
-        raise ValueError("the malloc1997 image places records in the order the tracer created them, which needs "
+        raise InputError("the malloc1997 image places records in the order the tracer created them, which needs "
                          "a trace whose metadata holds record_counts and kd_config (one written by "
                          "tracer.rendering.render)")
     if scene is None:
         if metadata.get("scene") not in NAMED_SCENES:
-            raise ValueError(f"the malloc1997 image places records in the order the tracer created them, which "
+            raise InputError(f"the malloc1997 image places records in the order the tracer created them, which "
                              f"needs the trace's scene: {metadata.get('scene')!r} is not a scene of the catalogue "
                              f"({', '.join(NAMED_SCENES)}); pass the scene (scene=...)")
         scene = load(metadata["scene"])
@@ -202,7 +202,7 @@ def trace_creation_order(trace, scene=None) -> CreationOrder:
             "light": scene.light_position.shape[0]}
     for name, count in have.items():
         if int(counts.get(name, 0)) != int(count):
-            raise ValueError(f"the scene {scene.name!r} and the tree rebuilt from the trace's kd_config have "
+            raise InputError(f"the scene {scene.name!r} and the tree rebuilt from the trace's kd_config have "
                              f"{count} {name} records but the trace's record_counts say {counts.get(name, 0)}: "
                              "is it the trace of this scene?")
     return creation_order(scene, tree.nodes, tree.primitive_indices)

@@ -25,6 +25,7 @@ from .custom_mappings import CustomMapping, from_owner_image
 from .distribution import Distribution
 from .mapping_base import DEFAULT_DISPATCH_CYCLES, Mapping
 from .study_mappings import Block, DynamicBlock, Pixel, Row, Strip
+from rtcommon.validate import InputError
 
 __all__ = [
     "DEFAULT_DISPATCH_CYCLES",
@@ -81,4 +82,4 @@ def get_mapping(name_or_mapping) -> Mapping:
         folded = {k.lower(): v for k, v in MAPPINGS.items()}
         if name_or_mapping.lower() in folded:
             return folded[name_or_mapping.lower()]
-    raise ValueError(f"unknown mapping {name_or_mapping!r}; choose one of {', '.join(MAPPINGS)} or pass a Mapping")
+    raise InputError(f"unknown mapping {name_or_mapping!r}; choose one of {', '.join(MAPPINGS)} or pass a Mapping")

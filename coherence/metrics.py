@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from rtcommon.validate import InputError
 
 RAY_COUNTERS = ("primary_rays", "shadow_rays", "reflection_rays", "refraction_rays")
 
@@ -82,7 +83,7 @@ def add_speedups(runs: pd.DataFrame) -> pd.DataFrame:
     one = runs[runs["n_processes"] == 1].set_index("mapping")
     missing = sorted(set(runs["mapping"]) - set(one.index))
     if missing:
-        raise ValueError(f"speed-ups need a one-process run of every mapping; missing {missing}")
+        raise InputError(f"speed-ups need a one-process run of every mapping; missing {missing}")
     t1_user = runs["mapping"].map(one["user_cycles_max"])
     t1_work = t1_user - runs["mapping"].map(one["dispatch_cycles"])
     t1_real = runs["mapping"].map(one["real_cycles"])

@@ -22,7 +22,7 @@ import pandas as pd
 from cachesim.config import DEFAULT_HIERARCHY
 from coherence.cost import DEFAULT_COST_MODEL
 from coherence.layout import DEFAULT_LAYOUT
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 __all__ = ["MissMap", "miss_map"]
 
@@ -55,13 +55,13 @@ class MissMap:
     def __post_init__(self):
         misses = self.misses
         if not isinstance(misses, np.ndarray) or misses.ndim != 3 or misses.dtype != np.int64:
-            raise ValueError("MissMap.misses must be an int64 array of shape (H, W, L), got "
+            raise InputError("MissMap.misses must be an int64 array of shape (H, W, L), got "
                              f"{getattr(misses, 'dtype', type(misses).__name__)} of shape "
                              f"{getattr(misses, 'shape', None)}")
         levels = tuple(self.levels)
         if len(levels) != misses.shape[2] or not all(isinstance(name, str) and name for name in levels) \
                 or len(set(levels)) != len(levels):
-            raise ValueError(f"MissMap.levels must be {misses.shape[2]} distinct non-empty names (one per "
+            raise InputError(f"MissMap.levels must be {misses.shape[2]} distinct non-empty names (one per "
                              f"level of misses), got {self.levels!r}")
         object.__setattr__(self, "levels", levels)
         require_int("MissMap.n_processes", self.n_processes, 1)
@@ -69,7 +69,7 @@ class MissMap:
     def level(self, name: str) -> np.ndarray:
         """Misses per pixel at level ``name``, int64 (H, W)."""
         if name not in self.levels:
-            raise ValueError(f"unknown level {name!r}; this miss map has {', '.join(self.levels)}")
+            raise InputError(f"unknown level {name!r}; this miss map has {', '.join(self.levels)}")
         return self.misses[:, :, self.levels.index(name)]
 
     def frame(self) -> pd.DataFrame:
@@ -155,7 +155,7 @@ def miss_map(trace, mapping, n_processes: int, *, hierarchy=DEFAULT_HIERARCHY, l
     cost = get_cost_model(cost)
     machine = Machine() if machine is None else machine
     if not isinstance(machine, Machine):
-        raise ValueError(f"machine must be a coherence.Machine, got {type(machine).__name__}")
+        raise InputError(f"machine must be a coherence.Machine, got {type(machine).__name__}")
     placed = place_layout(layout, trace, scene)
     run = simulate_run(trace, mapping.build(trace.width, trace.height, n_processes), hierarchy, placed, cost,
                        machine, pixel_misses=True)

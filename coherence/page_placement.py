@@ -55,7 +55,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from rtcommon.validate import require_int, require_power_of_two
+from rtcommon.validate import InputError, require_int, require_power_of_two
 
 __all__ = ["PAGE_PLACEMENTS", "BackgroundPages", "PagePlacement", "PageTable", "identity_pages",
            "translate_addresses", "translate_stream"]
@@ -129,7 +129,7 @@ class PagePlacement:
 
     def __post_init__(self):
         if self.policy not in PAGE_PLACEMENTS:
-            raise ValueError(f"PagePlacement.policy must be one of {', '.join(PAGE_PLACEMENTS)}, "
+            raise InputError(f"PagePlacement.policy must be one of {', '.join(PAGE_PLACEMENTS)}, "
                              f"got {self.policy!r}")
         require_int("PagePlacement.page_size", self.page_size, 512)
         require_power_of_two("PagePlacement.page_size", self.page_size)

@@ -47,7 +47,7 @@ from coherence.pixel_lines import PixelLines, no_pixel_lines
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
                                  RunOutputs, RunQueues, run_schedule)
-from rtcommon.validate import require_bool, require_int, require_number
+from rtcommon.validate import InputError, require_bool, require_int, require_number
 
 SCHEDULERS = ("shared-queue", "static")
 PLACEMENTS = ("round-robin", "neighbours")
@@ -126,23 +126,23 @@ class Machine:
 
     def __post_init__(self):
         if not isinstance(self.page_placement, PagePlacement):
-            raise ValueError(f"Machine.page_placement must be a PagePlacement, "
+            raise InputError(f"Machine.page_placement must be a PagePlacement, "
                              f"got {type(self.page_placement).__name__}")
         require_int("Machine.n_cpus", self.n_cpus, 1)
         for name in ("quantum_cycles", "switch_cycles"):
             require_number(f"Machine.{name}", getattr(self, name), 0)
         if self.scheduler not in SCHEDULERS:
-            raise ValueError(f"Machine.scheduler must be one of {SCHEDULERS}, got {self.scheduler!r}")
+            raise InputError(f"Machine.scheduler must be one of {SCHEDULERS}, got {self.scheduler!r}")
         if self.placement not in PLACEMENTS:
-            raise ValueError(f"Machine.placement must be one of {PLACEMENTS}, got {self.placement!r}")
+            raise InputError(f"Machine.placement must be one of {PLACEMENTS}, got {self.placement!r}")
         if self.scheduler != "static" and self.placement != PLACEMENTS[0]:
-            raise ValueError(f"Machine.placement={self.placement!r} applies to scheduler='static' only "
+            raise InputError(f"Machine.placement={self.placement!r} applies to scheduler='static' only "
                              f"(the {self.scheduler} scheduler moves processes between CPUs)")
         require_int("Machine.background_load", self.background_load, 0)
         require_int("Machine.background_footprint", self.background_footprint, 0)
         require_int("Machine.background_seed", self.background_seed, 0)
         if self.background_load > 0 and self.quantum_cycles == 0:
-            raise ValueError("Machine.quantum_cycles must be > 0 with a background load: a background "
+            raise InputError("Machine.quantum_cycles must be > 0 with a background load: a background "
                              "process never finishes, so without time slices ours would never run")
 
     def cpu_of(self, n_processes: int) -> np.ndarray:
@@ -328,7 +328,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         from tracer.trace.access import COUNTER_NAMES as counter_names
     n_pixels = trace.width * trace.height
     if (distribution.width, distribution.height) != (trace.width, trace.height):
-        raise ValueError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
+        raise InputError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")
     require_bool("pixel_misses", pixel_misses)
     counters = np.asarray(trace.counters)
@@ -336,11 +336,11 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         compute = cost.compute_cycles(counters, counter_names)
     compute = np.ascontiguousarray(compute, dtype=np.float64)
     if compute.shape != (n_pixels,):
-        raise ValueError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+        raise InputError(f"compute must have shape ({n_pixels},), got {compute.shape}")
 
     if machine.page_placement.translates and placed.pages.frame.shape[0] == 0:
         if lines is not None and lines.line_offsets.shape[0] > 0:
-            raise ValueError("lines hold virtual addresses but the machine places pages; make them from "
+            raise InputError("lines hold virtual addresses but the machine places pages; make them from "
                              "placed.with_pages(machine.page_placement, hierarchy)")
         placed = placed.with_pages(machine.page_placement, hierarchy)
     n_processes = distribution.n_processes
@@ -368,7 +368,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if lines is None:
         lines = no_pixel_lines(line_shift)
     elif lines.line_shift != line_shift or lines.line_offsets.shape != (n_pixels + 1,):
-        raise ValueError(f"lines are for {lines.line_offsets.shape[0] - 1} pixels of {1 << lines.line_shift}-byte "
+        raise InputError(f"lines are for {lines.line_offsets.shape[0] - 1} pixels of {1 << lines.line_shift}-byte "
                          f"lines; this run needs {n_pixels} pixels of {1 << line_shift}-byte lines")
 
     out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)

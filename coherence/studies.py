@@ -22,7 +22,7 @@ from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
 from coherence.simulation import Machine, simulate_run
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.trace.access import COUNTER_NAMES, RecordKind
 from tracer.trace.check import META_FILE
 
@@ -65,7 +65,7 @@ def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
         for kind, offsets in ((RecordKind.POLYGON, scene.polygon_offsets), (RecordKind.PATCH, scene.patch_offsets)):
             sizes = np.diff(np.asarray(offsets, dtype=np.int64))
             if sizes.size < counts.get(kind, 0):
-                raise ValueError(f"the trace reads {kind.name.lower()} records the scene does not have: "
+                raise InputError(f"the trace reads {kind.name.lower()} records the scene does not have: "
                                  "is it the trace of this scene?")
             counts[kind] = sizes.size
             vertices[kind] = sizes
@@ -108,7 +108,7 @@ class Execution:
             require_int("Execution.n_jobs", self.n_jobs, 1)
         require_int("Execution.shared_lines_budget", self.shared_lines_budget, 0)
         if self.executor is not None and self.trace_folder is None:
-            raise ValueError("Execution: runs on an executor load the trace where they execute; give "
+            raise InputError("Execution: runs on an executor load the trace where they execute; give "
                              "trace_folder, the folder the trace was saved in")
 
 
@@ -149,11 +149,11 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     mapping_objects = [get_mapping(mapping) for mapping in mappings]
     names = [mapping.name for mapping in mapping_objects]
     if len(set(names)) != len(names):
-        raise ValueError(f"mappings must have distinct names, got {names}")
+        raise InputError(f"mappings must have distinct names, got {names}")
     counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
     execution = execution or Execution()
     if not isinstance(execution, Execution):
-        raise ValueError(f"study: execution must be a coherence.studies.Execution, got {type(execution).__name__}")
+        raise InputError(f"study: execution must be a coherence.studies.Execution, got {type(execution).__name__}")
     executor, trace_folder, n_jobs = execution.executor, execution.trace_folder, execution.n_jobs
     placed = place_layout(layout, trace, scene).with_pages(machine.page_placement, hierarchy)
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)

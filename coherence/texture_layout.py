@@ -33,7 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from rtcommon.validate import require_power_of_two
+from rtcommon.validate import InputError, require_power_of_two
 
 ORDERS = ("linear", "tiled", "morton", "blocked")
 CHAINS = ("contiguous", "by_level")
@@ -62,9 +62,9 @@ class TextureLayout:
 
     def __post_init__(self):
         if self.order not in ORDERS:
-            raise ValueError(f"TextureLayout.order must be one of {', '.join(ORDERS)}, got {self.order!r}")
+            raise InputError(f"TextureLayout.order must be one of {', '.join(ORDERS)}, got {self.order!r}")
         if self.chains not in CHAINS:
-            raise ValueError(f"TextureLayout.chains must be one of {', '.join(CHAINS)}, got {self.chains!r}")
+            raise InputError(f"TextureLayout.chains must be one of {', '.join(CHAINS)}, got {self.chains!r}")
         for name in ("tile", "superblock"):
             require_power_of_two(f"TextureLayout.{name}", getattr(self, name))
 
@@ -78,7 +78,7 @@ class TextureLayout:
         label, _, chains = str(text).partition(":")
         match = re.fullmatch(r"(linear|morton|tiled|blocked)(\d+)?(?:x(\d+))?", label)
         if match is None or (match[1] in ("linear", "morton") and match[2]) or (match[1] != "blocked" and match[3]):
-            raise ValueError(f"unknown texture layout {text!r}: use linear, morton, tiled<k> or blocked<k>x<s>, "
+            raise InputError(f"unknown texture layout {text!r}: use linear, morton, tiled<k> or blocked<k>x<s>, "
                              "optionally with :by_level")
         tile = int(match[2]) if match[2] else 4
         superblock = int(match[3]) if match[3] else 8
@@ -138,7 +138,7 @@ class TextureLayout:
         levels = [[(int(w), int(h)) for w, h in texture] for texture in textures]
         for t, texture in enumerate(levels):
             if any(w < 1 or h < 1 for w, h in texture):
-                raise ValueError(f"texture {t}: every level needs a width and height >= 1, got {texture}")
+                raise InputError(f"texture {t}: every level needs a width and height >= 1, got {texture}")
         if self.chains == "contiguous":
             placing = [(t, k) for t, texture in enumerate(levels) for k in range(len(texture))]
         else:

@@ -28,6 +28,7 @@ from coherence.layout import DEFAULT_LAYOUT
 from coherence.simulation import Machine
 from tracer.rendering.tree_variants import PLAUSIBLE_TREE_VARIANTS, STUDY_TREE_VARIANT, tree_rule_name
 from tracer.rendering.workload import WORKLOADS
+from rtcommon.validate import InputError
 
 __all__ = ["DISTRIBUTIONS", "SOURCES", "STUDY_TREE_RULE", "TREE_VARIANTS", "UNKNOWNS", "Unknown", "unknown"]
 
@@ -92,31 +93,31 @@ class Unknown:
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
-            raise ValueError(f"Unknown.name must be an identifier, got {self.name!r}")
+            raise InputError(f"Unknown.name must be an identifier, got {self.name!r}")
         if self.distribution not in DISTRIBUTIONS:
-            raise ValueError(f"Unknown.distribution of {self.name} must be one of {', '.join(DISTRIBUTIONS)}, "
+            raise InputError(f"Unknown.distribution of {self.name} must be one of {', '.join(DISTRIBUTIONS)}, "
                              f"got {self.distribution!r}")
         if self.source not in SOURCES:
-            raise ValueError(f"Unknown.source of {self.name} must be one of {', '.join(SOURCES)}, "
+            raise InputError(f"Unknown.source of {self.name} must be one of {', '.join(SOURCES)}, "
                              f"got {self.source!r}")
         object.__setattr__(self, "choices", tuple(self.choices))
         if self.distribution == "categorical":
             if len(self.choices) < 2 or self.low is not None or self.high is not None:
-                raise ValueError(f"Unknown.choices of {self.name} must hold at least 2 values, "
+                raise InputError(f"Unknown.choices of {self.name} must hold at least 2 values, "
                                  "and low and high must be None, for a categorical unknown")
             return
         if self.choices:
-            raise ValueError(f"Unknown.choices of {self.name} must be empty for a {self.distribution} unknown")
+            raise InputError(f"Unknown.choices of {self.name} must be empty for a {self.distribution} unknown")
         for bound in ("low", "high"):
             value = getattr(self, bound)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"Unknown.{bound} of {self.name} must be a finite number, got {value!r}")
+                raise InputError(f"Unknown.{bound} of {self.name} must be a finite number, got {value!r}")
         if not self.low < self.high:
-            raise ValueError(f"Unknown.low of {self.name} must be < high, got {self.low!r} and {self.high!r}")
+            raise InputError(f"Unknown.low of {self.name} must be < high, got {self.low!r} and {self.high!r}")
         if self.distribution == "log-uniform" and self.low <= 0:
-            raise ValueError(f"Unknown.low of {self.name} must be > 0 for a log-uniform range, got {self.low!r}")
+            raise InputError(f"Unknown.low of {self.name} must be > 0 for a log-uniform range, got {self.low!r}")
         if self.distribution == "integer" and (self.low != int(self.low) or self.high != int(self.high)):
-            raise ValueError(f"Unknown.low and high of {self.name} must be whole numbers for an integer range")
+            raise InputError(f"Unknown.low and high of {self.name} must be whole numbers for an integer range")
 
     def contains(self, value) -> bool:
         """Whether ``value`` lies in the range (or is one of the choices)."""
@@ -185,4 +186,4 @@ def unknown(name: str) -> Unknown:
     for entry in UNKNOWNS:
         if entry.name == name:
             return entry
-    raise ValueError(f"no unknown called {name!r}; known: {', '.join(u.name for u in UNKNOWNS)}")
+    raise InputError(f"no unknown called {name!r}; known: {', '.join(u.name for u in UNKNOWNS)}")

@@ -15,6 +15,7 @@ import socket
 import tempfile
 from pathlib import Path
 from typing import NamedTuple
+from rtcommon.validate import InputError
 
 #: What every temporary name ends with.
 TEMP_SUFFIX = ".tmp"
@@ -235,7 +236,7 @@ def regular_file(path: str | os.PathLike, what: str) -> Path:
     if stat.S_ISDIR(mode):
         raise IsADirectoryError(f"not {what}: {str(path)!r} is a folder")
     if not stat.S_ISREG(mode):
-        raise ValueError(f"not {what}: {str(path)!r} is not a regular file")
+        raise InputError(f"not {what}: {str(path)!r} is not a regular file")
     return path
 
 
@@ -266,14 +267,14 @@ def read_npy_header(path: str | os.PathLike) -> NpyHeader:
     with open(path, "rb") as stream:
         start = stream.read(len(np.lib.format.MAGIC_PREFIX) + 2)
         if not start.startswith(np.lib.format.MAGIC_PREFIX) or len(start) < len(np.lib.format.MAGIC_PREFIX) + 2:
-            raise ValueError("not a .npy file: it does not begin with the .npy magic string")
+            raise InputError("not a .npy file: it does not begin with the .npy magic string")
         version = (start[-2], start[-1])
         if version not in readers:
-            raise ValueError(f"unsupported .npy format version {version[0]}.{version[1]}")
+            raise InputError(f"unsupported .npy format version {version[0]}.{version[1]}")
         try:
             shape, fortran_order, dtype = readers[version](stream)
         except (ValueError, SyntaxError, TypeError, EOFError) as error:
-            raise ValueError(f"unreadable .npy header ({str(error).splitlines()[0]})") from None
+            raise InputError(f"unreadable .npy header ({str(error).splitlines()[0]})") from None
         size = stream.tell()
         stream.seek(0)
         return NpyHeader(stream.read(size), dtype, tuple(shape), bool(fortran_order))

@@ -17,7 +17,7 @@ import mmap
 import threading
 from pathlib import Path
 
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 _STATUS = Path("/proc/self/status")
 
@@ -83,7 +83,7 @@ class ResidentLimit:
     def __init__(self, arrays, max_bytes: int, interval: float = 0.2):
         max_bytes = require_int("max_bytes", max_bytes, 0)
         if not interval > 0:
-            raise ValueError(f"interval must be > 0 seconds, got {interval!r}")
+            raise InputError(f"interval must be > 0 seconds, got {interval!r}")
         maps = []
         for array in arrays:
             found = mapping_of(array)

@@ -1167,12 +1167,14 @@ def test_out_of_memory_names_size_only_where_there_is_one(monkeypatch, capsys, a
 
 
 @pytest.mark.parametrize("error, status", [("input", 2), (ZeroDivisionError("division by zero"), 1),
-                                           (TypeError("unsupported operand"), 1), (IndexError("out of range"), 1)])
+                                           (TypeError("unsupported operand"), 1), (IndexError("out of range"), 1),
+                                           (ValueError("setting an array element with a sequence"), 1)])
 def test_user_errors_and_bugs_are_told_apart(monkeypatch, capsys, error, status):
     """An InputError (the toolkit's own check) exits 2 with one line; any other exception is a bug: exit 1,
     its traceback, and a last line that says "internal error" and names it.
 
-    Fails if ``main`` no longer catches ``Exception`` as an internal error (the exception escapes it).
+    Fails if ``main`` no longer catches ``Exception`` as an internal error (the exception escapes it), or
+    takes a bare ValueError (numpy's, a bug's) for the user's again.
     """
     from analyses.cli import main
     from analyses.commands import cachesim
@@ -1250,3 +1252,21 @@ def test_ctrl_c_while_python_m_analyses_loads_prints_one_line():
 
     done = _python(_LOADING_INTERRUPT)
     assert (done.returncode, done.stderr) == (-signal.SIGINT, "coherence: interrupted\n")
+
+
+def test_the_toolkit_raises_no_bare_value_error():
+    """Every error the toolkit raises for bad input is an InputError, which the command line tells apart
+    from a bug's ValueError (exit 2 with one line, not exit 1 with a traceback).
+
+    Fails if any library module raises ``ValueError(...)`` itself, or defines an error class on
+    ``ValueError`` rather than ``InputError``, as every check did before.
+    """
+    import re
+
+    found = []
+    for package in ("tracer", "cachesim", "coherence", "analyses", "rtcommon"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for number, line in enumerate(path.read_text().splitlines(), 1):
+                if re.search(r"raise ValueError\(|^class (?!InputError\()\w+\(ValueError\)", line):
+                    found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "raise InputError (rtcommon.validate) instead:\n" + "\n".join(found)

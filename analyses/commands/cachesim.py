@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from analyses.commands.options import HelpFormatter, hierarchy_options
+from rtcommon.validate import InputError
 
 EPILOG = """\
 addresses file:
@@ -74,13 +75,13 @@ def run(args: argparse.Namespace) -> int:
     try:
         state = CacheState(hierarchy)
     except MemoryError as error:
-        raise ValueError(f"--hierarchy {args.hierarchy}: {error}; use smaller caches") from None
+        raise InputError(f"--hierarchy {args.hierarchy}: {error}; use smaller caches") from None
     try:
         addresses = read_addresses(args.addresses)
         result = simulate(addresses, state)
     except MemoryError:
         size = Path(args.addresses).stat().st_size
-        raise ValueError(f"{args.addresses}: out of memory simulating its addresses ({size / 2**20:,.0f} MB "
+        raise InputError(f"{args.addresses}: out of memory simulating its addresses ({size / 2**20:,.0f} MB "
                          "file); split the stream into shorter files") from None
     table = result.to_frame()
     meta = provenance(addresses=str(args.addresses), n_addresses=int(addresses.size))

@@ -99,7 +99,7 @@ def _load_scene(name: str, max_depth):
     try:
         from tracer.scenes.catalog import load
     except ImportError as error:  # pragma: no cover - scenes module missing
-        raise ValueError(f"cannot load scene {name!r}: tracer.scenes.catalog is unavailable ({error})") from None
+        raise InputError(f"cannot load scene {name!r}: tracer.scenes.catalog is unavailable ({error})") from None
     return load(name, max_depth=max_depth)
 
 

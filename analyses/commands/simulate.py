@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from analyses.commands.options import PLACEMENTS, SCHEDULERS, HelpFormatter, machine_options, model_options
+from rtcommon.validate import InputError
 
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
 
@@ -79,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--background-footprint", args.background_footprint, 0)
     checks.check_range("--page-seed", args.page_seed, 0)
     if args.placement != "round-robin" and args.scheduler != "static":
-        raise ValueError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
+        raise InputError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
                          "scheduler moves processes between CPUs)")
     if Path(args.hierarchy).suffix.lower() in (".toml", ".json"):
         checks.check_input_file("--hierarchy", args.hierarchy)
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
             checks.check_output_file(option, path)
             checks.check_output_file(option, path + ".meta.json")
     if args.csv and args.processes_csv and Path(args.csv).resolve() == Path(args.processes_csv).resolve():
-        raise ValueError("--csv and --processes-csv name the same file")
+        raise InputError("--csv and --processes-csv name the same file")
     trace_path = Path(args.trace)
     if trace_path.exists() and not trace_path.is_dir():
         raise NotADirectoryError(f"TRACE {args.trace!r} is a file; expected a folder written by "

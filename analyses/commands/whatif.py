@@ -5,6 +5,7 @@ import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, dask_options, mappings_options,
                                        memory_budget_options, size_options, workload_options)
+from rtcommon.validate import InputError
 
 HELP = "what-if studies: where would coherence matter more than load balance?"
 
@@ -85,10 +86,10 @@ def build_study(args):
 
     sources = sum(bool(source) for source in (args.study, args.grid, args.file))
     if sources != 1:
-        raise ValueError("give exactly one of: a built-in STUDY, --grid flags, or --file TOML")
+        raise InputError("give exactly one of: a built-in STUDY, --grid flags, or --file TOML")
     if args.study:
         if args.study not in BUILTIN:
-            raise ValueError(f"unknown study {args.study!r}: choose one of {', '.join(BUILTIN)}")
+            raise InputError(f"unknown study {args.study!r}: choose one of {', '.join(BUILTIN)}")
         study = BUILTIN[args.study]
     elif args.file:
         from analyses.commands.checks import check_input_file
@@ -100,7 +101,7 @@ def build_study(args):
         names = [name for name, _ in pairs]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:
-            raise ValueError(f"--grid {repeated[0]} is given more than once; list every value in one flag "
+            raise InputError(f"--grid {repeated[0]} is given more than once; list every value in one flag "
                              f"({repeated[0]}=V1,V2,...)")
         study = WhatIf(name="grid", grid=dict(pairs))
     # the options given replace the study's base experiment; the rest stay the study's

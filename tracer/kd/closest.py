@@ -16,6 +16,7 @@ from tracer.kd.tree import KdTree
 from tracer.scenes.model import Scene
 from tracer.trace.records import N_COUNTERS, Counter
 from tracer.kd.traverse import RecordLog, brute_force, new_stack, traverse, tree_arrays
+from rtcommon.validate import InputError
 
 
 class RayBatch(NamedTuple):
@@ -88,10 +89,10 @@ def _ray_batch(origins, directions, tmin, tmax) -> RayBatch:
     o = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 3))
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     if o.shape != d.shape:
-        raise ValueError(f"origins and directions must both be (R, 3), got {o.shape} and {d.shape}")
+        raise InputError(f"origins and directions must both be (R, 3), got {o.shape} and {d.shape}")
     norm = np.linalg.norm(d, axis=1)
     if np.any(norm == 0.0):
-        raise ValueError("directions must be non-zero")
+        raise InputError("directions must be non-zero")
     r = len(o)
     return RayBatch(o, np.ascontiguousarray(d / norm[:, None]), _bounds(tmin, r), _bounds(tmax, r))
 

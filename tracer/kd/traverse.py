@@ -23,6 +23,7 @@ from tracer.kd.nodes import above_child, below_child, is_leaf, leaf_count, leaf_
 from tracer.kd.tree import KdTree, KdTreeConfig, build_kdtree
 from tracer.trace.records import Counter, RecordKind, make_record
 from tracer.scenes.model import Scene
+from rtcommon.validate import InputError
 
 #: entries of a traversal stack: the deepest tree (MAX_TREE_DEPTH) fits
 STACK_DEPTH = 64
@@ -232,7 +233,7 @@ def tree_arrays(scene: Scene, tree: KdTree | None, kd_config: KdTreeConfig | Non
     if tree is None:
         tree = build_kdtree(scene, kd_config)
     elif not isinstance(tree, KdTree):
-        raise ValueError(f"tree must be a KdTree, got {type(tree).__name__}")
+        raise InputError(f"tree must be a KdTree, got {type(tree).__name__}")
     nodes = np.ascontiguousarray(tree.nodes, dtype=np.uint32)
     return tree, TreeArrays(nodes, nodes.view(np.float32), np.ascontiguousarray(tree.primitive_indices, dtype=np.int32),
                             np.ascontiguousarray(tree.bounds[0]), np.ascontiguousarray(tree.bounds[1]))

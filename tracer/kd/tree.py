@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from rtcommon.validate import require_int, require_number
+from rtcommon.validate import InputError, require_int, require_number
 from tracer.rendering.geometry import check_coordinates, element_bounds, element_clip_shapes
 from tracer.kd.build import _build_median
 from tracer.kd.sah import _build_sah
@@ -122,7 +122,7 @@ class KdTreeConfig:
 
     def __post_init__(self):
         if self.builder not in BUILDERS:
-            raise ValueError(f"KdTreeConfig.builder must be one of {BUILDERS}, got {self.builder!r}")
+            raise InputError(f"KdTreeConfig.builder must be one of {BUILDERS}, got {self.builder!r}")
         if self.tree_depth is not None:
             object.__setattr__(self, "tree_depth",
                                require_int("KdTreeConfig.tree_depth", self.tree_depth, 1, MAX_TREE_DEPTH))
@@ -130,17 +130,17 @@ class KdTreeConfig:
         for name in ("traversal_cost", "intersection_cost"):
             value = require_number(f"KdTreeConfig.{name}", getattr(self, name), 0)
             if value == 0.0:
-                raise ValueError(f"KdTreeConfig.{name} must be a finite number > 0, got {getattr(self, name)!r}")
+                raise InputError(f"KdTreeConfig.{name} must be a finite number > 0, got {getattr(self, name)!r}")
             object.__setattr__(self, name, value)
         eb = float(self.empty_bonus)
         if not 0.0 <= eb < 1.0:
-            raise ValueError(f"KdTreeConfig.empty_bonus must be in [0, 1), got {self.empty_bonus!r}")
+            raise InputError(f"KdTreeConfig.empty_bonus must be in [0, 1), got {self.empty_bonus!r}")
         object.__setattr__(self, "empty_bonus", eb)
         object.__setattr__(self, "clip", bool(self.clip))
         force_split = require_int("KdTreeConfig.force_split", self.force_split, 0)
         object.__setattr__(self, "force_split", force_split if force_split else 2**62)
         if self.axis_rule not in AXIS_RULES:
-            raise ValueError(f"KdTreeConfig.axis_rule must be one of {AXIS_RULES}, got {self.axis_rule!r}")
+            raise InputError(f"KdTreeConfig.axis_rule must be one of {AXIS_RULES}, got {self.axis_rule!r}")
         object.__setattr__(self, "split_to_depth", bool(self.split_to_depth))
 
     def to_dict(self) -> dict:
@@ -227,9 +227,9 @@ def resolve_config(config: KdTreeConfig | None, n_elements: int) -> KdTreeConfig
     if config is None:
         config = KdTreeConfig()
     if not isinstance(config, KdTreeConfig):
-        raise ValueError(f"config must be a KdTreeConfig, got {type(config).__name__}")
+        raise InputError(f"config must be a KdTreeConfig, got {type(config).__name__}")
     if n_elements >= 2**30:
-        raise ValueError(f"Scene.element_kind: too many elements for the kd-tree ({n_elements})")
+        raise InputError(f"Scene.element_kind: too many elements for the kd-tree ({n_elements})")
     if config.tree_depth is None:
         config = replace(config, tree_depth=default_tree_depth(n_elements))
     return config

@@ -12,6 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tracer.scenes.model import Scene
+from rtcommon.validate import InputError
 
 
 class CameraFrame(NamedTuple):
@@ -44,7 +45,7 @@ def checked_size(size, name: str = "size") -> tuple[int, int]:
     pair = (size, size) if np.ndim(size) == 0 else tuple(size)
     if len(pair) != 2 or any(isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1
                              for v in pair):
-        raise ValueError(f"{name} must be an int >= 1 or a (width, height) pair of them, got {size!r}")
+        raise InputError(f"{name} must be an int >= 1 or a (width, height) pair of them, got {size!r}")
     return int(pair[0]), int(pair[1])
 
 
@@ -60,7 +61,7 @@ def camera_frame(scene: Scene, width: int, height: int, corner_rays: bool = Fals
     fwd /= np.linalg.norm(fwd)
     right = np.cross(fwd, np.array(cam.up, dtype=np.float64))
     if np.linalg.norm(right) == 0.0:
-        raise ValueError("Camera.up must not be parallel to the viewing direction")
+        raise InputError("Camera.up must not be parallel to the viewing direction")
     right /= np.linalg.norm(right)
     up = np.cross(right, fwd)
     span = 2.0 * math.tan(math.radians(cam.angle) / 2.0)

@@ -28,6 +28,7 @@ from numba import njit
 from rtcommon.jit import NO_REFCOUNTS
 from tracer.rendering.polygons import CONVEX, hit_convex, hit_polygon, polygon_even_odd_axes  # noqa: F401 (re-exported)
 from tracer.scenes.model import ElementKind, Scene
+from rtcommon.validate import InputError
 
 INF = np.inf
 class Geometry(NamedTuple):
@@ -97,7 +98,7 @@ def check_coordinates(scene: Scene) -> None:
         bad = ~np.isfinite(rows) | (np.abs(rows) > COORDINATE_LIMIT)
         if bad.any():
             row, column = (int(i) for i in np.argwhere(bad)[0])
-            raise ValueError(f"Scene.{what}: row {row} holds {float(rows[row, column]):g}; coordinates and sizes "
+            raise InputError(f"Scene.{what}: row {row} holds {float(rows[row, column]):g}; coordinates and sizes "
                              f"must be finite and within +-{COORDINATE_LIMIT:.0e} (the tracer multiplies them)")
 
 
@@ -105,7 +106,7 @@ def _unit_rows(v: np.ndarray, what: str) -> np.ndarray:
     norm = np.linalg.norm(v, axis=1)
     if np.any(norm == 0.0) or not np.all(np.isfinite(norm)):
         bad = int(np.flatnonzero((norm == 0.0) | ~np.isfinite(norm))[0])
-        raise ValueError(f"Scene.{what}: degenerate entry at row {bad} (zero or non-finite normal)")
+        raise InputError(f"Scene.{what}: degenerate entry at row {bad} (zero or non-finite normal)")
     return v / norm[:, None]
 
 
@@ -116,7 +117,7 @@ def _newell(offsets: np.ndarray, vertices: np.ndarray, what: str) -> np.ndarray:
         return normals
     counts = np.diff(offsets)
     if np.any(counts < 3):
-        raise ValueError(f"Scene.{what}: every polygon needs at least 3 vertices")
+        raise InputError(f"Scene.{what}: every polygon needs at least 3 vertices")
     idx = np.arange(len(vertices))
     owner = np.repeat(np.arange(n), counts)
     nxt = idx + 1
@@ -157,11 +158,11 @@ def prepare_geometry(scene: Scene) -> Geometry:
     """
     n = scene.n_elements
     if scene.element_index.shape != (n,):
-        raise ValueError(f"Scene.element_index must have shape ({n},)")
+        raise InputError(f"Scene.element_index must have shape ({n},)")
     ekind = np.ascontiguousarray(scene.element_kind, dtype=np.uint8)
     eidx = np.ascontiguousarray(scene.element_index, dtype=np.int64)
     if n and ekind.max() > max(ElementKind):
-        raise ValueError(f"Scene.element_kind holds a value outside ElementKind (0..{int(max(ElementKind))})")
+        raise InputError(f"Scene.element_kind holds a value outside ElementKind (0..{int(max(ElementKind))})")
     f = lambda a, shape: np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(shape))
     sc = f(scene.sphere_center, (-1, 3))
     sr = np.abs(f(scene.sphere_radius, (-1,)))
@@ -188,7 +189,7 @@ def prepare_geometry(scene: Scene) -> Geometry:
     axis = ca - cb
     height = np.linalg.norm(axis, axis=1) if len(cb) else np.zeros(0)
     if np.any(height == 0.0):
-        raise ValueError("Scene.cone_apex: a cone has apex == base (zero height)")
+        raise InputError("Scene.cone_apex: a cone has apex == base (zero height)")
     axis = axis / height[:, None] if len(cb) else axis
     r0 = f(scene.cone_base_radius, (-1,))
     r1 = f(scene.cone_apex_radius, (-1,))

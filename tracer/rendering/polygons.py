@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
+from rtcommon.validate import InputError
 
 INF = np.inf
 #: ``Geometry.polygon_even_odd_axis`` of a convex polygon: its edges' half-planes decide a hit.
@@ -51,10 +52,10 @@ def polygon_even_odd_axes(offsets: np.ndarray, vertices: np.ndarray, normals: np
     vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     normals = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
     if offsets.ndim != 1 or offsets.size != normals.shape[0] + 1:
-        raise ValueError(f"polygon offsets must have one entry per normal plus one, got {offsets.size} "
+        raise InputError(f"polygon offsets must have one entry per normal plus one, got {offsets.size} "
                          f"offsets for {normals.shape[0]} normals")
     if offsets.size and (offsets[0] < 0 or offsets[-1] > vertices.shape[0] or np.any(np.diff(offsets) < 0)):
-        raise ValueError(f"polygon offsets must rise within the {vertices.shape[0]} vertices")
+        raise InputError(f"polygon offsets must rise within the {vertices.shape[0]} vertices")
     axes = np.full(normals.shape[0], CONVEX, dtype=np.int64)
     _even_odd_axes(offsets, vertices, normals, CONVEXITY_TOLERANCE, axes)
     return axes

@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 from rtcommon.versions import package_versions
-from rtcommon.validate import require_bool, require_int, require_number
+from rtcommon.validate import InputError, require_bool, require_int, require_number
 from tracer.rendering.camera import camera_frame, checked_size
 from tracer.rendering.geometry import prepare_geometry
 from tracer.kd.tree import KdTree, KdTreeConfig
@@ -124,7 +124,7 @@ class _GrowingRecords:
     def extend(self, pieces) -> None:
         need = self.n + sum(len(piece) for piece in pieces)
         if 4 * need > self.memory_budget:
-            raise ValueError(f"the trace needs more than memory_budget ({self.memory_budget / 2**20:.4g} MB of "
+            raise InputError(f"the trace needs more than memory_budget ({self.memory_budget / 2**20:.4g} MB of "
                              "records); pass trace_path to write it to disk in chunks, or keep_records=False "
                              "to count the records only")
         if need > len(self.data):
@@ -243,22 +243,22 @@ class RenderOptions:
         for name in ("corner_rays", "log", "keep_records"):
             object.__setattr__(self, name, require_bool(f"RenderOptions.{name}", getattr(self, name)))
         if self.kd_config is not None and not isinstance(self.kd_config, KdTreeConfig):
-            raise ValueError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
+            raise InputError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
         if self.max_depth is not None:
             object.__setattr__(self, "max_depth", require_int("RenderOptions.max_depth", self.max_depth, 1, 64))
         object.__setattr__(self, "memory_budget", require_int("RenderOptions.memory_budget", self.memory_budget, 4))
         if self.epsilon is not None:
             epsilon = require_number("RenderOptions.epsilon", self.epsilon, 0, "a distance")
             if epsilon == 0:
-                raise ValueError("RenderOptions.epsilon must be a finite number > 0 (a distance), got 0")
+                raise InputError("RenderOptions.epsilon must be a finite number > 0 (a distance), got 0")
             object.__setattr__(self, "epsilon", epsilon)
         try:
             workload = get_workload("modern" if self.workload is None else self.workload)
         except ValueError as error:
-            raise ValueError(f"RenderOptions.workload: {error}") from None
+            raise InputError(f"RenderOptions.workload: {error}") from None
         object.__setattr__(self, "workload", workload)
         if self.texture_filter not in TEXTURE_FILTERS:
-            raise ValueError(f"RenderOptions.texture_filter must be one of {', '.join(TEXTURE_FILTERS)}, "
+            raise InputError(f"RenderOptions.texture_filter must be one of {', '.join(TEXTURE_FILTERS)}, "
                              f"got {self.texture_filter!r}")
 
 
@@ -287,14 +287,14 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
     RenderResult
     """
     if not isinstance(scene, Scene):
-        raise ValueError(f"scene must be a Scene, got {type(scene).__name__}")
+        raise InputError(f"scene must be a Scene, got {type(scene).__name__}")
     options = RenderOptions() if options is None else options
     if not isinstance(options, RenderOptions):
-        raise ValueError(f"options must be RenderOptions, got {type(options).__name__}")
+        raise InputError(f"options must be RenderOptions, got {type(options).__name__}")
     width, height = scene.camera.resolution if options.size is None else options.size
     depth = scene.max_depth if options.max_depth is None else options.max_depth
     if isinstance(depth, (bool, np.bool_)) or int(depth) != depth or not 1 <= depth <= 64:
-        raise ValueError(f"max_depth must be an int in 1..64, got {depth!r} (the scene's {scene.name!r})")
+        raise InputError(f"max_depth must be an int in 1..64, got {depth!r} (the scene's {scene.name!r})")
     depth = int(depth)
     corner_rays, log, memory_budget = options.corner_rays, options.log, options.memory_budget
     epsilon, texture_filter, workload = options.epsilon, options.texture_filter, options.workload
@@ -401,7 +401,7 @@ def save_png(image, path) -> Path:
 
     image = np.asarray(image, dtype=np.float64)
     if image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
+        raise InputError(f"image must have shape (H, W, 3), got {image.shape}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     plt.imsave(path, np.clip(image, 0.0, 1.0))

@@ -21,6 +21,7 @@ from tracer.rendering.types import N_LIGHT_COLUMNS, N_MATERIAL_COLUMNS, Shading
 from tracer.scenes.model import Scene
 from tracer.rendering.texture import TextureFilter, filtered_lookup, mip_chains
 from tracer.rendering.uv import surface_uv, uv_maps
+from rtcommon.validate import InputError
 
 
 def shading_of(scene: Scene, texture_filter: TextureFilter = TextureFilter.TRILINEAR) -> Shading:
@@ -31,13 +32,13 @@ def shading_of(scene: Scene, texture_filter: TextureFilter = TextureFilter.TRILI
     """
     n = scene.n_elements
     if scene.element_material.shape != (n,):
-        raise ValueError(f"Scene.element_material must have shape ({n},)")
+        raise InputError(f"Scene.element_material must have shape ({n},)")
     emat = np.ascontiguousarray(scene.element_material, dtype=np.int64)
     mats = np.column_stack([scene.material_color.reshape(-1, 3), scene.material_kd, scene.material_ks,
                             scene.material_shine, scene.material_t, scene.material_ior]).astype(np.float64)
     mats = np.ascontiguousarray(mats.reshape(-1, N_MATERIAL_COLUMNS))
     if n and (emat.min() < 0 or emat.max() >= len(mats)):
-        raise ValueError("Scene.element_material refers to a material row that does not exist")
+        raise InputError("Scene.element_material refers to a material row that does not exist")
     n_lights = scene.n_lights
     scale = math.sqrt(n_lights) / (2.0 * n_lights) if n_lights else 0.5
     lights = np.ascontiguousarray(np.column_stack([scene.light_position.reshape(-1, 3),
@@ -56,12 +57,12 @@ def _texturing(scene: Scene, element_material: np.ndarray, n_materials: int, tex
         material_texture = np.full(n_materials, -1, dtype=np.int64)
         uv_scale = np.ones(n_materials)
     if material_texture.shape != (n_materials,) or uv_scale.shape != (n_materials,):
-        raise ValueError(f"Scene.material_texture and material_uv_scale must have shape ({n_materials},)")
+        raise InputError(f"Scene.material_texture and material_uv_scale must have shape ({n_materials},)")
     if n_materials and (material_texture.min() < -1 or material_texture.max() >= scene.n_textures):
-        raise ValueError(f"Scene.material_texture names a texture that does not exist "
+        raise InputError(f"Scene.material_texture names a texture that does not exist "
                          f"(the scene has {scene.n_textures})")
     if not (np.isfinite(uv_scale).all() and (uv_scale > 0).all()):
-        raise ValueError("Scene.material_uv_scale must be positive and finite")
+        raise InputError("Scene.material_uv_scale must be positive and finite")
     textured = np.flatnonzero(material_texture[element_material] >= 0)
     return (np.ascontiguousarray(material_texture), np.ascontiguousarray(uv_scale), *uv_maps(scene, textured),
             *mip_chains(scene), int(TextureFilter(texture_filter)))

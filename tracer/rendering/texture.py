@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from rtcommon.jit import NO_REFCOUNTS
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.trace.records import Counter, RecordKind, make_record
 
 #: the most texels a trace can name (27-bit record indices)
@@ -100,15 +100,15 @@ def mip_chains(scene) -> MipChains:
     sizes = np.asarray(scene.texture_size, dtype=np.int64).reshape(-1, 2)
     offsets = np.asarray(scene.texture_offsets, dtype=np.int64)
     if not scene.texels_read:
-        raise ValueError(f"scene {scene.name!r} was read without its texels (texels=False, for a summary); "
+        raise InputError(f"scene {scene.name!r} was read without its texels (texels=False, for a summary); "
                          "read it again with texels to render it")
     texels = np.asarray(scene.texture_texels)
     if offsets.shape != (sizes.shape[0] + 1,) or (sizes.size and sizes.min() < 1):
-        raise ValueError("Scene.texture_offsets must have one entry per texture plus one, "
+        raise InputError("Scene.texture_offsets must have one entry per texture plus one, "
                          "and every texture_size a width and height >= 1")
     if texels.dtype != np.uint8 or texels.ndim != 2 or texels.shape[1] != 4 \
             or offsets[-1] != texels.shape[0] or np.any(np.diff(offsets) != sizes[:, 0] * sizes[:, 1]):
-        raise ValueError("Scene.texture_texels must be uint8 (N, 4), width x height rows per texture")
+        raise InputError("Scene.texture_texels must be uint8 (N, 4), width x height rows per texture")
     levels, widths, heights, texture_level = [], [], [], [0]
     for x, (width, height) in enumerate(sizes):
         image = texels[offsets[x]:offsets[x + 1]].reshape(height, width, 4)
@@ -123,7 +123,7 @@ def mip_chains(scene) -> MipChains:
     level_first = np.zeros(len(levels) + 1, dtype=np.int64)
     np.cumsum([len(level) for level in levels], out=level_first[1:])
     if level_first[-1] > MAX_TEXELS:
-        raise ValueError(f"the textures' mip levels hold {int(level_first[-1])} texels; "
+        raise InputError(f"the textures' mip levels hold {int(level_first[-1])} texels; "
                          f"a trace can name at most {MAX_TEXELS}")
     return MipChains(np.ascontiguousarray(np.concatenate(levels)) if levels else np.zeros((0, 4), np.uint8),
                      level_first, np.array(widths, dtype=np.int64), np.array(heights, dtype=np.int64),

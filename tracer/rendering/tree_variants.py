@@ -32,6 +32,7 @@ from dataclasses import replace
 
 from tracer.kd.tree import KdTreeConfig
 from tracer.rendering.workload import WORKLOADS, Workload, get_workload
+from rtcommon.validate import InputError
 
 __all__ = ["PLAUSIBLE_TREE_VARIANTS", "STUDY_TREE_VARIANT", "TREE_VARIANTS", "TREE_VARIANT_WORKLOADS",
            "get_tree_variant", "tree_rule_name", "workload_with_tree"]
@@ -54,7 +55,7 @@ def tree_rule_name(config: KdTreeConfig, shadow_nearest: bool) -> str:
         For a rule that is not a spatial median with a depth limit.
     """
     if config.builder != "median" or config.tree_depth is None:
-        raise ValueError(f"a tree rule name needs a median builder with a depth limit, got {config}")
+        raise InputError(f"a tree rule name needs a median builder with a depth limit, got {config}")
     return (f"d{config.tree_depth}-l{config.leaf_size}-{'clip' if config.clip else 'box'}-{config.axis_rule}"
             f"-{'todepth' if config.split_to_depth else 'separate'}-{'nearest' if shadow_nearest else 'anyhit'}")
 
@@ -62,7 +63,7 @@ def tree_rule_name(config: KdTreeConfig, shadow_nearest: bool) -> str:
 def _rule(name: str) -> KdTreeConfig:
     match = _NAME.fullmatch(name)
     if match is None:
-        raise ValueError(f"tree rule name {name!r} does not read d<depth>-l<leaf>-<box|clip>-<longest|cycle>"
+        raise InputError(f"tree rule name {name!r} does not read d<depth>-l<leaf>-<box|clip>-<longest|cycle>"
                          "-<todepth|separate>-<nearest|anyhit>")
     depth, leaf, clip, axis, split, _ = match.groups()
     return KdTreeConfig(builder="median", tree_depth=int(depth), leaf_size=int(leaf), clip=clip == "clip",
@@ -96,7 +97,7 @@ def get_tree_variant(name: str) -> KdTreeConfig:
         For any other name, listing the choices.
     """
     if not isinstance(name, str) or name not in TREE_VARIANTS:
-        raise ValueError(f"tree variant must be one of {', '.join(TREE_VARIANTS)}, got {name!r}")
+        raise InputError(f"tree variant must be one of {', '.join(TREE_VARIANTS)}, got {name!r}")
     return TREE_VARIANTS[name]
 
 
@@ -119,10 +120,10 @@ def workload_with_tree(workload, tree_variant: str | None = None) -> Workload:
         return preset
     config = get_tree_variant(tree_variant)
     if preset.name not in TREE_VARIANT_WORKLOADS:
-        raise ValueError(f"tree variant {tree_variant} applies to the {', '.join(TREE_VARIANT_WORKLOADS)} "
+        raise InputError(f"tree variant {tree_variant} applies to the {', '.join(TREE_VARIANT_WORKLOADS)} "
                          f"workload only, not {preset.name}")
     if tree_rule_name(config, preset.shadow_nearest) != tree_variant:
-        raise ValueError(f"tree variant {tree_variant} has another shadow rule than the {preset.name} workload")
+        raise InputError(f"tree variant {tree_variant} has another shadow rule than the {preset.name} workload")
     if config == preset.kd_config:
         return preset
     return replace(preset, kd_config=config)

@@ -22,6 +22,7 @@ from numba import njit
 
 from tracer.rendering.geometry import newell_normal
 from tracer.scenes.model import ElementKind, Scene, vertices_and_uv
+from rtcommon.validate import InputError
 
 
 class UvMaps(NamedTuple):
@@ -61,10 +62,10 @@ def uv_maps(scene: Scene, elements=None) -> UvMaps:
             density[e] = 1.0 / (4.0 * math.pi * float(scene.sphere_radius[index]) ** 2)
             continue
         if kind == ElementKind.CONE:
-            raise ValueError(f"element {e} is a cone: textures on cones are not supported")
+            raise InputError(f"element {e} is a cone: textures on cones are not supported")
         vertices, uv = vertices_and_uv(scene, kind, index)
         if not np.isfinite(uv).all():
-            raise ValueError(f"element {e} ({kind.name.lower()} {index}) has a textured material "
+            raise InputError(f"element {e} ({kind.name.lower()} {index}) has a textured material "
                              "but no (u, v) at its vertices")
         plane_map[e], density[e] = _plane_map(vertices, uv)
     return UvMaps(plane_map, density)

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from rtcommon.validate import require_bool
+from rtcommon.validate import InputError, require_bool
 from tracer.kd.tree import KdTreeConfig
 
 __all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "get_workload"]
@@ -76,9 +76,9 @@ class Workload:
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"Workload.name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"Workload.name must be a non-empty string, got {self.name!r}")
         if not isinstance(self.kd_config, KdTreeConfig):
-            raise ValueError(f"Workload.kd_config must be a KdTreeConfig, got {type(self.kd_config).__name__}")
+            raise InputError(f"Workload.kd_config must be a KdTreeConfig, got {type(self.kd_config).__name__}")
         for lever in ("shadow_nearest", "log_ray_data"):
             object.__setattr__(self, lever, require_bool(f"Workload.{lever}", getattr(self, lever)))
 
@@ -113,4 +113,4 @@ def get_workload(name_or_workload) -> Workload:
         return name_or_workload
     if isinstance(name_or_workload, str) and name_or_workload in WORKLOADS:
         return WORKLOADS[name_or_workload]
-    raise ValueError(f"workload must be one of {', '.join(WORKLOADS)} or a Workload, got {name_or_workload!r}")
+    raise InputError(f"workload must be one of {', '.join(WORKLOADS)} or a Workload, got {name_or_workload!r}")

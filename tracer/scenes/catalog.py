@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 
 from tracer.scenes import spd, standins, textured
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.scenes.model import Scene
 from tracer.scenes.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
 
@@ -91,8 +91,8 @@ def load(name_or_path, max_depth: int | None = None, *, texels: bool = True) -> 
 
         return read_obj(path, max_depth=5 if max_depth is None else max_depth, texels=texels)
     if path.exists():
-        raise ValueError(f"unsupported scene file {text!r}: expected a .nff or .obj file")
+        raise InputError(f"unsupported scene file {text!r}: expected a .nff or .obj file")
     if path.suffix or os.sep in text or "/" in text:
         raise FileNotFoundError(f"scene file not found: {text!r}")
-    raise ValueError(f"unknown scene {text!r}: expected one of {', '.join(_GENERATORS)} "
+    raise InputError(f"unknown scene {text!r}: expected one of {', '.join(_GENERATORS)} "
                      "or a path to a .nff or .obj file")

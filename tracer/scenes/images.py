@@ -15,6 +15,7 @@ import numpy as np
 
 from rtcommon.files import regular_file, write_bytes_atomic
 from tracer.rendering.texture import MAX_TEXELS
+from rtcommon.validate import InputError
 
 __all__ = ["read_image", "image_size", "png_bytes", "write_png", "IMAGE_FORMATS", "MAX_IMAGE_TEXELS"]
 
@@ -62,7 +63,7 @@ def read_image(path) -> np.ndarray:
             else:
                 rgba = np.asarray(image.convert("RGBA"), dtype=np.uint8)
         except (OSError, SyntaxError, ValueError) as error:  # truncated or corrupt data
-            raise ValueError(f"unreadable image {str(path)!r}: {error}") from None
+            raise InputError(f"unreadable image {str(path)!r}: {error}") from None
     return np.ascontiguousarray(rgba)
 
 
@@ -104,21 +105,21 @@ def _opened(path):
     except Image.DecompressionBombError:
         pass
     except UnidentifiedImageError:
-        raise ValueError(f"not a PNG or JPEG image: {str(path)!r}") from None
+        raise InputError(f"not a PNG or JPEG image: {str(path)!r}") from None
     except (OSError, SyntaxError, ValueError) as error:
-        raise ValueError(f"unreadable image {str(path)!r}: {error}") from None
+        raise InputError(f"unreadable image {str(path)!r}: {error}") from None
     for image_class in (PngImagePlugin.PngImageFile, JpegImagePlugin.JpegImageFile):
         try:
             return image_class(path)
         except (OSError, SyntaxError):
             continue
-    raise ValueError(f"not a PNG or JPEG image: {str(path)!r}")
+    raise InputError(f"not a PNG or JPEG image: {str(path)!r}")
 
 
 def _check_size(path, size) -> tuple[int, int]:
     width, height = (int(v) for v in size)
     if width * height > MAX_IMAGE_TEXELS:
-        raise ValueError(f"image {str(path)!r} is {width} x {height} ({width * height:,} texels); a texture may "
+        raise InputError(f"image {str(path)!r} is {width} x {height} ({width * height:,} texels); a texture may "
                          f"hold at most {MAX_IMAGE_TEXELS:,} texels")
     return width, height
 
@@ -126,7 +127,7 @@ def _check_size(path, size) -> tuple[int, int]:
 def _rgba(image) -> np.ndarray:
     image = np.asarray(image)
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 4 or min(image.shape[:2]) < 1:
-        raise ValueError(f"an image must be uint8 of shape (height, width, 4), got {image.dtype} {image.shape}")
+        raise InputError(f"an image must be uint8 of shape (height, width, 4), got {image.dtype} {image.shape}")
     return np.ascontiguousarray(image)
 
 

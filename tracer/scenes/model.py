@@ -39,7 +39,7 @@ import enum
 from dataclasses import dataclass, field
 
 import numpy as np
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 
 
 class ElementKind(enum.IntEnum):
@@ -81,17 +81,17 @@ class Camera:
         for name in ("eye", "look_at", "up"):
             value = getattr(self, name)
             if len(value) != 3 or not all(np.isfinite(v) for v in value):
-                raise ValueError(f"Camera.{name} must be 3 finite numbers, got {value!r}")
+                raise InputError(f"Camera.{name} must be 3 finite numbers, got {value!r}")
             object.__setattr__(self, name, tuple(float(v) for v in value))
         if not 0.0 < self.angle < 180.0:
-            raise ValueError(f"Camera.angle must be in (0, 180) degrees, got {self.angle}")
+            raise InputError(f"Camera.angle must be in (0, 180) degrees, got {self.angle}")
         if not self.hither >= 0.0:
-            raise ValueError(f"Camera.hither must be >= 0, got {self.hither}")
+            raise InputError(f"Camera.hither must be >= 0, got {self.hither}")
         if len(self.resolution) != 2 or min(self.resolution) < 1:
-            raise ValueError(f"Camera.resolution must be two positive ints, got {self.resolution!r}")
+            raise InputError(f"Camera.resolution must be two positive ints, got {self.resolution!r}")
         object.__setattr__(self, "resolution", (int(self.resolution[0]), int(self.resolution[1])))
         if np.allclose(self.eye, self.look_at):
-            raise ValueError("Camera.eye and Camera.look_at must differ")
+            raise InputError("Camera.eye and Camera.look_at must differ")
 
 
 def _f64(shape_tail):
@@ -318,25 +318,25 @@ class Material:
 
     def __post_init__(self):
         if len(self.color) != 3:
-            raise ValueError(f"Material.color must be 3 numbers, got {self.color!r}")
+            raise InputError(f"Material.color must be 3 numbers, got {self.color!r}")
         object.__setattr__(self, "color", tuple(float(c) for c in self.color))
         for name in ("kd", "ks", "shine", "t", "ior"):
             object.__setattr__(self, name, float(getattr(self, name)))
         values = (*self.color, self.kd, self.ks, self.shine, self.t, self.ior)
         if not all(np.isfinite(v) for v in values):
-            raise ValueError(f"Material values must be finite, got {values!r}")
+            raise InputError(f"Material values must be finite, got {values!r}")
         if min(self.color) < 0.0:
-            raise ValueError(f"Material.color must be >= 0 in each channel, got {self.color!r}")
+            raise InputError(f"Material.color must be >= 0 in each channel, got {self.color!r}")
         for name in ("kd", "ks", "t", "ior"):  # not shine: any Phong exponent is a highlight
             if getattr(self, name) < 0.0:
-                raise ValueError(f"Material.{name} must be >= 0, got {getattr(self, name)!r}")
+                raise InputError(f"Material.{name} must be >= 0, got {getattr(self, name)!r}")
         texture = require_int("Material.texture", self.texture)
         if texture < -1:
-            raise ValueError(f"Material.texture must be a texture number or -1, got {texture}")
+            raise InputError(f"Material.texture must be a texture number or -1, got {texture}")
         object.__setattr__(self, "texture", texture)
         object.__setattr__(self, "uv_scale", float(self.uv_scale))
         if not (np.isfinite(self.uv_scale) and self.uv_scale > 0):
-            raise ValueError(f"Material.uv_scale must be a positive finite number, got {self.uv_scale!r}")
+            raise InputError(f"Material.uv_scale must be a positive finite number, got {self.uv_scale!r}")
 
     def as_tuple(self) -> tuple[float, ...]:
         """``(r, g, b, kd, ks, shine, t, ior)`` as in NFF ``f``."""
@@ -406,7 +406,7 @@ class SceneBuilder:
         RGB, uint8 (row 0 at the top); returns its number for :class:`Material`."""
         image = np.asarray(image)
         if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (3, 4) or min(image.shape[:2]) < 1:
-            raise ValueError(f"a texture must be a uint8 image of shape (height, width, 3 or 4), "
+            raise InputError(f"a texture must be a uint8 image of shape (height, width, 3 or 4), "
                              f"got {image.dtype} {image.shape}")
         if image.shape[2] == 3:
             image = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
@@ -415,7 +415,7 @@ class SceneBuilder:
 
     def _add(self, kind: ElementKind, index: int) -> int:
         if self._material.texture >= len(self._textures):
-            raise ValueError(f"material uses texture {self._material.texture}, but only "
+            raise InputError(f"material uses texture {self._material.texture}, but only "
                              f"{len(self._textures)} textures were added")
         key = self._material.key()
         row = self._material_rows.setdefault(key, len(self._material_rows))
@@ -444,7 +444,7 @@ class SceneBuilder:
         """
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         if len(v) < 3:
-            raise ValueError(f"a polygon needs at least 3 vertices, got {len(v)}")
+            raise InputError(f"a polygon needs at least 3 vertices, got {len(v)}")
         if len(v) == 3:
             return self.triangle(v, uv)
         self._polygons.append(v)
@@ -457,7 +457,7 @@ class SceneBuilder:
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         if len(v) < 3 or len(v) != len(n):
-            raise ValueError("a patch needs n >= 3 vertices and as many normals")
+            raise InputError("a patch needs n >= 3 vertices and as many normals")
         self._patches.append(v)
         self._patch_normals.append(n)
         self._patch_uv.append(_uv(uv, len(v)))
@@ -586,7 +586,7 @@ def _uv(uv, n: int) -> np.ndarray:
         return np.full((n, 2), np.nan)
     uv = np.asarray(uv, dtype=np.float64)
     if uv.shape != (n, 2) or not np.isfinite(uv).all():
-        raise ValueError(f"uv must be {n} finite (u, v) pairs, shape ({n}, 2), got shape {uv.shape}")
+        raise InputError(f"uv must be {n} finite (u, v) pairs, shape ({n}, 2), got shape {uv.shape}")
     return uv
 
 

@@ -91,6 +91,7 @@ from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PR
                                     Fallback, SceneParts, assemble, parse_fast, polygon_measures,
                                     view_direction_problem)
 from tracer.scenes.model import Camera, ElementKind, Scene, unread_texture
+from rtcommon.validate import InputError
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
 
@@ -99,7 +100,7 @@ BYTE_ORDER_MARK = "\ufeff"
 #: The largest ``# max_depth N`` the renderer takes.
 MAX_DEPTH = 64
 
-class NFFError(ValueError):
+class NFFError(InputError):
     """A malformed NFF file.
 
     Attributes

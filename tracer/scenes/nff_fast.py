@@ -20,6 +20,7 @@ import re
 import numpy as np
 
 from tracer.scenes.model import Camera, ElementKind, Material, Scene, is_unread, texture_arrays, untextured
+from rtcommon.validate import InputError
 
 TOKEN = re.compile(r"\S+")
 DEPTH_PRAGMA = re.compile(r"^[ \t]*#[ \t]*max_depth[ \t]+([0-9]+)[ \t]*$", re.MULTILINE)
@@ -384,7 +385,7 @@ def _texture_fields(parts: SceneParts, keys: list, n_triangles: int, n_polygon_v
                                 ("patch_uv", parts.patch_uv, 2 * n_patch_vertices)):
         if values:  # the positional reader's; the fast reader gives no (u, v)
             if len(values) != count:
-                raise ValueError(f"{name}: {len(values)} values for {count} coordinates")
+                raise InputError(f"{name}: {len(values)} values for {count} coordinates")
             fields[name] = np.array(values, dtype=np.float64).reshape(fields[name].shape)
     fields.update(texture_arrays(parts.textures))
     return fields

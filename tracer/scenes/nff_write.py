@@ -15,6 +15,7 @@ import numpy as np
 from rtcommon.files import write_files_atomic
 from tracer.scenes.nff_fast import KEYWORDS, TOKEN
 from tracer.scenes.model import ElementKind, Scene, vertices_and_uv
+from rtcommon.validate import InputError
 
 __all__ = ["format_nff", "write_nff"]
 
@@ -35,7 +36,7 @@ def _element_uv(scene: Scene, kind: int, index: int) -> np.ndarray | None:
     if np.isnan(uv).all():
         return None
     if not np.isfinite(uv).all():
-        raise ValueError(f"format_nff: a {ElementKind(kind).name.lower()} (row {index}) has (u, v) at some "
+        raise InputError(f"format_nff: a {ElementKind(kind).name.lower()} (row {index}) has (u, v) at some "
                          "vertices and not at others; NFF gives all or none")
     return uv
 
@@ -43,7 +44,7 @@ def _element_uv(scene: Scene, kind: int, index: int) -> np.ndarray | None:
 def _texture_file_name(name) -> str:
     text = str(name)
     if not text or TOKEN.fullmatch(text) is None or "#" in text or text in KEYWORDS or text == "procedural":
-        raise ValueError(f"format_nff: texture file name {text!r} must be one token (no whitespace, no '#') "
+        raise InputError(f"format_nff: texture file name {text!r} must be one token (no whitespace, no '#') "
                          "and not a keyword")
     return text
 
@@ -85,7 +86,7 @@ def format_nff(scene: Scene, texture_files=None) -> str:
             out.append("l " + _join(position) + " " + _join(color))
     if scene.n_textures:
         if texture_files is None or len(texture_files) != scene.n_textures:
-            raise ValueError(f"format_nff: the scene has {scene.n_textures} textures; texture_files must name "
+            raise InputError(f"format_nff: the scene has {scene.n_textures} textures; texture_files must name "
                              "a file for each (write_nff writes them)")
         out.extend(f"texture t{k} {_texture_file_name(name)}" for k, name in enumerate(texture_files))
     materials = np.column_stack([scene.material_color, scene.material_kd, scene.material_ks,
@@ -110,7 +111,7 @@ def format_nff(scene: Scene, texture_files=None) -> str:
         elif kind in (ElementKind.TRIANGLE, ElementKind.POLYGON, ElementKind.PATCH):
             uv = _element_uv(scene, kind, index)
             if textured and uv is None:
-                raise ValueError(f"format_nff: element {element} is textured but has no (u, v); "
+                raise InputError(f"format_nff: element {element} is textured but has no (u, v); "
                                  "NFF cannot say so")
             if kind == ElementKind.TRIANGLE:
                 vertices = scene.triangle_vertices[index]
@@ -128,14 +129,14 @@ def format_nff(scene: Scene, texture_files=None) -> str:
                 out.extend(_join(v) + " " + _join(t) for v, t in zip(vertices, uv))
         elif kind == ElementKind.CONE:
             if textured:
-                raise ValueError(f"format_nff: element {element} is a cone with a textured material; "
+                raise InputError(f"format_nff: element {element} is a cone with a textured material; "
                                  "NFF cones have no (u, v)")
             out.append("c " + _join(scene.cone_base[index]) + " "
                        + _fmt(scene.cone_base_radius[index]))
             out.append("  " + _join(scene.cone_apex[index]) + " "
                        + _fmt(scene.cone_apex_radius[index]))
         else:
-            raise ValueError(f"element kind {kind} has no NFF form")
+            raise InputError(f"element kind {kind} has no NFF form")
     out.append("")
     return "\n".join(out)
 
@@ -172,7 +173,7 @@ def write_nff(scene: Scene, path) -> Path:
     from tracer.scenes.images import png_bytes
 
     if not scene.texels_read:
-        raise ValueError(f"write_nff: scene {scene.name!r} was read without its texels (texels=False); "
+        raise InputError(f"write_nff: scene {scene.name!r} was read without its texels (texels=False); "
                          "read it again with texels to write it")
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")

@@ -42,11 +42,12 @@ from pathlib import Path
 import numpy as np
 
 from tracer.scenes.model import Camera, Material, Scene, SceneBuilder, unread_texture
+from rtcommon.validate import InputError
 
 __all__ = ["OBJError", "read_obj", "read_mtl", "frame_mesh"]
 
 
-class OBJError(ValueError):
+class OBJError(InputError):
     """A malformed OBJ file; the message says file, line and what was expected."""
 
     def __init__(self, file: str, line: int, expected: str, found: str):

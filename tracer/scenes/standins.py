@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from rtcommon.validate import require_number
+from rtcommon.validate import InputError, require_number
 from tracer.scenes.model import Camera, Material, Scene, SceneBuilder
 from tracer.scenes.study import PAPER_ELEMENTS
 
@@ -42,7 +42,7 @@ FLUID_ELEMENTS = PAPER_ELEMENTS["fluid"]
 def _target(name: str, paper_count: int, scale, lowest: float, highest: float) -> int:
     require_number(f"{name} scale", scale)
     if not lowest <= scale <= highest:
-        raise ValueError(f"{name} scale must be in [{lowest}, {highest}], got {scale}")
+        raise InputError(f"{name} scale must be in [{lowest}, {highest}], got {scale}")
     return int(round(paper_count * float(scale)))
 
 
@@ -394,7 +394,7 @@ def room(scale: float = 1.0, seed: int = 1999) -> Scene:
     # differing by at most one, so any number of tiles covers the floor.
     tiles = target - b.n_elements
     if tiles < 16:
-        raise ValueError(f"room scale {scale} leaves {tiles} floor tiles; use a larger scale")
+        raise InputError(f"room scale {scale} leaves {tiles} floor tiles; use a larger scale")
     rows = max(1, int(round(math.sqrt(tiles * D / W))))
     per_row = np.full(rows, tiles // rows)
     per_row[: tiles % rows] += 1
@@ -525,7 +525,7 @@ def fluid(scale: float = 1.0, seed: int = 1999) -> Scene:
     # Pool surface, the filler: a sunflower layer that takes any count.
     particles = target - b.n_elements
     if particles < 200:
-        raise ValueError(f"fluid scale {scale} leaves {particles} surface particles; "
+        raise InputError(f"fluid scale {scale} leaves {particles} surface particles; "
                          "use a larger scale")
     disk = 5.0
     i = np.arange(particles)

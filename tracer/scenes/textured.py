@@ -22,6 +22,7 @@ from tracer.scenes import spd, standins
 from tracer.rendering.geometry import newell_normal
 from tracer.scenes.model import ElementKind, Scene
 from tracer.rendering.texture import procedural_texture
+from rtcommon.validate import InputError
 
 #: textured scene name -> its base scene
 TEXTURED_SCENES = {"balls-textured": "balls", "room-textured": "room"}
@@ -57,7 +58,7 @@ def add_textures(scene: Scene, images, element_texture, uv_scale, planar_period:
         Each (material row, texture, scale) used gets a material row of its own.
     """
     if scene.n_textures:
-        raise ValueError("add_textures: the scene already has textures")
+        raise InputError("add_textures: the scene already has textures")
     element_texture = np.asarray(element_texture, dtype=np.int64)
     uv_scale = np.asarray(uv_scale, dtype=np.float64)
     materials = {name: getattr(scene, name) for name in ("material_color", "material_kd", "material_ks",
@@ -98,7 +99,7 @@ def add_textures(scene: Scene, images, element_texture, uv_scale, planar_period:
             first, stop = scene.polygon_offsets[index], scene.polygon_offsets[index + 1]
             polygon_uv[first:stop] = planar_uv(scene.polygon_vertices[first:stop], planar_period)
         elif kind != ElementKind.SPHERE:
-            raise ValueError(f"add_textures: element {e} is a {kind.name.lower()}, which this helper can't map")
+            raise InputError(f"add_textures: element {e} is a {kind.name.lower()}, which this helper can't map")
     images = [np.asarray(image, dtype=np.uint8) for image in images]
     sizes = np.array([(image.shape[1], image.shape[0]) for image in images], dtype=np.int64).reshape(-1, 2)
     offsets = np.zeros(len(images) + 1, dtype=np.int64)

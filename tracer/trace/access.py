@@ -40,6 +40,7 @@ from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityErro
     ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, META_FILE,
     TraceIntegrityError, array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
 )
+from rtcommon.validate import InputError
 
 _ARRAYS = tuple(DTYPES)
 #: Arrays a loaded trace reads through a memory map (mmap=True): the two that grow with it. The records
@@ -122,7 +123,7 @@ class AccessTrace:
         try:
             col = COUNTER_NAMES.index(name)
         except ValueError:
-            raise ValueError(f"unknown counter {name!r}; one of {COUNTER_NAMES}") from None
+            raise InputError(f"unknown counter {name!r}; one of {COUNTER_NAMES}") from None
         return self.counters[:, col].reshape(self.height, self.width)
 
     def totals(self) -> dict:
@@ -293,7 +294,7 @@ def _publish(tmp: Path, directory: Path) -> None:
         if not directory.is_dir():
             raise NotADirectoryError(f"{str(directory)!r} exists and is a file, not a trace directory; not overwriting")
         if not (directory / META_FILE).is_file() and any(directory.iterdir()):
-            raise ValueError(f"{str(directory)!r} exists and is not a trace directory; not overwriting")
+            raise InputError(f"{str(directory)!r} exists and is not a trace directory; not overwriting")
         old = directory.with_name(f"{temp_prefix(directory.name)}old.tmp")
         os.replace(directory, old)
     os.replace(tmp, directory)
@@ -369,7 +370,7 @@ class TraceWriter:
         """
         n = self.n_records
         if int(pixel_offsets[-1]) != n:
-            raise ValueError(f"pixel_offsets end at {int(pixel_offsets[-1])} but {n} records were written")
+            raise InputError(f"pixel_offsets end at {int(pixel_offsets[-1])} but {n} records were written")
         self._file.seek(0)
         self._file.write(_npy_header(n))
         self._file.close()
@@ -377,7 +378,7 @@ class TraceWriter:
         np.save(self.tmp / ARRAY_FILES["pixel_offsets"], pixel_offsets)
         if counters is None:  # filled in place (counters_array): already in its file
             if self._counters is None:
-                raise ValueError("finish: counters is None, but counters_array was never called")
+                raise InputError("finish: counters is None, but counters_array was never called")
             counters = self._counters
             self.release_counter_pages()
         else:

@@ -28,7 +28,7 @@ from numba import njit
 
 from rtcommon.files import read_npy_header
 from rtcommon.resident import drop_pages, mapping_of
-from rtcommon.validate import require_int
+from rtcommon.validate import InputError, require_int
 from tracer.trace.records import (COUNTER_NAMES, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind,
                                   record_id, record_kind)
 
@@ -45,7 +45,7 @@ META_CHECKSUM = META_FILE + ".xxh3"
 CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
 
 
-class TraceIntegrityError(ValueError):
+class TraceIntegrityError(InputError):
     """A trace's files are damaged or unverifiable, or its arrays break the format's rules.
 
     ``detail`` is the message without the trace's name (what a cache's
@@ -95,19 +95,19 @@ def check_layout(arrays: dict, width, height, metadata) -> tuple[int, int]:
     width = require_int("AccessTrace.width", width, 1)
     height = require_int("AccessTrace.height", height, 1)
     if not isinstance(metadata, dict):
-        raise ValueError(f"AccessTrace.metadata must be a dict, got {type(metadata).__name__}")
+        raise InputError(f"AccessTrace.metadata must be a dict, got {type(metadata).__name__}")
     for name, dtype in DTYPES.items():
         array = arrays[name]
         if not isinstance(array, np.ndarray):
-            raise ValueError(f"AccessTrace.{name} must be a numpy array, got {type(array).__name__}")
+            raise InputError(f"AccessTrace.{name} must be a numpy array, got {type(array).__name__}")
         if array.dtype != dtype:
-            raise ValueError(f"AccessTrace.{name} must have dtype {dtype.name}, got {array.dtype}")
+            raise InputError(f"AccessTrace.{name} must have dtype {dtype.name}, got {array.dtype}")
     p = width * height
     for name, shape in (("pixel_offsets", (p + 1,)), ("counters", (p, len(COUNTER_NAMES)))):
         if arrays[name].shape != shape:
-            raise ValueError(f"AccessTrace.{name} must have shape {shape}, got {arrays[name].shape}")
+            raise InputError(f"AccessTrace.{name} must have shape {shape}, got {arrays[name].shape}")
     if arrays["records"].ndim != 1:
-        raise ValueError(f"AccessTrace.records must have shape (R,), got {arrays['records'].shape}")
+        raise InputError(f"AccessTrace.records must have shape (R,), got {arrays['records'].shape}")
     return width, height
 
 

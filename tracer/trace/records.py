@@ -20,6 +20,7 @@ import enum
 
 import numpy as np
 from numba import njit
+from rtcommon.validate import InputError
 
 KIND_SHIFT = 28
 WRITE_SHIFT = 27
@@ -162,9 +163,9 @@ def pack(kind, index, write=False) -> np.ndarray:
     kind = np.asarray(kind, dtype=np.int64)
     index = np.asarray(index, dtype=np.int64)
     if np.any((kind < 0) | (kind > max(RecordKind))):
-        raise ValueError(f"pack: kind must be a RecordKind value (0..{int(max(RecordKind))})")
+        raise InputError(f"pack: kind must be a RecordKind value (0..{int(max(RecordKind))})")
     if np.any((index < 0) | (index > INDEX_MASK)):
-        raise ValueError(f"pack: index must be in 0..{INDEX_MASK}")
+        raise InputError(f"pack: index must be in 0..{INDEX_MASK}")
     flag = np.where(np.asarray(write, dtype=bool), WRITE_FLAG, 0)
     return ((kind << KIND_SHIFT) | flag | index).astype(np.uint32)
 
