@@ -4,8 +4,9 @@
 >>> result = robustness(ROBUSTNESS_EXPERIMENT, scenes=["tetra"], trajectories=10, seed=1)
 >>> result.summary["scenes"]["tetra"]["p_load_balance"]                     # doctest: +SKIP
 
-For each scene the trace is rendered once (through the trace cache of
-:mod:`analyses.traces`) and every sample only replays it. The samples are
+For each scene the trace is rendered once per tree variant (through the
+trace cache of :mod:`analyses.traces`) and every sample only replays the
+trace of its variant. The samples are
 Morris trajectories (:func:`analyses.robustness_factors.morris_design`)
 over every unknown the toolkit has a mechanism for
 (:data:`analyses.robustness_factors.FACTORS`); one sample is one
@@ -184,28 +185,37 @@ def _scene_samples(base: Experiment, design: np.ndarray, seeds, executor) -> lis
     from analyses.traces import cached_trace
     from coherence.studies import Execution
 
-    scene, trace, info = cached_trace(base.scene, base.size, cache_dir=base.cache_dir, kd=base.kd_builder(),
-                                      max_depth=base.max_depth, progress=base.progress, workload=base.workload)
-    execution = Execution(executor=executor, trace_folder=f"{info['path']}/trace")
+    replays = {}  # tree variant -> (scene, trace, execution): one render per variant
+
+    def replay(variant):
+        if variant not in replays:
+            replays.clear()  # the design steps one factor at a time: keep one trace in memory
+            scene, trace, info = cached_trace(base.scene, base.size, cache_dir=base.cache_dir, kd=base.kd_builder(),
+                                              max_depth=base.max_depth, progress=base.progress,
+                                              workload=base.workload, tree_variant=variant)
+            replays[variant] = (scene, trace, Execution(executor=executor, trace_folder=f"{info['path']}/trace"))
+        return replays[variant]
+
     per_trajectory = design.shape[0] // len(seeds)
     rows = []
     with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
         warnings.simplefilter("always")
         for index, unit_row in enumerate(design):
             trajectory = index // per_trajectory
-            rows.append(_sample_row(base, (scene, trace, execution), unit_row, index, seeds[trajectory],
+            values = factor_values(unit_row)
+            rows.append(_sample_row(base, replay(values["tree_variant"]), values, index, seeds[trajectory],
                                     trajectory))
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         warnings.warn(message, stacklevel=3)
     return rows
 
 
-def _sample_row(base: Experiment, replay, unit_row, index: int, seed: int, trajectory: int) -> dict:
-    """Simulate one sample on ``replay`` = (scene, trace, execution) and return its row."""
+def _sample_row(base: Experiment, replay, values: dict, index: int, seed: int, trajectory: int) -> dict:
+    """Simulate the sample of ``values`` on ``replay`` = (scene, trace, execution) and return its row."""
     from coherence.studies import study
 
     scene, trace, execution = replay
-    setup = sample_setup(base, factor_values(unit_row), seed)
+    setup = sample_setup(base, values, seed)
     experiment = setup.experiment
     result = study(trace, experiment.mapping_objects(), experiment.n_processes,
                    hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),

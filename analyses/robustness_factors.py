@@ -39,16 +39,17 @@ from rtcommon.validate import InputError
 __all__ = ["LEFT_OUT", "FACTORS", "SampleSetup", "factor_value", "factor_values", "sample_setup",
            "morris_design", "morris_indices", "sobol_design", "sobol_indices"]
 
-#: Unknowns of :data:`coherence.unknowns.UNKNOWNS` the study does not vary
-#: yet, with the reason (each is kept at the base experiment's value).
-LEFT_OUT = {"tree_variant": "an Experiment cannot select a study-era tree variant yet"}
+#: Unknowns of :data:`coherence.unknowns.UNKNOWNS` the study does not vary,
+#: with the reason (each is kept at the base experiment's value); none now.
+LEFT_OUT = {}
 
 #: The unknowns the study varies, in the order of :data:`coherence.unknowns.UNKNOWNS`.
 FACTORS = tuple(entry for entry in UNKNOWNS if entry.name not in LEFT_OUT)
 
-#: Morris grid levels: four levels reach every choice of a categorical
-#: factor of up to four choices.
-MORRIS_LEVELS = 4
+#: Morris grid levels (even, as Morris's design needs): the six levels 0,
+#: 0.2, ..., 1 reach every choice of a categorical factor of up to five
+#: choices (the tree variants) and both ends of every range.
+MORRIS_LEVELS = 6
 
 
 def factor_value(entry, u: float):
@@ -119,6 +120,7 @@ def sample_setup(base, values: dict, seed: int) -> SampleSetup:
     if missing:
         raise InputError(f"sample_setup: no value for {', '.join(missing)}")
     experiment = replace(base, hierarchy=_hierarchy(values), cost=_cost(values), layout=values["memory_image"],
+                         tree_variant=values["tree_variant"],
                          page_placement=values["page_placement"], page_seed=int(seed),
                          background=int(values["background_load"]),
                          background_footprint=int(round(values["background_footprint"])))

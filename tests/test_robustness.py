@@ -29,9 +29,11 @@ def test_categorical_and_integer_coordinates_by_hand():
                 0.75: "random", 0.999: "random", 1.0: "random"}
     for u, choice in expected.items():
         assert factor_value(placement, u) == choice
-    image = unknown("memory_image")  # three choices: Morris's levels 0, 1/3, 2/3, 1 reach each
-    assert [factor_value(image, u) for u in (0.0, 1 / 3, 2 / 3, 1.0)] == ["compact", "alpha1997", "malloc1997",
-                                                                          "malloc1997"]
+    image = unknown("memory_image")  # three choices: two of Morris's six levels 0, 0.2, ..., 1 on each
+    assert [factor_value(image, u) for u in np.linspace(0, 1, 6)] == ["compact", "compact", "alpha1997",
+                                                                      "alpha1997", "malloc1997", "malloc1997"]
+    tree = unknown("tree_variant")  # five choices: the six levels reach every one
+    assert [factor_value(tree, u) for u in np.linspace(0, 1, 6)] == [*tree.choices, tree.choices[-1]]
     load = unknown("background_load")
     assert [factor_value(load, u) for u in (0.0, 0.11, 0.12, 0.5, 0.88, 0.89, 1.0)] == [0, 0, 1, 4, 7, 8, 8]
     with pytest.raises(ValueError, match="page_placement.*\\[0, 1\\]"):
@@ -80,8 +82,12 @@ def test_every_sample_lies_in_the_documented_ranges_and_reaches_the_objects():
                             ("test_triangle", "cost_test_triangle"), ("light_read", "cost_light_read"),
                             ("ray", "cost_ray"), ("test_root", "square_root_cycles")):
             assert getattr(cost, field) == pytest.approx(values[name]), field
+        assert experiment.tree_variant == values["tree_variant"]
         assert (experiment.scene, experiment.size, experiment.workload) == (base.scene, 32, base.workload)
-    for entry in FACTORS:  # the design reaches both ends of every range
+    for row in morris_design(NAMES, 40, seed=11):  # a longer design reaches both ends of every range
+        for name, value in factor_values(row).items():
+            seen[name].add(value)
+    for entry in FACTORS:
         if entry.distribution == "categorical":
             assert seen[entry.name] == set(entry.choices), entry.name
         else:

@@ -8,13 +8,13 @@ from analyses.commands.options import HelpFormatter, cache_options, check_at_lea
 HELP = "the verdict under uncertainty: Morris screening over the study's unknowns, per scene"
 
 EPILOG = """\
-Every unknown of docs/unknowns.md that the toolkit has a mechanism for
-(memory and B-cache latency, page placement, memory image, other users'
-count and footprint, time slice, data TLB and its miss cost, square-root
-cost, five operation costs) is sampled over its documented range by Morris
-trajectories (SALib, four levels); the study-era tree variants are not varied
-yet. Each scene's trace is rendered once (study-era workload) and every
-sample replays it: every mapping at 1 and 8 processes, all sharing the
+Every unknown of docs/unknowns.md (memory and B-cache latency, page
+placement, memory image, other users' count and footprint, time slice, data
+TLB and its miss cost, square-root cost, five operation costs, tree variant)
+is sampled over its documented range by Morris trajectories (SALib, six
+levels). Each scene's trace is rendered once per tree variant (study-era
+workload) and every sample replays the trace of its variant: every mapping
+at 1 and 8 processes, all sharing the
 sample's values and seeds. Every run is simulated in full. With --sobol N,
 first-order and total Sobol indices of the top four unknowns follow.
 
