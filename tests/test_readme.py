@@ -29,12 +29,14 @@ def test_readme_is_short_and_names_every_output_file():
     name (e.g. REPORT_FILES["page"] = "report.html")."""
     from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
     from analyses.report import MISS_MAP_FILES, REPORT_FILES
+    from analyses.robustness_output import ROBUSTNESS_FILES
     from analyses.whatif_output import WHATIF_FILES
     from tracer.trace.check import ARRAY_FILES, META_FILE
 
     text = README.read_text(encoding="utf-8")
     assert len(text.splitlines()) <= 150
     names = [*REPORT_FILES.values(), *MISS_MAP_FILES, *PAPER_FILES.values(), *CROSSOVER_FILES.values(),
+             *ROBUSTNESS_FILES.values(),
              *(pattern.format(name="NAME") for pattern in WHATIF_FILES.values()), *ARRAY_FILES.values(), META_FILE]
     missing = [name for name in names if f"`{name}`" not in text]
     assert not missing, f"README's outputs table does not name {missing}"
