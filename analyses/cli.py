@@ -33,9 +33,6 @@ COMMAND_MODULES = (
 )
 
 
-class UserError(InputError):
-    """An error caused by the user's input; printed without a traceback (an :class:`InputError`)."""
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``coherence`` parser with every subcommand registered."""

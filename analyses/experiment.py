@@ -20,7 +20,7 @@ progress is shown change no result, so they are left out of it.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from analyses.memory_budget import DEFAULT_MEMORY_BUDGET, MIN_MEMORY_BUDGET
 from cachesim.config import DEFAULT_HIERARCHY
@@ -248,9 +248,6 @@ class Experiment:
                 "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,
                 "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used()}
 
-    @classmethod
-    def field_names(cls) -> tuple[str, ...]:
-        return tuple(field.name for field in fields(cls))
 
 
 def _choose(name: str, value, allowed) -> None:

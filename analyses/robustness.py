@@ -159,7 +159,7 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
                                "choices": list(e.choices), "unit": e.unit} for e in FACTORS],
                   "left_out": dict(LEFT_OUT), "re_costed": "none: every run is simulated in full"}
     for key in ("hierarchy", "cost", "layout", "background_load", "background_footprint", "page_placement",
-                "page_seed", "scene"):
+                "page_seed", "tree_variant", "scene"):
         parameters.pop(key)  # sampled per run, recorded per sample
     return RobustnessResult(pd.concat(frames, ignore_index=True), pd.DataFrame(index_rows),
                             {"parameters": parameters, "scenes": summaries})

@@ -111,7 +111,8 @@ class Machine:
     page_placement : PagePlacement
         Which physical frames the operating system gives the scene's pages
         (:mod:`coherence.page_placement`); default ``contiguous``, physical =
-        virtual. Other users' streams are not translated.
+        virtual. Under ``random`` other users' stream pages get hashed
+        colours too (:func:`coherence.page_placement.translate_stream`).
     """
 
     n_cpus: int = STUDY_CPUS

@@ -14,7 +14,7 @@ from analyses.robustness import ROBUSTNESS_EXPERIMENT, flip_thresholds, robustne
 from analyses.robustness_factors import (FACTORS, LEFT_OUT, factor_value, factor_values, morris_design,
                                          morris_indices, sample_setup, sobol_design, sobol_indices)
 from analyses.robustness_output import ROBUSTNESS_FILES, write_robustness
-from coherence.unknowns import UNKNOWNS, Unknown, unknown
+from coherence.unknowns import UNKNOWNS, unknown
 
 NAMES = [entry.name for entry in FACTORS]
 

@@ -22,7 +22,7 @@ from importlib import import_module
 from rtcommon.validate import InputError
 
 __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", "hierarchy_options", "model_options",
-           "tree_options", "size_options", "cache_options", "mappings_options", "chosen_mappings",
+           "tree_options", "size_options", "cache_options", "mappings_options",
            "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS", "PAGE_PLACEMENTS",
            "WORKLOADS", "TREE_VARIANTS", "workload_options", "workload_from_args", "EXPERIMENT_OPTIONS",
            "experiment_from_args"]
@@ -358,13 +358,6 @@ def mappings_options(why: str = "") -> argparse.ArgumentParser:
                         help="mappings to compare, any of %(mappings)s (default: "
                              f"{why or '%(default_mappings)s'})")
     return parent
-
-
-def chosen_mappings(args: argparse.Namespace) -> list:
-    """The mappings asked for, else the default ones, as a list of names."""
-    from coherence.mappings import DEFAULT_MAPPINGS
-
-    return list(args.mappings) if args.mappings else list(DEFAULT_MAPPINGS)
 
 
 def machine_options(*, processes, processes_help: str, background: int, background_why: str,

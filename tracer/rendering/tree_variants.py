@@ -31,7 +31,7 @@ import re
 from dataclasses import replace
 
 from tracer.kd.tree import KdTreeConfig
-from tracer.rendering.workload import WORKLOADS, Workload, get_workload
+from tracer.rendering.workload import Workload, get_workload
 from rtcommon.validate import InputError
 
 __all__ = ["PLAUSIBLE_TREE_VARIANTS", "STUDY_TREE_VARIANT", "TREE_VARIANTS", "TREE_VARIANT_WORKLOADS",
