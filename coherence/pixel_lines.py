@@ -1,7 +1,7 @@
 """Every pixel's line accesses, worked out once and shared by the runs of a study.
 
 A schedule replay turns each pixel's records into line addresses
-(:func:`coherence.layout.record_lines_and_writes`) every time it renders the
+(:func:`coherence.record_lines.record_lines_and_writes`) every time it renders the
 pixel, a large share of a replay's time. A study replays the same trace dozens of times with one layout and one
 smallest line size, so :func:`pixel_lines` does that work once, and
 :func:`coherence.simulation.simulate_run` reads slices of the result instead.
@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from coherence.layout import FILL_AHEAD, PlacedLayout, _count_lines, _fill_lines
+from coherence.layout import PlacedLayout
+from coherence.record_lines import FILL_AHEAD, _count_lines, _fill_lines
 from coherence.page_placement import translate_addresses
 from rtcommon.validate import require_power_of_two
 

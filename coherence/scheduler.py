@@ -49,7 +49,7 @@ from numba import njit
 from cachesim import kernels as K
 from cachesim import tlb as T
 from cachesim.fresh import skip_fresh_lines
-from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
+from coherence.record_lines import FILL_AHEAD, line_span_bound, record_lines_and_writes
 from coherence.page_placement import BackgroundPages, translate_stream
 from rtcommon.jit import NO_REFCOUNTS
 

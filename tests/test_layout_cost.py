@@ -170,7 +170,7 @@ def test_render_metadata_counts_every_record_kind():
 
 
 def test_record_lines_and_writes_flag_every_line_of_a_written_record():
-    from coherence.layout import record_lines, record_lines_and_writes
+    from coherence.record_lines import record_lines, record_lines_and_writes
     from tracer.trace.records import pack
 
     rng = np.random.default_rng(11)
@@ -198,7 +198,7 @@ def test_record_lines_equal_a_slow_reference_whether_counted_first_or_not(shift)
     # a buffer too short for the bound makes the kernel count first, one long
     # enough lets it fill straight away. Either way: every line of every
     # record, in order, each flagged as its record is.
-    from coherence.layout import FILL_AHEAD, line_span_bound, record_lines_and_writes
+    from coherence.record_lines import FILL_AHEAD, line_span_bound, record_lines_and_writes
     from tracer.trace.records import pack
 
     rng = np.random.default_rng(shift)

@@ -264,7 +264,7 @@ def test_tlb_misses_add_to_memory_cycles_only():
 
 
 def test_pixel_lines_are_each_pixels_converted_records():
-    from coherence.layout import record_lines_and_writes
+    from coherence.record_lines import record_lines_and_writes
 
     trace = random_trace(width=8, height=6, seed=4)
     kinds, ids = unpack(trace.records)
