@@ -82,3 +82,8 @@ def prepare_output_folder(out) -> Path:
     except OSError as error:
         raise InputError(f"cannot create output folder {str(out)!r}: {error.strerror}") from None
     return path
+
+
+def csv_text(frame) -> str:
+    """A table as the CSV text every output file uses: no index, ``\n`` line ends, floats to 10 significant digits."""
+    return frame.to_csv(index=False, lineterminator="\n", float_format="%.10g")

@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from analyses.html import figure_png, render_page
-from analyses.output import check_output_folder
+from analyses.output import check_output_folder, csv_text
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
 from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
@@ -129,10 +129,6 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
                        decomposition=decomposition, pngs=pngs)
 
 
-def _csv(frame: pd.DataFrame) -> str:
-    return frame.to_csv(index=False, lineterminator="\n", float_format="%.10g")
-
-
 def write_paper(result: PaperResult, out="paper") -> Path:
     """Write paper.csv, scenes.csv, predictions.csv, paper.json, the speed-up PNGs and index.html into ``out``."""
     path = check_output_folder(out)
@@ -152,10 +148,11 @@ def write_paper(result: PaperResult, out="paper") -> Path:
     summary = paper_summary(result)
     # one unit: every file is made before any is renamed into place (an interrupt leaves the old set)
     names = {**PAPER_FILES, **CROSSOVER_FILES}
-    files = {path / names["runs"]: _csv(result.runs).encode(), path / names["scenes"]: _csv(result.table).encode(),
-             path / names["predictions"]: _csv(result.predictions).encode()}
+    files = {path / names["runs"]: csv_text(result.runs).encode(),
+             path / names["scenes"]: csv_text(result.table).encode(),
+             path / names["predictions"]: csv_text(result.predictions).encode()}
     if boundary is not None:
-        files[path / names["crossover_table"]] = _csv(result.crossover).encode()
+        files[path / names["crossover_table"]] = csv_text(result.crossover).encode()
     files[path / names["summary"]] = (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()
     files.update({path / names[name]: data for name, data in pngs.items()})
     files[path / names["page"]] = paper_html(result, pngs).encode("utf-8")

@@ -27,7 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from analyses.html import figure_png, render_page
-from analyses.output import prepare_output_folder
+from analyses.output import csv_text, prepare_output_folder
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
@@ -76,10 +76,6 @@ def _tornado_png(indices: pd.DataFrame, scene: str) -> bytes:
     return figure_png(figure)
 
 
-def _csv(frame: pd.DataFrame) -> str:
-    return frame.to_csv(index=False, lineterminator="\n", float_format="%.10g")
-
-
 def _flip_text(rule) -> str:
     if isinstance(rule, str):
         return rule
@@ -112,8 +108,8 @@ def write_robustness(result, out) -> Path:
         scenes.append({"name": scene, "summary": scene_summary, "tables": _scene_tables(scene_summary),
                        "tornado": _tornado_png(result.indices, scene)})
     page = render_page("robustness.html.j2", p=summary["parameters"], scenes=scenes)
-    files = {path / ROBUSTNESS_FILES["samples"]: _csv(result.samples),
-             path / ROBUSTNESS_FILES["indices"]: _csv(result.indices),
+    files = {path / ROBUSTNESS_FILES["samples"]: csv_text(result.samples),
+             path / ROBUSTNESS_FILES["indices"]: csv_text(result.indices),
              path / ROBUSTNESS_FILES["summary"]: json.dumps(summary, indent=2, allow_nan=False) + "\n",
              path / ROBUSTNESS_FILES["page"]: page}
     write_files_atomic(files)
