@@ -274,39 +274,53 @@ class Hierarchy:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write to ``.toml`` or ``.json`` (chosen by suffix), atomically."""
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix == ".toml":
-            import tomli_w
-
-            text = tomli_w.dumps(self.to_dict())
-        elif suffix == ".json":
-            text = json.dumps(self.to_dict(), indent=2) + "\n"
-        else:
-            raise InputError(f"{path}: hierarchy files must end in .toml or .json")
-        write_text_atomic(path, text)
-        return path
+        return write_config_table(path, self.to_dict(), "hierarchy")
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Hierarchy":
         """Read a hierarchy written by :meth:`save` (or by hand)."""
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such hierarchy file")
-        suffix = path.suffix.lower()
-        text = read_text_file(path, f"a {suffix.lstrip('.').upper() or 'TOML or JSON'} hierarchy")
-        try:
-            if suffix == ".toml":
-                data = tomllib.loads(text)
-            elif suffix == ".json":
-                data = json.loads(text)
-            else:
-                raise InputError(f"{path}: hierarchy files must end in .toml or .json")
-        except tomllib.TOMLDecodeError as error:
-            raise InputError(f"{path}: not valid TOML: {error}") from None
-        except json.JSONDecodeError as error:
-            raise InputError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_config_table(path, "hierarchy"), source=str(path))
+
+
+def read_config_table(path: str | os.PathLike, what: str) -> dict:
+    """The table of a ``.toml`` or ``.json`` configuration file (``what`` names it in messages).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    InputError
+        Another suffix, or text that is not valid TOML or JSON (with the line).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such {what} file")
+    suffix = path.suffix.lower()
+    if suffix not in (".toml", ".json"):
+        raise InputError(f"{path}: {what} files must end in .toml or .json")
+    text = read_text_file(path, f"a {suffix.lstrip('.').upper()} {what}")
+    try:
+        return tomllib.loads(text) if suffix == ".toml" else json.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise InputError(f"{path}: not valid TOML: {error}") from None
+    except json.JSONDecodeError as error:
+        raise InputError(f"{path}:{error.lineno}:{error.colno}: not valid JSON: {error.msg}") from None
+
+
+def write_config_table(path: str | os.PathLike, table: dict, what: str) -> Path:
+    """Write ``table`` to a ``.toml`` or ``.json`` file (chosen by suffix), atomically."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        import tomli_w
+
+        text = tomli_w.dumps(table)
+    elif suffix == ".json":
+        text = json.dumps(table, indent=2) + "\n"
+    else:
+        raise InputError(f"{path}: {what} files must end in .toml or .json")
+    write_text_atomic(path, text)
+    return path
 
 
 def alpha21164() -> Hierarchy:
