@@ -1,0 +1,198 @@
+"""cachesim.multicore: shared levels and write-invalidate coherence against an interleaved reference."""
+import numpy as np
+import pytest
+
+from cachesim import CacheLevel, Hierarchy, alpha21164, alpha21164_with_dtb, simulate
+from cachesim.multicore import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
+                                FALSE_SHARING_MISSES, HITS, MISSES, SharedState, interleave, simulate_threads)
+from cachesim.sharing import SHARING, SharedHierarchy, private
+from reference_multicore import reference_threads
+
+
+def random_machine(rng):
+    """2-4 cores, SMT 1-2, 2-3 small levels with growing lines and random sharing, policy and inclusion."""
+    n_levels = int(rng.integers(2, 4))
+    inclusion = str(rng.choice(["non-inclusive", "inclusive"]))
+    line = int(rng.choice([8, 16]))
+    levels = []
+    for index in range(n_levels):
+        line = line * int(rng.choice([1, 2])) if index else line
+        ways = int(rng.choice([1, 2, 3, 4]))
+        sets = int(rng.choice([1, 2, 3, 4, 8]))
+        levels.append(CacheLevel(f"L{index + 1}", line * ways * sets * (index + 1), line, ways,
+                                 str(rng.choice(["lru", "fifo", "random"])), seed=int(rng.integers(0, 9)),
+                                 write_allocate=bool(index or rng.random() < 0.5)))
+    scopes = sorted(rng.choice(len(SHARING), n_levels))
+    n_cores = int(rng.integers(2, 5))
+    per_complex = int(rng.choice([d for d in range(1, n_cores + 1) if n_cores % d == 0]))
+    return SharedHierarchy(Hierarchy(tuple(levels), inclusion=inclusion), n_cores=n_cores,
+                           smt=int(rng.integers(1, 3)), cores_per_complex=per_complex,
+                           shared_by=tuple(SHARING[s] for s in scopes))
+
+
+def random_stream(rng, machine, n):
+    """Accesses to a few dozen lines, a third of them writes, 1-8 bytes each, random kinds."""
+    line = machine.hierarchy.levels[0].line_size
+    addresses = rng.integers(0, 40, n) * line + rng.integers(0, line, n)
+    sizes = np.minimum(rng.integers(1, 9, n), line - addresses % line)
+    return (addresses, rng.integers(0, machine.n_threads, n), rng.random(n) < 0.3, sizes,
+            rng.integers(0, 16, n))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_machines_match_the_reference(seed):
+    """Every counter of every instance and kind, and each thread's served counts, equal the
+    reference's, for one call and for the stream run in two calls on one state.
+    Mutation: drop the ``del state.lost[key]`` of a fill in simulate_threads_stream."""
+    rng = np.random.default_rng(seed)
+    machine = random_machine(rng)
+    addresses, threads, writes, sizes, kinds = random_stream(rng, machine, 1500)
+    expected, served = reference_threads(addresses, threads, machine, writes, sizes, kinds)
+    result = simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes, kinds=kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    np.testing.assert_array_equal(result.served, served)
+    assert expected[..., COHERENCE_INVALIDATIONS].sum() > 0  # the case exercises coherence
+    state = SharedState(machine)
+    cut = 700
+    first = simulate_threads(addresses[:cut], threads[:cut], state, writes=writes[:cut], sizes=sizes[:cut],
+                             kinds=kinds[:cut])
+    second = simulate_threads(addresses[cut:], threads[cut:], state, writes=writes[cut:], sizes=sizes[cut:],
+                              kinds=kinds[cut:])
+    np.testing.assert_array_equal(first.counts + second.counts, expected)
+
+
+def test_a_copied_state_continues_independently():
+    """Mutation: make SharedState.copy share ``lost`` with the original (``clone.lost = self.lost``)."""
+    rng = np.random.default_rng(5)
+    machine = random_machine(rng)
+    addresses, threads, writes, sizes, _ = random_stream(rng, machine, 1200)
+    state = SharedState(machine)
+    simulate_threads(addresses[:600], threads[:600], state, writes=writes[:600], sizes=sizes[:600])
+    clone = state.copy()
+    once = simulate_threads(addresses[600:], threads[600:], state, writes=writes[600:], sizes=sizes[600:])
+    again = simulate_threads(addresses[600:], threads[600:], clone, writes=writes[600:], sizes=sizes[600:])
+    np.testing.assert_array_equal(once.counts, again.counts)
+    assert once.counts[..., COHERENCE_MISSES].sum() > 0
+
+
+@pytest.mark.parametrize("make", [alpha21164, lambda: Hierarchy(
+    (CacheLevel("L1", 512, 16, 2, "random", seed=3), CacheLevel("L2", 2048, 32, 4, "fifo")),
+    inclusion="inclusive")])
+def test_one_thread_of_private_levels_equals_simulate(make):
+    """Mutation: fill the levels top-down (``range(served)``) in simulate_threads_stream."""
+    rng = np.random.default_rng(7)
+    addresses = rng.integers(0, 1 << 23, 20000) & ~np.int64(3)
+    writes = rng.random(addresses.size) < 0.2
+    expected = simulate(addresses, make(), writes=writes)
+    result = simulate_threads(addresses, np.zeros(addresses.size, dtype=np.int64), private(make()), writes=writes)
+    np.testing.assert_array_equal(result.level_counts()[:, :8], expected.counts)
+    served = np.bincount(simulate(addresses, make(), writes=writes, return_levels=True).served_by,
+                         minlength=len(make().levels) + 1)
+    np.testing.assert_array_equal(result.served[0], served)
+
+
+def two_cores():
+    """Two cores of one thread; 64-byte lines; private 1 KB L1s under a shared 8 KB L2."""
+    hierarchy = Hierarchy((CacheLevel("L1", 1024, 64, 2), CacheLevel("L2", 8192, 64, 4)))
+    return SharedHierarchy(hierarchy, n_cores=2, shared_by=("core", "machine"))
+
+
+def ping_pong(n, first_bytes):
+    """Threads 0 and 1 write in turn to line 0x1000; thread t writes 4 bytes from ``first_bytes[t]``."""
+    threads = np.arange(n) % 2
+    return (0x1000 + np.array(first_bytes)[threads], threads, np.ones(n, dtype=bool), np.full(n, 4))
+
+
+def test_ping_pong_writes_invalidate_each_other():
+    """Both threads write the same bytes in turn: write i (i >= 1) removes the line from the other L1,
+    so every write misses its L1, all after the first two are coherence misses, none false sharing;
+    the shared L2 holds the line throughout (one cold miss). Counted by hand for 10 writes.
+    Mutation: ``continue`` at the top of _invalidate_others' instance loop (no invalidation)."""
+    addresses, threads, writes, sizes = ping_pong(10, [0, 0])
+    result = simulate_threads(addresses, threads, two_cores(), writes=writes, sizes=sizes)
+    l1 = result.counts[0].sum(axis=1)  # per instance
+    assert l1[:, MISSES].tolist() == [5, 5]
+    assert l1[:, COHERENCE_INVALIDATIONS].tolist() == [5, 4]  # thread 0's copy lost after writes 1, 3, ..., 9
+    assert l1[:, COHERENCE_MISSES].tolist() == [4, 4]
+    assert l1[:, FALSE_SHARING_MISSES].tolist() == [0, 0]
+    l2 = result.counts[1].sum(axis=1)
+    assert l2[0, MISSES] == 1 and l2[0, HITS] == 9 and l2[0, COHERENCE_INVALIDATIONS] == 0
+
+
+def test_disjoint_bytes_of_one_line_are_false_sharing():
+    """Thread 0 writes bytes 0-3 and thread 1 bytes 4-7 of one line (adjacent, disjoint): the same
+    misses as ping-pong, and every coherence miss is a false-sharing miss.
+    Mutation: ``end < written_first or written_end < first`` in _note_miss (touching counts as shared)."""
+    addresses, threads, writes, sizes = ping_pong(10, [0, 4])
+    frame = simulate_threads(addresses, threads, two_cores(), writes=writes, sizes=sizes).to_frame()
+    l1 = frame[frame.level == "L1"]
+    assert l1.coherence_misses.tolist() == [4, 4]
+    assert l1.false_sharing_misses.tolist() == [4, 4]
+    assert l1.threads.tolist() == ["0", "1"]
+    assert frame[frame.level == "L2"].threads.tolist() == ["0-1"]
+    # Without byte ranges an access covers its line: the same coherence misses, no false sharing.
+    whole = simulate_threads(addresses, threads, two_cores(), writes=writes).to_frame()
+    assert whole.coherence_misses.tolist() == [4, 4, 0] and whole.false_sharing_misses.sum() == 0
+
+
+def test_a_read_only_shared_line_is_never_invalidated():
+    """Both threads read one line 20 times in turn: one cold L1 miss each, one L2 miss, nothing lost.
+    Mutation: call _invalidate_others for reads too (``if True:``)."""
+    threads = np.arange(40) % 2
+    result = simulate_threads(np.full(40, 0x2000), threads, two_cores())
+    counts = result.level_counts()
+    assert counts[0, MISSES] == 2 and counts[1, MISSES] == 1
+    assert counts[:, COHERENCE_INVALIDATIONS].sum() == 0 and counts[:, COHERENCE_MISSES].sum() == 0
+    assert result.served.tolist() == [[19, 0, 1], [19, 1, 0]]
+
+
+def test_an_inclusive_shared_level_back_invalidates_the_instances_it_serves():
+    """A shared direct-mapped L2 of 2 lines under private L1s: thread 0 reads A, thread 1 reads B
+    (same L2 set), which evicts A from L2 and so from thread 0's L1 only; thread 0 reads A again,
+    which evicts B and removes it from thread 1's L1 only. Counted by hand.
+    Mutation: back-invalidate only instance ``instance`` of each upper level in _back_invalidate."""
+    hierarchy = Hierarchy((CacheLevel("L1", 256, 64, 4), CacheLevel("L2", 128, 64, 1)), inclusion="inclusive")
+    machine = SharedHierarchy(hierarchy, n_cores=2, shared_by=("thread", "machine"))
+    result = simulate_threads([0, 128, 0], [0, 1, 0], machine, kinds=[3, 5, 3])
+    back = result.counts[0, :, :, BACK_INVALIDATIONS]
+    assert back[0, 5] == 1 and back[1, 3] == 1 and back.sum() == 2  # by the kind of the evicting access
+    assert result.served.tolist() == [[0, 0, 2], [0, 0, 1]]
+    frame = result.to_frame()
+    assert frame[frame.level == "L1"].kind.tolist() == [3, 5, 3, 5]
+    assert frame[frame.level == "L1"].back_invalidations.tolist() == [0, 1, 1, 0]
+
+
+def test_interleave_takes_quantum_accesses_per_turn():
+    """Mutation: sort by ``(rounds, threads)`` the other way round (thread-major order)."""
+    addresses, threads = interleave([[1, 2, 3, 4, 5], [10, 20], [100, 200, 300]], quantum=2)
+    assert addresses.tolist() == [1, 2, 10, 20, 100, 200, 3, 4, 300, 5]
+    assert threads.tolist() == [0, 0, 1, 1, 2, 2, 0, 0, 2, 0]
+    with pytest.raises(ValueError, match="quantum must be an integer >= 1"):
+        interleave([[1]], quantum=0)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"thread_ids": [0, 2]}, r"thread_ids\[1\] is 2; expected an integer in \[0, 2\)"),
+    ({"kinds": [0, 16]}, r"kinds\[1\] is 16"),
+    ({"sizes": [4, 0]}, r"sizes\[1\] is 0"),
+    ({"sizes": [4]}, r"sizes must have shape \(2,\)"),
+    ({"thread_ids": [0.0, 1.0]}, "thread_ids must be integers"),
+])
+def test_bad_streams_name_the_argument(kwargs, message):
+    """Mutation: drop the range check in _small_integers."""
+    arguments = {"thread_ids": [0, 1], **kwargs}
+    thread_ids = arguments.pop("thread_ids")
+    with pytest.raises(ValueError, match=message):
+        simulate_threads([0, 64], thread_ids, two_cores(), **arguments)
+
+
+def test_unsupported_hierarchies_are_refused():
+    """Mutation: drop the exclusive check in SharedState.__init__."""
+    exclusive = Hierarchy((CacheLevel("L1", 256, 64, 2), CacheLevel("L2", 1024, 64, 4)), inclusion="exclusive")
+    with pytest.raises(ValueError, match="exclusive hierarchies are not simulated with threads"):
+        simulate_threads([0], [0], private(exclusive))
+    with pytest.raises(ValueError, match="data TLB is not simulated with threads"):
+        simulate_threads([0], [0], private(alpha21164_with_dtb()))
+    many = private(two_cores().hierarchy, n_cores=1024, smt=8)  # 16,384 instances: keys need 14 bits
+    with pytest.raises(ValueError, match="addresses must be below 0x"):
+        simulate_threads([2**64 - 1], [0], many)
