@@ -18,13 +18,11 @@ unknown's value by its documented distribution:
 with these objects, so the mappings share every sampled value, the seeds of
 the page placement and of the other users' streams included.
 
-The cost model of a sample starts from the study-era cost structure
-(:data:`coherence.calibration.STUDY1997_COSTS`): the sampled sphere test,
-ray and node-visit cycles take the places of its three fitted costs, so
-shading, index reads and cone tests follow the sphere test by their
-routines' floating-point operation counts; the sampled triangle test sets
-polygon and patch tests by the same counts, and the sampled light read and
-square root replace theirs.
+The cost model of a sample: the sampled sphere test, triangle test, light
+read, ray, node visit and square root, every other operation (polygon, patch
+and cone tests, shading, index reads) following the sphere test by the one
+rule the prior fit uses too (:data:`coherence.calibration.SPHERE_TEST_TIES`,
+the routines' floating-point operation counts).
 """
 from __future__ import annotations
 
@@ -141,16 +139,14 @@ def _hierarchy(values: dict):
 
 
 def _cost(values: dict):
-    from coherence.calibration import OPERATION_FLOPS, STUDY1997_COSTS
-    from coherence.cost import CLOCK_HZ
+    from coherence.calibration import tied_costs
+    from coherence.cost import CLOCK_HZ, CostModel
 
-    model = STUDY1997_COSTS.model([values["cost_test_sphere"], values["cost_ray"], values["cost_node_visit"]],
-                                  clock_hz=CLOCK_HZ, name="sampled")
-    triangle = float(values["cost_test_triangle"])
-    per_flop = triangle / OPERATION_FLOPS["test_triangle"]
-    return replace(model, test_triangle=triangle, test_polygon=per_flop * OPERATION_FLOPS["test_polygon"],
-                   test_patch=per_flop * OPERATION_FLOPS["test_patch"],
-                   light_read=float(values["cost_light_read"]), test_root=float(values["square_root_cycles"]))
+    costs = tied_costs(float(values["cost_test_sphere"]),
+                       own={"test_triangle": float(values["cost_test_triangle"]),
+                            "light_read": float(values["cost_light_read"])})
+    return CostModel(ray=float(values["cost_ray"]), node_visit=float(values["cost_node_visit"]),
+                     test_root=float(values["square_root_cycles"]), clock_hz=CLOCK_HZ, name="sampled", **costs)
 
 
 # --------------------------------------------------------------------------

@@ -29,7 +29,8 @@ same three costs, each within its prior range of :data:`coherence.unknowns.UNKNO
 (counted from the routines' instructions on the 21164, each spanning 4x)
 instead of within :data:`STUDY_BOUNDS`. An operation that has a prior of its
 own (the triangle test, a light of a shaded hit) stays tied to the sphere
-test, by the ratio of the low ends of the two priors (the routines'
+test (:data:`SPHERE_TEST_TIES`, the one rule of ties, which the robustness
+study's samples follow too), by the ratio of the low ends of the two priors (the routines'
 dependent chains, from which the ranges were counted) instead of by the
 flop ratio: since every prior spans the same factor over its chain, the
 tied cost lies inside its own prior exactly when the sphere test lies
@@ -195,16 +196,82 @@ def prior_range(operation: str) -> tuple[float, float]:
     return float(entry.low), float(entry.high)
 
 
-def _study1997_priors() -> CostStructure:
+@dataclass(frozen=True)
+class CostTie:
+    """How one operation's cycles follow the sphere test's.
+
+    Attributes
+    ----------
+    multiple : float
+        Cycles of the operation per cycle of the sphere test.
+    source : str
+        Where the multiple comes from.
+    """
+
+    multiple: float
+    source: str
+
+
+def _sphere_test_ties() -> dict:
     flops = OPERATION_FLOPS
     reference_low = prior_range("test_sphere")[0]
-    # the sphere test first: a FittedCost's first operation is its reference
-    work = {"test_sphere": 1.0}
+    ties = {}
     for operation, n in flops.items():
+        if operation == "test_sphere":
+            continue
         if operation in PRIOR_UNKNOWNS:
-            work[operation] = prior_range(operation)[0] / reference_low  # ratio of the dependent chains
+            ties[operation] = CostTie(prior_range(operation)[0] / reference_low,
+                                      "ratio of the low ends of its prior and the sphere test's "
+                                      "(the routines' dependent chains on the 21164, coherence.unknowns)")
         else:
-            work[operation] = n / flops["test_sphere"]
+            ties[operation] = CostTie(n / flops["test_sphere"],
+                                      "ratio of floating-point operations of the routines (OPERATION_FLOPS)")
+    return ties
+
+
+#: The one rule by which operation costs follow the sphere test's, operation
+#: -> :class:`CostTie`: an operation with a prior range of its own (the
+#: triangle test, one light of a shaded hit) by the ratio of the low ends of
+#: the two priors, every other one (polygon, patch and cone tests, shading,
+#: an index read) by its routine's flop ratio. The prior fit
+#: (:data:`STUDY1997_PRIOR_COSTS`) ties every one of them; a sample of the
+#: robustness study (:func:`tied_costs`) samples the operations with priors
+#: of their own and ties the rest.
+SPHERE_TEST_TIES = _sphere_test_ties()
+
+
+def tied_costs(test_sphere: float, own=None) -> dict:
+    """Cycles of every operation of :data:`SPHERE_TEST_TIES` for a sphere test of ``test_sphere`` cycles.
+
+    Parameters
+    ----------
+    test_sphere : float
+        Cycles of the sphere test, > 0.
+    own : dict, optional
+        Operation -> cycles of the operations given their own value instead
+        of their tie (each a key of :data:`SPHERE_TEST_TIES`).
+
+    Returns
+    -------
+    dict
+        Operation -> cycles, the sphere test included.
+    """
+    own = dict(own or {})
+    unknown_operations = sorted(set(own) - set(SPHERE_TEST_TIES))
+    if unknown_operations:
+        raise InputError(f"tied_costs: {unknown_operations} are not tied to the sphere test; "
+                         f"use {sorted(SPHERE_TEST_TIES)}")
+    if not (np.isfinite(test_sphere) and test_sphere > 0):
+        raise InputError(f"tied_costs: test_sphere must be > 0 cycles, got {test_sphere!r}")
+    costs = {"test_sphere": float(test_sphere)}
+    for operation, tie in SPHERE_TEST_TIES.items():
+        costs[operation] = float(own[operation]) if operation in own else float(test_sphere) * tie.multiple
+    return costs
+
+
+def _study1997_priors() -> CostStructure:
+    # the sphere test first: a FittedCost's first operation is its reference
+    work = {"test_sphere": 1.0, **{operation: tie.multiple for operation, tie in SPHERE_TEST_TIES.items()}}
     # the sphere test's range, narrowed (if ever needed) so every tied cost with a prior stays inside it
     low = max(prior_range(op)[0] / m for op, m in work.items() if op in PRIOR_UNKNOWNS)
     high = min(prior_range(op)[1] / m for op, m in work.items() if op in PRIOR_UNKNOWNS)

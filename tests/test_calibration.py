@@ -6,7 +6,7 @@ from scipy.optimize import minimize
 
 from coherence.calibration import (FITS, OPERATION_FLOPS, PRIOR_UNKNOWNS, STUDY1997_COSTS, STUDY1997_PRIOR_COSTS,
                                    CostStructure, FittedCost, at_bounds, fit_costs, fitted_values, leave_one_out,
-                                   prior_range, rms)
+                                   SPHERE_TEST_TIES, prior_range, rms, tied_costs)
 from coherence.cost import OPERATIONS
 from coherence.unknowns import unknown
 
@@ -125,6 +125,36 @@ def test_study_structure_fits_three_costs_and_fixes_nothing_to_zero():
 
 # --------------------------------------------------------------------------
 # the fit within physical priors
+
+
+def test_robustness_samples_tie_costs_by_the_prior_fits_rule():
+    """A robustness sample and the prior fit follow one rule of ties: on seeded random sphere-test, ray and
+    node-visit cycles within their priors, a sample whose triangle test and light read sit at their ties has
+    the prior fit's model in every operation, and a sample's own triangle test moves no other operation.
+    Hand case: polygon tests of a 30-cycle sphere test cost 30 * 106 / 22. Fails if the sample ties the
+    polygon and patch tests to its triangle test by the flop ratio 106 / 52 (the rule it had before)."""
+    from analyses.robustness_factors import _cost
+    from coherence.cost import SQUARE_ROOT_CYCLES_21164
+
+    assert tied_costs(30.0)["test_polygon"] == pytest.approx(30.0 * 106 / 22)
+    assert tied_costs(30.0)["light_read"] == pytest.approx(120.0)  # the priors' low ends, 30 and 120
+    assert set(SPHERE_TEST_TIES) == set(OPERATION_FLOPS) - {"test_sphere"}
+    rng = np.random.default_rng(29)
+    for _ in range(20):
+        sphere, ray, node = (rng.uniform(*prior_range(op)) for op in ("test_sphere", "ray", "node_visit"))
+        fit = STUDY1997_PRIOR_COSTS.model([sphere, ray, node], clock_hz=CLOCK, name="fit")
+        values = {"cost_test_sphere": sphere, "cost_ray": ray, "cost_node_visit": node,
+                  "cost_test_triangle": fit.test_triangle, "cost_light_read": fit.light_read,
+                  "square_root_cycles": SQUARE_ROOT_CYCLES_21164}
+        sample = _cost(values)
+        for operation in OPERATIONS:
+            assert getattr(sample, operation) == pytest.approx(getattr(fit, operation)), operation
+        other = _cost({**values, "cost_test_triangle": rng.uniform(*prior_range("test_triangle"))})
+        for operation in OPERATIONS:
+            if operation != "test_triangle":
+                assert getattr(other, operation) == getattr(sample, operation), operation
+    with pytest.raises(ValueError, match="ray"):
+        tied_costs(30.0, own={"ray": 100.0})
 
 
 def test_every_tied_cost_with_a_prior_stays_inside_it():
