@@ -11,8 +11,10 @@ then renamed (:func:`rtcommon.files.write_files_atomic`):
     Morris ``mu_star``, ``mu``, ``sigma`` and rank of every (scene, factor),
     with Sobol's ``S1`` and ``ST`` for the factors Sobol's design varied.
 ``robustness.json``
-    Parameters, seed, package versions (SALib's included) and per scene the
-    summary of :func:`analyses.robustness.scene_summary`.
+    Parameters, seed, package versions (SALib's included), the command that
+    reproduces the study (:func:`robustness_command`), the commit of the
+    code that ran it (:func:`rtcommon.versions.source_commit`) and per scene
+    the summary of :func:`analyses.robustness.scene_summary`.
 ``index.html``
     One self-contained page: per scene the verdict's probability, the
     percentiles, the flip region and a tornado chart of ``mu_star``.
@@ -31,22 +33,35 @@ from analyses.output import csv_text, prepare_output_folder
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
-__all__ = ["ROBUSTNESS_FILES", "robustness_summary", "plot_tornado", "write_robustness"]
+__all__ = ["ROBUSTNESS_FILES", "robustness_command", "robustness_summary", "plot_tornado", "write_robustness"]
 
 #: The files :func:`write_robustness` writes, by what they hold.
 ROBUSTNESS_FILES = {"samples": "samples.csv", "indices": "indices.csv", "summary": "robustness.json",
                     "page": "index.html"}
 
 
+def robustness_command(parameters: dict) -> str:
+    """The ``coherence robustness`` command line that runs the study of ``parameters`` (its recorded ones)."""
+    command = ["coherence robustness", "--scenes", *parameters["scenes"], "--size", str(parameters["size"]),
+               "--trajectories", str(parameters["trajectories"]), "--seed", str(parameters["seed"])]
+    if parameters["sobol"]:
+        command += ["--sobol", str(parameters["sobol"])]
+    return " ".join(command)
+
+
 def robustness_summary(result) -> dict:
-    """What ``robustness.json`` holds: parameters, versions and the per-scene summaries, as plain JSON data."""
+    """What ``robustness.json`` holds: parameters, versions, command, commit and the per-scene summaries,
+    as plain JSON data."""
     from importlib.metadata import version
 
     from coherence.provenance import provenance
+    from rtcommon.versions import source_commit
 
     meta = provenance(**result.summary["parameters"])
     versions = {**meta["versions"], "SALib": version("SALib")}
-    return plain({"parameters": meta["parameters"], "versions": versions, "scenes": result.summary["scenes"]}, 10)
+    return plain({"parameters": meta["parameters"], "versions": versions,
+                  "command": robustness_command(meta["parameters"]), "commit": source_commit(),
+                  "scenes": result.summary["scenes"]}, 10)
 
 
 def plot_tornado(df, ax=None, *, title=None):
