@@ -44,6 +44,8 @@ from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
 from coherence.page_placement import PagePlacement
 from coherence.pixel_lines import PixelLines, no_pixel_lines
+from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
+                              fixed_schedule)
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
                                  RunOutputs, RunQueues, run_schedule)
@@ -271,12 +273,18 @@ class Run:
         the CPU its process rendered it on; None unless asked for
         (``simulate_run(..., pixel_misses=True)``). Summed over the pixels
         a process rendered, level ``l`` gives its ``<level>_misses``.
+    miss_counts : coherence.recost.MissCounts or None
+        Per process, the counts its cycles are made of (read and write hits
+        and misses per level, TLB misses, the trace's counters) and whether
+        they do not depend on cycles: what :func:`coherence.recost.recost_run`
+        needs to re-cost the run without replaying it.
     """
 
     processes: pd.DataFrame
     task_owner: np.ndarray
     real_cycles: float
     pixel_misses: np.ndarray | None = None
+    miss_counts: MissCounts | None = None
 
 
 def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed: PlacedLayout,
@@ -418,8 +426,16 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
     frame["finish_cycles"] = out_cycles[:, FINISH_CYCLES]
     processes = pd.DataFrame(frame)
+    accesses = np.empty((n_processes, n_levels, N_ACCESS_COLUMNS), dtype=np.int64)
+    accesses[:, :, READ_HITS] = counts[:, :, K.HITS] - counts[:, :, K.WRITE_HITS]
+    accesses[:, :, READ_MISSES] = counts[:, :, K.MISSES] - counts[:, :, K.WRITE_MISSES]
+    accesses[:, :, WRITE_HITS] = counts[:, :, K.WRITE_HITS]
+    accesses[:, :, WRITE_MISSES] = counts[:, :, K.WRITE_MISSES]
+    tlb_misses = tlbs.counts[:n_processes, T.TLB_MISSES].copy() if tlbs.enabled else np.zeros(n_processes, np.int64)
+    miss_counts = MissCounts(accesses, tlb_misses, by_process, tuple(counter_names),
+                             fixed_schedule(distribution, machine))
     return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()),
-               out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None)
+               out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None, miss_counts)
 
 
 @njit(cache=True, nogil=True)

@@ -21,6 +21,7 @@ from coherence.layout import DEFAULT_LAYOUT, MemoryLayout, PlacedLayout, get_lay
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
+from coherence.recost import RunStore
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import InputError, require_int
 from tracer.trace.access import COUNTER_NAMES, RecordKind
@@ -96,12 +97,19 @@ class Execution:
         Bytes the runs may share in line addresses worked out once
         (:mod:`coherence.pixel_lines`); beyond it each run converts its
         pixels' records itself. The counts are the same either way.
+    store : coherence.recost.RunStore, optional
+        Runs of earlier studies of the same trace: a run whose counts they
+        already hold is re-costed or reused instead of simulated
+        (:mod:`coherence.recost`; the cycles equal a simulation's up to the
+        order of floating-point additions), and every simulated run is
+        added to it.
     """
 
     n_jobs: int | None = None
     executor: object = None
     trace_folder: object = None
     shared_lines_budget: int = SHARED_LINES_BUDGET
+    store: RunStore | None = None
 
     def __post_init__(self):
         if self.n_jobs is not None:
@@ -110,6 +118,8 @@ class Execution:
         if self.executor is not None and self.trace_folder is None:
             raise InputError("Execution: runs on an executor load the trace where they execute; give "
                              "trace_folder, the folder the trace was saved in")
+        if self.store is not None and not isinstance(self.store, RunStore):
+            raise InputError(f"Execution.store must be a coherence.recost.RunStore, got {type(self.store).__name__}")
 
 
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
@@ -181,7 +191,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         first_of.setdefault(key, index)
     distinct = sorted(first_of.values())
 
-    simulated = {}
+    simulated = _from_store(execution.store, trace, distinct, keys, (hierarchy, layout, machine, cost, compute))
+    distinct = [index for index in distinct if index not in simulated]  # the runs to simulate
     bar = _progress(len(distinct), progress)
     if executor is not None:
         futures = [executor.submit(simulate_stored, str(trace_folder), distribution_of(index), hierarchy, placed,
@@ -207,6 +218,10 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
                 simulated[index] = run
                 bar.update(1)
     bar.close()
+    if execution.store is not None:
+        for index in distinct:
+            execution.store.add(execution.store.keys(keys[index], hierarchy, layout, machine, cost, compute),
+                                simulated[index])
     results = []
     for (mapping, _), key, tasks, n in zip(jobs, keys, task_counts, process_counts):
         run = simulated[first_of[key]]
@@ -226,6 +241,23 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
                   "machine": asdict(machine), "mappings": names, "n_processes": counts}
     return StudyResult(runs, processes, parameters)
+
+
+def _from_store(store, trace, distinct, keys, setup) -> dict:
+    """Run index -> run, for the runs of ``distinct`` that ``store`` re-costs or reuses (none without a store).
+
+    ``setup`` is (hierarchy, layout, machine, cost, compute cycles per pixel) of the study.
+    """
+    if store is None:
+        return {}
+    store.bind(trace)
+    hierarchy, _, _, cost, _ = setup
+    found = {}
+    for index in distinct:
+        run = store.find(store.keys(keys[index], *setup), hierarchy, cost)
+        if run is not None:
+            found[index] = run
+    return found
 
 
 #: traces loaded by :func:`simulate_stored` in this process, by folder (a worker runs many runs of one trace)

@@ -1,0 +1,230 @@
+"""Re-costing a simulated run from its stored miss counts, without replaying it.
+
+A run's cycles are a sum over its accesses and pixels: compute cycles (the
+cost model's weights times the trace's counters), each level's read hits at
+that level's latency, the last level's read misses at memory's, every write
+at the first level's latency and every TLB miss at the TLB's penalty
+(:mod:`coherence.scheduler`). When the counts themselves do not depend on
+cycles, a change of cost alone is a new weighted sum of the same counts.
+
+They do not depend on cycles exactly when no CPU that runs one of our
+processes ever runs another process (:func:`fixed_schedule`):
+
+- the distribution is static, or dynamic with one process (its hand-outs
+  then all go to that process, in task order, whatever they cost);
+- ``shared-queue`` scheduler: our processes plus the other users' fit the
+  CPUs (``n + background_load <= n_cpus``): every process takes a CPU of its
+  own at time 0 (one without pixels finishes at once and hands its CPU,
+  untouched, to the next) and no run queue ever holds a process waiting
+  for a CPU, so a slice's end changes nothing;
+- ``static`` scheduler: our processes are pinned to distinct CPUs and no
+  background process is pinned to one of them.
+
+Then each of our processes renders its own pixels, in its own order, on
+caches and a TLB no other process touches, from when it first gets its CPU
+to its finish without a pause. Its counts are the same for every cost
+model, latency and time slice, and its finish is its user time plus the
+switches its CPU made before it (a cost fixed by the machine). One more
+condition is checked on the run itself (:func:`recost_run`): every process
+that has pixels takes more than zero cycles, before and after; one that
+finished at time 0 would hand its CPU, warm, to the next in the queue.
+
+Everything else (DB with more than one process, more processes than CPUs,
+background load that time-slices with ours) is simulated again: a latency
+changes when slices end and which process takes which DB block. A change to
+the caches' geometry, the memory layout, the page placement, the
+background or the trace is never a cost change.
+
+:class:`RunStore` keeps the runs of one trace between studies
+(:class:`coherence.studies.Execution` ``store``) and counts which path each
+run took.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from rtcommon.validate import InputError
+
+__all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts",
+           "fixed_schedule", "recost_run", "RunStore", "CYCLE_COLUMNS"]
+
+#: Columns of :attr:`MissCounts.accesses`: read hits and misses, write hits and misses.
+READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES = 0, 1, 2, 3
+N_ACCESS_COLUMNS = 4
+
+#: Columns of a run's process table that depend on the costs; every other column is a count.
+CYCLE_COLUMNS = ("tlb_cycles", "compute_cycles", "memory_cycles", "user_cycles", "user_seconds", "finish_cycles")
+
+
+@dataclass(frozen=True)
+class MissCounts:
+    """What a run's cycles are made of, per process.
+
+    Attributes
+    ----------
+    accesses : ndarray of int64, shape (n, L, N_ACCESS_COLUMNS)
+        Per process and cache level (``hierarchy.levels`` order): columns
+        :data:`READ_HITS`, :data:`READ_MISSES`, :data:`WRITE_HITS`,
+        :data:`WRITE_MISSES`.
+    tlb_misses : ndarray of int64, shape (n,)
+        Data TLB misses per process (zero without a TLB).
+    counters : ndarray of int64, shape (n, K)
+        The trace's counters summed over each process's pixels.
+    counter_names : tuple of str
+        Names of the ``K`` counter columns.
+    fixed_schedule : bool
+        :func:`fixed_schedule` of the run's distribution and machine: the
+        counts do not depend on cycles.
+    """
+
+    accesses: np.ndarray
+    tlb_misses: np.ndarray
+    counters: np.ndarray
+    counter_names: tuple
+    fixed_schedule: bool
+
+
+def fixed_schedule(distribution, machine) -> bool:
+    """Whether a run's counts do not depend on cycles (the rule of the module's docstring).
+
+    Parameters
+    ----------
+    distribution : coherence.distribution.Distribution
+    machine : coherence.simulation.Machine
+    """
+    n = int(distribution.n_processes)
+    if distribution.dynamic and n > 1:
+        return False
+    if machine.scheduler == "static":
+        ours = machine.cpu_of(n)
+        background = (n + np.arange(machine.background_load, dtype=np.int64)) % machine.n_cpus
+        return bool(np.unique(ours).size == n and not np.isin(background, ours).any())
+    return n + machine.background_load <= machine.n_cpus
+
+
+def recost_run(run, hierarchy, cost):
+    """``run`` with the cycles of ``hierarchy``'s latencies and TLB penalty and of ``cost``, from its counts.
+
+    Parameters
+    ----------
+    run : coherence.simulation.Run
+        Simulated with a hierarchy of the same levels, TLB and geometry
+        (only latencies and the TLB's ``miss_cycles`` may differ).
+    hierarchy : cachesim.Hierarchy
+    cost : coherence.cost.CostModel
+
+    Returns
+    -------
+    coherence.simulation.Run or None
+        The run as :func:`~coherence.simulation.simulate_run` would give it
+        with these costs (cycle columns of :data:`CYCLE_COLUMNS` and
+        ``real_cycles`` recomputed, equal to a simulation's up to the order
+        of floating-point additions; every count unchanged); None when the
+        run cannot be re-costed (no stored counts, a schedule that depends
+        on cycles, or a process with pixels at zero cycles), so that the
+        caller simulates it.
+    """
+    counts = run.miss_counts
+    if counts is None or not counts.fixed_schedule:
+        return None
+    n_levels = len(hierarchy.levels)
+    if counts.accesses.shape[1] != n_levels or ("tlb_misses" in run.processes) != (hierarchy.tlb is not None):
+        raise InputError(f"recost_run: the run was simulated on {counts.accesses.shape[1]} cache levels "
+                         f"{'with' if 'tlb_misses' in run.processes else 'without'} a TLB; the hierarchy has "
+                         f"{n_levels} {'with' if hierarchy.tlb is not None else 'without'} one")
+    processes = run.processes
+    has_pixels = processes["pixels"].to_numpy() > 0
+    if (processes["user_cycles"].to_numpy()[has_pixels] <= 0).any():
+        return None
+    latency = np.array([level.latency for level in hierarchy.levels], dtype=np.float64)
+    accesses = counts.accesses
+    compute = counts.counters.astype(np.float64) @ cost.weights(counts.counter_names)
+    memory = accesses[:, :, READ_HITS] @ latency + accesses[:, -1, READ_MISSES] * float(hierarchy.memory_latency)
+    memory = memory + (accesses[:, 0, WRITE_HITS] + accesses[:, 0, WRITE_MISSES]) * latency[0]
+    frame = processes.copy()
+    if hierarchy.tlb is not None:
+        tlb_cycles = counts.tlb_misses * float(hierarchy.tlb.miss_cycles)
+        frame["tlb_cycles"] = tlb_cycles
+        memory = memory + tlb_cycles
+    dispatch = processes["dispatch_cycles"].to_numpy(dtype=np.float64)
+    user = compute + memory + dispatch
+    if (user[has_pixels] <= 0).any():
+        return None
+    frame["compute_cycles"] = compute
+    frame["memory_cycles"] = memory
+    frame["user_cycles"] = user
+    frame["user_seconds"] = user / cost.clock_hz
+    # the finish moves with the user time; what lies before it (switches) does not depend on costs
+    frame["finish_cycles"] = processes["finish_cycles"].to_numpy() + (user - processes["user_cycles"].to_numpy())
+    return replace(run, processes=frame, real_cycles=float(frame["finish_cycles"].max()))
+
+
+class RunStore:
+    """Runs of one trace kept between studies, to re-cost or reuse instead of simulating.
+
+    A run is stored under what decides its counts: the distribution's
+    replay (see :func:`coherence.studies.study`), the cache hierarchy
+    without its latencies and TLB penalty, the placed memory layout and the
+    machine without its time slice. A later run with the
+    same key is
+
+    - *reused* as stored when its costs are identical too (latencies, TLB
+      penalty, time slice, clock and every pixel's compute
+      cycles): the simulation would be the same;
+    - *re-costed* (:func:`recost_run`) when only costs differ and the stored
+      run's schedule does not depend on cycles;
+    - *simulated* otherwise, and stored in place of the earlier one.
+
+    Attributes
+    ----------
+    simulated, re_costed, reused : int
+        Runs that took each path so far.
+    """
+
+    def __init__(self):
+        self._runs = {}
+        self._trace = None
+        self.simulated = 0
+        self.re_costed = 0
+        self.reused = 0
+
+    def bind(self, trace) -> None:
+        """Serve ``trace``; a store refuses a second trace (its keys do not name the trace)."""
+        if self._trace is None:
+            self._trace = trace
+        elif self._trace is not trace:
+            raise InputError("RunStore: this store holds runs of another trace; use one store per trace")
+
+    @staticmethod
+    def keys(replay_key, hierarchy, layout, machine, cost, compute) -> tuple:
+        """The key of what decides a run's counts, and the key of its costs."""
+        levels = tuple(replace(level, latency=0.0) for level in hierarchy.levels)
+        tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=0.0)
+        counts_key = (replay_key, repr(replace(hierarchy, levels=levels, memory_latency=0.0, tlb=tlb, name="")),
+                      repr(layout), repr({k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}))
+        compute_digest = hashlib.blake2b(np.ascontiguousarray(compute, dtype=np.float64).tobytes(),
+                                         digest_size=16).digest()
+        cost_key = (repr(hierarchy), float(machine.quantum_cycles), float(cost.clock_hz), compute_digest)
+        return counts_key, cost_key
+
+    def find(self, keys, hierarchy, cost):
+        """The run for ``keys`` (:meth:`keys`) without simulating it, or None; counts the path taken."""
+        counts_key, cost_key = keys
+        if counts_key not in self._runs:
+            return None
+        stored_cost_key, run = self._runs[counts_key]
+        if stored_cost_key == cost_key:
+            self.reused += 1
+            return run
+        recosted = recost_run(run, hierarchy, cost)
+        if recosted is not None:
+            self.re_costed += 1
+        return recosted
+
+    def add(self, keys, run) -> None:
+        """Keep a simulated run under ``keys``."""
+        self.simulated += 1
+        self._runs[keys[0]] = (keys[1], run)

@@ -1,0 +1,166 @@
+"""Re-costing runs from stored miss counts: equal to a full simulation where the schedule does not depend on
+cycles, refused (and simulated again) where it does."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cachesim import CacheLevel, Hierarchy
+from cachesim.tlb_config import Tlb
+from coherence.cost import CostModel
+from coherence.layout import get_layout
+from coherence.mappings import get_mapping
+from coherence.recost import CYCLE_COLUMNS, RunStore, fixed_schedule, recost_run
+from coherence.simulation import Machine, simulate_run
+from coherence.studies import Execution, place_layout, study
+from trace_factory import SMALL, random_trace
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace.records import WRITE_FLAG
+
+SMALL_TLB = replace(SMALL, tlb=Tlb(entries=4, page_size=512, miss_cycles=30.0), name="small-tlb")
+
+
+def written_trace(width, height, seed):
+    """random_trace with a fifth of its records turned into writes."""
+    trace = random_trace(width=width, height=height, seed=seed)
+    records = np.array(trace.records, dtype=np.uint32)
+    records[np.random.default_rng(seed + 100).random(records.size) < 0.2] |= np.uint32(WRITE_FLAG)
+    return AccessTrace(trace.pixel_offsets, records, trace.counters, width, height, {})
+
+
+def random_costs(rng, hierarchy):
+    """The hierarchy with random latencies and TLB penalty, and a cost model of random weights and clock."""
+    levels = tuple(replace(level, latency=float(rng.uniform(1, 30))) for level in hierarchy.levels)
+    tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=float(rng.uniform(10, 200)))
+    hierarchy = replace(hierarchy, levels=levels, memory_latency=float(rng.uniform(40, 300)), tlb=tlb)
+    names = [name for name in CostModel.__dataclass_fields__ if name not in ("clock_hz", "name")]
+    cost = CostModel(**{name: float(rng.uniform(0, 500)) for name in names}, clock_hz=float(rng.uniform(1e8, 3e9)))
+    return hierarchy, cost
+
+
+COUNT_COLUMNS_EXCLUDED = set(CYCLE_COLUMNS)
+
+# (machine, mapping, processes): every case qualifies (fixed_schedule is True)
+QUALIFYING = [
+    (Machine(n_cpus=4, quantum_cycles=3000), "S", 4),
+    (Machine(n_cpus=4, quantum_cycles=3000), "B", 3),
+    (Machine(n_cpus=4, quantum_cycles=2000, background_load=2, background_footprint=2048), "P", 2),
+    (Machine(n_cpus=4, quantum_cycles=2000, background_load=3, background_footprint=4096), "DB", 1),
+    (Machine(n_cpus=8, scheduler="static", placement="neighbours", background_load=4, quantum_cycles=1000,
+             background_footprint=4096), "R", 4),
+    (Machine(n_cpus=4, scheduler="static", switch_cycles=50.0), "S", 4),
+]
+
+
+@pytest.mark.parametrize("case", range(len(QUALIFYING)))
+@pytest.mark.parametrize("hierarchy", [SMALL, SMALL_TLB], ids=["no-tlb", "tlb"])
+def test_recost_equals_full_simulation_on_qualifying_runs(case, hierarchy):
+    """Seeded random latencies, TLB penalties, cost weights, clocks and time slices: re-costing the run of one
+    draw gives every count of a simulation of the other exactly and its cycles to rounding. Fails if
+    recost_run leaves out the writes' first-level latency (``memory = memory + (... WRITE_HITS ...)``)."""
+    machine, mapping, n = QUALIFYING[case]
+    rng = np.random.default_rng(case)
+    trace = written_trace(12, 10, seed=case)
+    placed = place_layout(get_layout("compact"), trace)
+    distribution = get_mapping(mapping).build(trace.width, trace.height, n)
+    assert fixed_schedule(distribution, machine)
+    first_hierarchy, first_cost = random_costs(rng, hierarchy)
+    stored = simulate_run(trace, distribution, first_hierarchy, placed, first_cost, machine)
+    assert stored.miss_counts.fixed_schedule
+    for _ in range(3):
+        new_hierarchy, new_cost = random_costs(rng, hierarchy)
+        new_machine = replace(machine, quantum_cycles=float(rng.uniform(500, 5000)))
+        full = simulate_run(trace, distribution, new_hierarchy, placed, new_cost, new_machine)
+        recosted = recost_run(stored, new_hierarchy, new_cost)
+        assert list(recosted.processes.columns) == list(full.processes.columns)
+        counts = [c for c in full.processes.columns if c not in COUNT_COLUMNS_EXCLUDED]
+        assert recosted.processes[counts].equals(full.processes[counts])
+        for column in CYCLE_COLUMNS:
+            if column in full.processes:
+                np.testing.assert_allclose(recosted.processes[column], full.processes[column], rtol=1e-12,
+                                           err_msg=column)
+        assert recosted.real_cycles == pytest.approx(full.real_cycles, rel=1e-12)
+        np.testing.assert_array_equal(recosted.task_owner, full.task_owner)
+
+
+def test_recost_of_a_tiny_run_by_hand():
+    """One pixel reads one sphere record twice and writes it once: the first read misses both levels (memory),
+    the second hits L1, the write hits L1. Under latencies 3 / 11 / memory 70 that is 70 + 3 + 3 memory
+    cycles; compute is the ray's and the sphere test's weights times their counters. Fails if recost_run
+    prices read misses at the last level's latency instead of memory's."""
+    record = pack([RecordKind.SPHERE], [0])[0]
+    records = np.array([record, record, record | np.uint32(WRITE_FLAG)], dtype=np.uint32)
+    counters = np.zeros((1, len(COUNTER_NAMES)), dtype=np.int64)
+    counters[0, COUNTER_NAMES.index("primary_rays")] = 1
+    counters[0, COUNTER_NAMES.index("tests_sphere")] = 2
+    trace = AccessTrace(np.array([0, 3], dtype=np.int64), records, counters, 1, 1, {})
+    placed = place_layout(get_layout("compact"), trace)
+    distribution = get_mapping("S").build(1, 1, 1)
+    stored = simulate_run(trace, distribution, SMALL, placed, CostModel(), Machine(n_cpus=1))
+    levels = (CacheLevel("L1", 512, 32, 1, latency=3), CacheLevel("L2", 3072, 64, 3, latency=11))
+    cost = CostModel(ray=100.0, test_sphere=7.0, clock_hz=1e6)
+    recosted = recost_run(stored, Hierarchy(levels, memory_latency=70), cost)
+    row = recosted.processes.iloc[0]
+    assert row["memory_cycles"] == 70 + 3 + 3
+    assert row["compute_cycles"] == 100 + 2 * 7
+    assert row["user_cycles"] == row["finish_cycles"] == recosted.real_cycles == 70 + 3 + 3 + 114
+    assert row["user_seconds"] == pytest.approx(190 / 1e6)
+
+
+def test_which_runs_have_a_fixed_schedule():
+    """The rule by hand. Fails if fixed_schedule ignores the background (``n + background_load``) or lets
+    DB with several processes through."""
+    def build(mapping, n):
+        return get_mapping(mapping).build(16, 16, n)
+
+    idle = Machine(n_cpus=8)
+    assert fixed_schedule(build("S", 8), idle)
+    assert fixed_schedule(build("DB", 1), idle)
+    assert not fixed_schedule(build("DB", 2), idle)
+    assert not fixed_schedule(build("S", 9), idle)
+    assert not fixed_schedule(build("S", 8), replace(idle, background_load=1))
+    assert fixed_schedule(build("S", 7), replace(idle, background_load=1))
+    assert not fixed_schedule(build("DB", 8), replace(idle, background_load=2))
+    static = Machine(n_cpus=8, scheduler="static")
+    assert fixed_schedule(build("B", 4), replace(static, background_load=4))  # background on CPUs 4-7
+    assert not fixed_schedule(build("B", 4), replace(static, background_load=5))  # the fifth on CPU 0
+    assert not fixed_schedule(build("B", 9), replace(static, placement="neighbours"))
+
+
+def test_study_recosts_qualifying_runs_and_resimulates_db_with_background():
+    """Two studies of one trace that differ only in costs share a store: the one-process runs (which fit the
+    CPUs beside two background processes) are re-costed, the 8-process S and DB runs (background
+    time-slices with them) are simulated again, and every result equals a study without a store. A third,
+    identical study reuses the two it simulated and re-costs the others again. Fails if fixed_schedule returns True for every run (DB at 8 is then
+    re-costed and the counts of simulated runs change)."""
+    trace = written_trace(128, 64, seed=3)  # eight DB blocks
+    machine = Machine(n_cpus=8, quantum_cycles=2000, background_load=2, background_footprint=2048)
+    store = RunStore()
+    rng = np.random.default_rng(7)
+    setups = [random_costs(rng, SMALL_TLB) for _ in range(2)]
+
+    def run(hierarchy, cost, execution):
+        return study(trace, ["S", "DB"], [1, 8], hierarchy=hierarchy, cost=cost, machine=machine, progress=False,
+                     execution=execution)
+
+    run(*setups[0], Execution(store=store))
+    assert (store.simulated, store.re_costed, store.reused) == (4, 0, 0)
+    second = run(*setups[1], Execution(store=store))
+    assert (store.simulated, store.re_costed, store.reused) == (6, 2, 0)
+    fresh = run(*setups[1], None)
+    columns = [c for c in fresh.runs.columns if pd.api.types.is_numeric_dtype(fresh.runs[c])]
+    np.testing.assert_allclose(second.runs[columns].to_numpy(np.float64), fresh.runs[columns].to_numpy(np.float64),
+                               rtol=1e-12)
+    run(*setups[1], Execution(store=store))
+    assert (store.simulated, store.re_costed, store.reused) == (6, 4, 2)  # the simulated two are reused
+    with pytest.raises(ValueError, match="another trace"):
+        run(*setups[1], Execution(store=_bound_elsewhere()))
+
+
+def _bound_elsewhere() -> RunStore:
+    store = RunStore()
+    store.bind(random_trace())
+    return store
