@@ -23,6 +23,8 @@ Output folder (default robustness):
   indices.csv       Morris mu*, mu, sigma, rank (and Sobol S1, ST) per scene x unknown
   robustness.json   parameters, seed, versions and per scene the summary
   index.html        one self-contained page with tornado charts
+and with --faithfulness-md FILE the faithfulness section, Markdown generated
+from robustness.json alone.
 The same inputs and --seed give byte-identical files.
 
 examples:
@@ -49,6 +51,9 @@ def register(subparsers) -> None:
                              "scene, N a power of two (default 0: none)")
     parser.add_argument("--out", metavar="DIR", default="robustness", help="output folder (default robustness)")
     parser.add_argument("--json", action="store_true", help="print robustness.json to stdout")
+    parser.add_argument("--faithfulness-md", metavar="FILE",
+                        help="also write the faithfulness section (Markdown) generated from robustness.json to "
+                             "FILE; python -m analyses.faithfulness regenerates it from a stored robustness.json")
     parser.set_defaults(func=run)
 
 
@@ -64,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness
     from analyses.robustness_output import ROBUSTNESS_FILES, robustness_summary, write_robustness
     from analyses.traces import check_cache_dir
+    from rtcommon.files import check_writable_ancestor
     from rtcommon.validate import require_power_of_two
     from tracer.scenes.catalog import PAPER_SCENES
 
@@ -77,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     check_cache_dir(args.cache)
     scenes = check_scenes(args.scenes if args.scenes else PAPER_SCENES)
     check_output_folder(args.out)
+    if args.faithfulness_md:
+        check_writable_ancestor(args.faithfulness_md, "--faithfulness-md")
     base = replace(ROBUSTNESS_EXPERIMENT, size=args.size, cache_dir=args.cache)
     with dask_executor(args.dask) as executor:
         result = robustness(base, scenes=scenes, trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
@@ -84,6 +92,12 @@ def run(args: argparse.Namespace) -> int:
     path = write_robustness(result, args.out)
     print(f"wrote {path / ROBUSTNESS_FILES['page']}, "
           f"{', '.join(name for role, name in ROBUSTNESS_FILES.items() if role != 'page')}", file=sys.stderr)
+    if args.faithfulness_md:
+        from analyses.faithfulness import write_faithfulness
+
+        write_faithfulness(json.loads((path / ROBUSTNESS_FILES["summary"]).read_text(encoding="utf-8")),
+                           args.faithfulness_md)
+        print(f"wrote {args.faithfulness_md}", file=sys.stderr)
     if args.json:
         print(json.dumps(robustness_summary(result), indent=2, allow_nan=False))
     else:

@@ -1,0 +1,141 @@
+"""The faithfulness section: generated from a small real robustness study, every figure read back from the
+Markdown and compared with the summary it came from; the mechanism rule on a hand-made case; bad input."""
+from __future__ import annotations
+
+import json
+import re
+import warnings
+from dataclasses import replace
+
+import pytest
+
+from analyses.faithfulness import MECHANISMS, VERDICT_SIZE, faithfulness_markdown, main, mechanism_shares
+from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness
+from analyses.robustness_factors import FACTORS
+from analyses.robustness_output import robustness_summary
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory):
+    base = replace(ROBUSTNESS_EXPERIMENT, size=16, cache_dir=str(tmp_path_factory.mktemp("cache")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 16x16
+        result = robustness(base, scenes=["tetra"], trajectories=2, seed=5)
+    return json.loads(json.dumps(robustness_summary(result)))  # as read back from robustness.json
+
+
+def _cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def _table(lines: list[str], header_start: str) -> list[list[str]]:
+    """The body rows of the first table whose header row starts with ``header_start``."""
+    start = next(i for i, line in enumerate(lines) if line.startswith(header_start))
+    rows = []
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append(_cells(line))
+    return rows
+
+
+def _close(text: str, value: float, scale: float = 1.0) -> bool:
+    """Printed ``text`` (4 significant digits) equals ``value * scale``."""
+    return float(text) == pytest.approx(value * scale, rel=1e-3, abs=1e-12)
+
+
+def test_every_figure_of_the_section_is_the_summarys(summary):
+    """Parse the Markdown of a real 16x16 tetra study (2 trajectories) and check each figure against the JSON:
+    command, seed, commit, size, trajectories, per scene P(load balance), evaluations, the 5/50/95th
+    percentiles of B - S, DB - S (in %) and the margin, the top three unknowns with mu* and flip regions,
+    and every mechanism's share recomputed here from mu*. Fails if faithfulness_markdown swaps two
+    percentiles (for example ``(50, 5, 95)`` in the DB - S row)."""
+    text = faithfulness_markdown(summary)
+    lines = text.splitlines()
+    p = summary["parameters"]
+    assert re.search(r"^- Command: `(.*)`$", text, re.M).group(1) == summary["command"]
+    assert summary["command"].startswith("coherence robustness --scenes tetra --size 16 --trajectories 2 --seed 5")
+    assert int(re.search(r"^- Seed: (\d+)$", text, re.M).group(1)) == p["seed"] == 5
+    assert re.search(r"^- Commit: `(.*)`$", text, re.M).group(1) == summary["commit"]
+    image = re.search(r"^- Image: (\d+) x (\d+) pixels; (\d+) Morris trajectories over (\d+) unknowns", text, re.M)
+    assert [int(g) for g in image.groups()] == [16, 16, 2, len(FACTORS)]
+    assert f"meant at {VERDICT_SIZE} x {VERDICT_SIZE} pixels or more" in text  # 16 < VERDICT_SIZE
+
+    for scene, s in summary["scenes"].items():
+        section = lines[lines.index(f"### {scene}"):]
+        found = re.search(r"P\(load balance\) = (\S+) over (\d+) evaluations", "\n".join(section[:4]))
+        assert _close(found.group(1), s["p_load_balance"]) and int(found.group(2)) == s["n_evaluations"]
+        rows = {row[0]: row[1:] for row in _table(section, "| quantity |")}
+        # the mutation must be able to bite: the percentiles differ
+        assert s["db_minus_s"]["p5"] < s["db_minus_s"]["p50"] < s["db_minus_s"]["p95"]
+        for label, key, scale in (("one-process B - S (%)", "b_minus_s", 100.0),
+                                  ("one-process DB - S (%)", "db_minus_s", 100.0),
+                                  ("verdict's margin", "margin", 1.0)):
+            for cell, q in zip(rows[label], (5, 50, 95)):
+                assert _close(cell, s[key][f"p{q}"], scale), (label, q, cell)
+        top = _table(section, "| rank |")
+        assert [row[1] for row in top] == s["top"] and [int(row[0]) for row in top] == [1, 2, 3]
+        for rank, factor, mechanism, mu_star, flip in top:
+            assert _close(mu_star, s["mu_star"][factor])
+            assert factor in MECHANISMS[mechanism]
+            rule = s["flip"][factor]
+            if isinstance(rule, str):
+                assert flip == rule
+            else:
+                assert _close(re.search(r"agrees with (\S+)%", flip).group(1), rule["agreement"], 100.0)
+                if "threshold" in rule:
+                    when = re.search(rf"when {rule['load_balance_when']} (\S+)", flip)
+                    assert _close(when.group(1), rule["threshold"])
+
+    scenes = list(summary["scenes"])
+    shares = {row[0]: row[1:] for row in _table(lines, "| mechanism |")}
+    for mechanism, factors in MECHANISMS.items():
+        per_scene = []
+        for scene in scenes:
+            mu = summary["scenes"][scene]["mu_star"]
+            per_scene.append(max(mu[f] for f in factors) / max(mu.values()))
+        assert [float(c) for c in shares[mechanism]] == pytest.approx(per_scene + [sum(per_scene) / len(scenes)],
+                                                                       rel=1e-3, abs=1e-12), mechanism
+    best = max(MECHANISMS, key=lambda m: float(shares[m][-1]))
+    assert re.search(r"Overall: \*\*(.+?)\*\*", text).group(1) == best
+
+
+def test_mechanism_shares_by_hand():
+    """Two scenes, mu* set by hand: in scene a the node-visit cost has the largest mu* (4), the memory
+    latency 2 and the B-cache latency 3, so memory latencies take 3/4; in scene b memory latency leads (1)
+    and costs are 0.5. Means: memory latencies (0.75 + 1) / 2, operation costs (1 + 0.5) / 2. Fails if a
+    mechanism's share sums its unknowns' shares instead of taking the largest."""
+    zeros = {entry.name: 0.0 for entry in FACTORS}
+    scenes = {"a": {"mu_star": {**zeros, "cost_node_visit": 4.0, "memory_latency": 2.0, "bcache_latency": 3.0}},
+              "b": {"mu_star": {**zeros, "memory_latency": 1.0, "cost_ray": 0.5, "cost_test_sphere": 0.25}}}
+    shares = mechanism_shares(scenes)
+    assert list(shares)[0] == "memory latencies"
+    assert shares["memory latencies"] == {"scenes": {"a": 0.75, "b": 1.0}, "mean": 0.875}
+    assert shares["operation costs"] == {"scenes": {"a": 1.0, "b": 0.5}, "mean": 0.75}
+    assert shares["tree memory"]["mean"] == 0.0
+    # every unknown of the study belongs to exactly one named mechanism
+    assert sorted(f for factors in MECHANISMS.values() for f in factors) == sorted(e.name for e in FACTORS)
+
+
+def test_regenerates_from_a_stored_summary_and_refuses_bad_input(summary, tmp_path, capsys):
+    """``python -m analyses.faithfulness`` writes the same Markdown from robustness.json as the function gives,
+    creating the folder; a missing file, a file that is not JSON and a summary without its command each give
+    a one-line error and exit 2, writing nothing. Fails if main drops the check of the summary's keys."""
+    stored = tmp_path / "robustness.json"
+    stored.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    out = tmp_path / "docs" / "results" / "faithfulness.md"
+    assert main([str(stored), str(out)]) == 0
+    assert out.read_text(encoding="utf-8") == faithfulness_markdown(summary)
+
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"parameters": \n', encoding="utf-8")
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps({k: v for k, v in summary.items() if k != "command"}), encoding="utf-8")
+    for path, says in ((tmp_path / "missing.json", "no such"), (broken, "broken.json:2: not JSON"),
+                       (old, "has no command")):
+        target = tmp_path / f"{path.stem}.md"
+        capsys.readouterr()
+        assert main([str(path), str(target)]) == 2
+        error = capsys.readouterr().err.strip()
+        assert says in error and "\n" not in error, error
+        assert not target.exists()
