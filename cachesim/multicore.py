@@ -145,6 +145,10 @@ class SharedArrays(NamedTuple):
         Lines lost to an invalidation and not filled again: key
         ``line * n_all_instances + instance_base[level] + instance``, value
         the first byte and the end of the bytes of the invalidating write.
+    lost_in_set : ndarray of int64, shape (W,)
+        At the first way of each set of each instance, how many of ``lost``'s
+        lines map to that set: a miss or fill looks ``lost`` up only where
+        this is nonzero.
     """
 
     tags: np.ndarray
@@ -152,32 +156,30 @@ class SharedArrays(NamedTuple):
     counts: np.ndarray
     served: np.ndarray
     lost: object
+    lost_in_set: np.ndarray
 
 
+# The helpers take arrays, not bundles: a bundle's field read in the
+# per-access loop costs a reference-count update each time.
 @njit(cache=True, inline="always")
-def _lost_key(line, level, instance, machine):
-    return line * machine.n_all_instances + machine.instance_base[level] + instance
-
-
-@njit(cache=True, inline="always")
-def _instance_base(line, level, instance, geometry, machine):
+def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     """First way of ``line``'s set in instance ``instance`` of ``level``."""
-    return (_set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
-            + instance * machine.level_ways[level])
+    mask = set_mask[level]
+    set_index = line & mask if mask >= 0 else line % n_sets[level]
+    return offset[level] + instance * level_ways[level] + set_index * ways[level]
 
 
 @njit(cache=True, inline="always")
-def _note_miss(line, level, instance, kind, first, end, machine, state):
-    """Count a coherence (and false-sharing) miss when ``line`` was lost to an invalidation."""
-    key = _lost_key(line, level, instance, machine)
-    if key in state.lost:
-        written_first, written_end = state.lost[key]
-        state.counts[level, instance, kind, COHERENCE_MISSES] += 1
+def _note_miss(key, level, instance, kind, first, end, lost, counts):
+    """Count a coherence (and false-sharing) miss when ``key``'s line was lost to an invalidation."""
+    if key in lost:
+        written_first, written_end = lost[key]
+        counts[level, instance, kind, COHERENCE_MISSES] += 1
         if end <= written_first or written_end <= first:
-            state.counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+            counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _back_invalidate(evicted, level, instance, kind, geometry, machine, state):
     """Inclusion: remove the evicted line from the instances above that ``instance`` serves."""
     width = machine.threads_per_instance[level]
@@ -187,14 +189,15 @@ def _back_invalidate(evicted, level, instance, kind, geometry, machine, state):
         first_line = evicted << spread
         for above in range(instance * width // per_upper, (instance + 1) * width // per_upper):
             for sub in range(first_line, first_line + (np.int64(1) << spread)):
-                base = _instance_base(sub, upper, above, geometry, machine)
+                base = _set_of(sub, upper, above, geometry.n_sets, geometry.set_mask, geometry.ways,
+                               geometry.offset, machine.level_ways)
                 slot = _find(state.tags, base, geometry.ways[upper], sub)
                 if slot >= 0:
                     state.tags[slot] = -1
                     state.counts[upper, above, kind, BACK_INVALIDATIONS] += 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state):
     """A write by ``thread``: remove its line from every instance that does not serve the thread."""
     for level in range(geometry.rel_shift.shape[0]):
@@ -203,12 +206,14 @@ def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state
         for other in range(machine.n_instances[level]):
             if other == own:
                 continue
-            slot = _find(state.tags, _instance_base(line, level, other, geometry, machine), geometry.ways[level],
-                         line)
+            base = _set_of(line, level, other, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
+                           machine.level_ways)
+            slot = _find(state.tags, base, geometry.ways[level], line)
             if slot >= 0:
                 state.tags[slot] = -1
                 state.counts[level, other, kind, COHERENCE_INVALIDATIONS] += 1
-                state.lost[_lost_key(line, level, other, machine)] = (first, end)
+                state.lost[line * machine.n_all_instances + machine.instance_base[level] + other] = (first, end)
+                state.lost_in_set[base] += 1
 
 
 @njit(cache=True)
@@ -234,76 +239,133 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     """
     addresses = stream.addresses
     threads = stream.threads
-    has_writes = stream.writes.shape[0] > 0
-    has_sizes = stream.sizes.shape[0] > 0
-    has_kinds = stream.kinds.shape[0] > 0
+    writes = stream.writes
+    sizes = stream.sizes
+    kinds = stream.kinds
+    has_writes = writes.shape[0] > 0
+    has_sizes = sizes.shape[0] > 0
+    has_kinds = kinds.shape[0] > 0
     tags = state.tags
     stamps = state.stamps
     counts = state.counts
     served_counts = state.served
+    lost = state.lost
+    lost_in_set = state.lost_in_set
     instance_of = machine.instance_of
+    level_ways = machine.level_ways
+    instance_base = machine.instance_base
+    n_all = machine.n_all_instances
     rel_shift = geometry.rel_shift
+    n_sets = geometry.n_sets
+    set_mask = geometry.set_mask
     ways = geometry.ways
+    offset = geometry.offset
     policy = geometry.policy
+    seeds = geometry.seeds
+    write_allocate = geometry.write_allocate
+    inclusive = geometry.inclusion == INCLUSIVE
     n_levels = rel_shift.shape[0]
     shift = np.uint64(geometry.line_shift)
-    line_bytes = np.uint64(1) << shift
+    line_bytes = np.int64(1) << geometry.line_shift
     lines = np.empty(n_levels, dtype=np.int64)
     instances = np.empty(n_levels, dtype=np.int64)
+    bases = np.empty(n_levels, dtype=np.int64)
+    # The first level serves most accesses: its geometry in scalars.
+    mask0 = set_mask[0]
+    sets0 = n_sets[0]
+    ways0 = ways[0]
+    per_instance0 = level_ways[0]
+    track0 = policy[0] == LRU and ways0 > 1
+    allocate0 = write_allocate[0]
+    previous_line = np.int64(-1)  # a line the previous access left in its thread's first level
+    previous_thread = np.int64(-1)
     for i in range(addresses.shape[0]):
         clock += 1
         address = addresses[i]
         thread = threads[i]
         line0 = np.int64(address >> shift)
-        is_write = has_writes and stream.writes[i]
-        kind = np.int64(stream.kinds[i]) if has_kinds else np.int64(0)
-        if has_sizes:
-            first = np.int64(address)
-            end = first + stream.sizes[i]
+        is_write = has_writes and writes[i]
+        kind = np.int64(kinds[i]) if has_kinds else np.int64(0)
+        instance0 = instance_of[0, thread]
+        first = np.int64(0)
+        end = np.int64(0)
+        if line0 == previous_line and thread == previous_thread:
+            # The previous access, by the same thread, left the line in its
+            # first level as the set's most recent entry: a hit that changes nothing.
+            slot = np.int64(0)
         else:
-            first = np.int64(address & ~(line_bytes - np.uint64(1)))
-            end = first + np.int64(line_bytes)
-        served = n_levels
-        for level in range(n_levels):
-            line = line0 >> rel_shift[level]
-            instance = instance_of[level, thread]
-            lines[level] = line
-            instances[level] = instance
-            counts[level, instance, kind, ACCESSES] += 1
+            base0 = instance0 * per_instance0 + (line0 & mask0 if mask0 >= 0 else line0 % sets0) * ways0
+            slot = _find(tags, base0, ways0, line0)
+            if slot >= 0 and track0:
+                stamps[slot] = clock
+        if slot >= 0:
+            counts[0, instance0, kind, HITS] += 1
             if is_write:
-                counts[level, instance, kind, WRITES] += 1
-            slot = _find(tags, _instance_base(line, level, instance, geometry, machine), ways[level], line)
-            if slot >= 0:
-                counts[level, instance, kind, HITS] += 1
+                counts[0, instance0, kind, WRITE_HITS] += 1
+            served_counts[thread, 0] += 1
+            previous_line = line0
+            previous_thread = thread
+        else:
+            if has_sizes:
+                first = np.int64(address)
+                end = first + sizes[i]
+            else:
+                first = line0 << geometry.line_shift
+                end = first + line_bytes
+            served = n_levels
+            for level in range(n_levels):
+                line = line0 >> rel_shift[level]
+                instance = instance_of[level, thread]
+                base = _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways)
+                lines[level] = line
+                instances[level] = instance
+                bases[level] = base
+                if level > 0:
+                    slot = _find(tags, base, ways[level], line)
+                    if slot >= 0:
+                        counts[level, instance, kind, HITS] += 1
+                        if is_write:
+                            counts[level, instance, kind, WRITE_HITS] += 1
+                        if policy[level] == LRU:
+                            stamps[slot] = clock
+                        served = level
+                        break
+                counts[level, instance, kind, MISSES] += 1
                 if is_write:
-                    counts[level, instance, kind, WRITE_HITS] += 1
-                if policy[level] == LRU:
-                    stamps[slot] = clock
-                served = level
-                break
-            counts[level, instance, kind, MISSES] += 1
-            if is_write:
-                counts[level, instance, kind, WRITE_MISSES] += 1
-            if len(state.lost) > 0:
-                _note_miss(line, level, instance, kind, first, end, machine, state)
-        served_counts[thread, served] += 1
-        for level in range(served - 1, -1, -1):
-            if is_write and not geometry.write_allocate[level]:
-                continue
-            line = lines[level]
-            instance = instances[level]
-            base = _instance_base(line, level, instance, geometry, machine)
-            evicted = _insert(tags, stamps, geometry.seeds[level], base, ways[level], policy[level], line, clock)
-            if len(state.lost) > 0:
-                key = _lost_key(line, level, instance, machine)
-                if key in state.lost:
-                    del state.lost[key]
-            if evicted >= 0:
-                counts[level, instance, kind, EVICTIONS] += 1
-                if geometry.inclusion == INCLUSIVE and level > 0:
-                    _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
+                    counts[level, instance, kind, WRITE_MISSES] += 1
+                if lost_in_set[base] > 0:
+                    _note_miss(line * n_all + instance_base[level] + instance, level, instance, kind, first, end,
+                               lost, counts)
+            served_counts[thread, served] += 1
+            for level in range(served - 1, -1, -1):
+                if is_write and not write_allocate[level]:
+                    continue
+                line = lines[level]
+                instance = instances[level]
+                base = bases[level]
+                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
+                if lost_in_set[base] > 0:
+                    key = line * n_all + instance_base[level] + instance
+                    if key in lost:
+                        del lost[key]
+                        lost_in_set[base] -= 1
+                if evicted >= 0:
+                    counts[level, instance, kind, EVICTIONS] += 1
+                    if inclusive and level > 0:
+                        _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
+            previous_line = line0 if (allocate0 or not is_write) else np.int64(-1)
+            previous_thread = thread
         if is_write:
+            if not has_sizes:
+                first = line0 << geometry.line_shift
+                end = first + line_bytes
+            elif slot >= 0:
+                first = np.int64(address)
+                end = first + sizes[i]
             _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+    # Every access is a hit or a miss: the totals follow.
+    counts[..., ACCESSES] = counts[..., HITS] + counts[..., MISSES]
+    counts[..., WRITES] = counts[..., WRITE_HITS] + counts[..., WRITE_MISSES]
     return clock
 
 
@@ -362,12 +424,13 @@ class SharedState:
         self.counts = np.zeros((n_levels, most, N_KINDS, N_SHARED_COUNTERS), dtype=np.int64)
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
         self.lost = _empty_lost()
+        self.lost_in_set = np.zeros(total_ways, dtype=np.int64)
         self.clock = 0
 
     @property
     def arrays(self) -> SharedArrays:
         """The contents and counters as one bundle for :func:`simulate_threads_stream` (updated in place)."""
-        return SharedArrays(self.tags, self.stamps, self.counts, self.served, self.lost)
+        return SharedArrays(self.tags, self.stamps, self.counts, self.served, self.lost, self.lost_in_set)
 
     def copy(self) -> "SharedState":
         """An independent clone: continuing either leaves the other untouched."""
@@ -375,6 +438,7 @@ class SharedState:
         clone.machine, clone.geometry, clone.machine_geometry = self.machine, self.geometry, self.machine_geometry
         clone.tags, clone.stamps = self.tags.copy(), self.stamps.copy()
         clone.counts, clone.served = self.counts.copy(), self.served.copy()
+        clone.lost_in_set = self.lost_in_set.copy()
         clone.lost = _empty_lost()
         for key, value in self.lost.items():
             clone.lost[key] = value
