@@ -13,8 +13,11 @@ over every unknown the toolkit has a mechanism for
 :func:`coherence.study` of every mapping at one process and at
 :data:`analyses.verdict.VERDICT_PROCESSES`, on the sample's machine,
 caches, memory image and cost model, so the mappings of a sample share all
-its values and seeds. Every run is simulated in full: none is re-costed
-from stored miss counts.
+its values and seeds. A run whose miss counts an earlier sample of the same
+trace already holds (the samples differ only in costs, and the run's
+schedule does not depend on cycles) is re-costed from them instead of
+simulated (:mod:`coherence.recost`, :data:`RE_COSTED`); the summary counts
+the runs of each path per scene (``runs``, :data:`RUN_PATHS`).
 
 From each sample (:data:`SAMPLE_COLUMNS`): the one-process time of B and DB
 relative to S's (``(T_B - T_S) / T_S``), every mapping's coherence and
@@ -62,6 +65,16 @@ SOBOL_FACTORS = 4
 #: of its range (the geometric mean of a log-uniform one, the middle choice).
 HELD_AT = 0.5
 
+#: The paths a sample's run can take (:class:`coherence.recost.RunStore`), counted per scene and design.
+RUN_PATHS = ("simulated", "re_costed", "reused")
+
+#: What the summary's parameters say of re-costing.
+RE_COSTED = ("a run whose schedule does not depend on cycles (coherence.recost.fixed_schedule: a static mapping or "
+             "one process, with ours and the other users' processes each on a CPU of its own) is re-costed from the "
+             "miss counts of an earlier sample of the same trace that differed from it only in costs (latencies, "
+             "DTB miss cost, operation costs, time slice); a run identical to an earlier one is reused; every other "
+             "run is simulated")
+
 #: Columns of the samples table before the per-mapping losses and the factors' values.
 SAMPLE_COLUMNS = ("scene", "sample", "trajectory", "seed", "b_minus_s", "db_minus_s", "decided_by",
                   "load_balance", "margin")
@@ -85,7 +98,9 @@ class RobustnessResult:
     summary : dict
         ``parameters`` (the base's, the scenes, trajectories, seed, factors
         and left-out unknowns) and ``scenes``: per scene what
-        :func:`scene_summary` gives.
+        :func:`scene_summary` gives, and ``runs``: how many runs of the
+        Morris samples were simulated, re-costed and reused
+        (:data:`RUN_PATHS`; Sobol's under ``sobol``).
     """
 
     samples: pd.DataFrame
@@ -135,29 +150,31 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     seeds = trajectory_seeds(seed, trajectories)
     frames, index_rows, summaries = [], [], {}
     for scene in scenes:
-        frame = pd.DataFrame(_scene_samples(replace(base, scene=scene), design, seeds, executor))
+        replays = _Replays(replace(base, scene=scene), executor)
+        rows, paths = _scene_samples(replace(base, scene=scene), design, seeds, replays)
+        frame = pd.DataFrame(rows)
         indices = morris_indices(names, design, frame["margin"].to_numpy(), seed)
         ranked = sorted(names, key=lambda name: -indices["mu_star"][name])
         for name in names:
             index_rows.append({"scene": scene, "factor": name, **{k: indices[k][name] for k in indices},
                                "rank": ranked.index(name) + 1})
-        summaries[scene] = scene_summary(frame, ranked, indices["mu_star"], base.mapping_names())
+        summaries[scene] = {**scene_summary(frame, ranked, indices["mu_star"], base.mapping_names()), "runs": paths}
         frames.append(frame.assign(design="morris"))
         if sobol:
             top = ranked[:SOBOL_FACTORS]
-            sobol_frame, sobol_result = _sobol(replace(base, scene=scene), top, sobol, seed, executor)
+            sobol_frame, sobol_result = _sobol(replace(base, scene=scene), top, sobol, seed, replays)
             for row in index_rows[-len(names):]:
                 row.update({key: sobol_result[key].get(row["factor"], np.nan) for key in ("S1", "ST")})
             summaries[scene]["sobol"] = {"factors": top, "base_samples": int(sobol),
                                          "n_evaluations": int(len(sobol_frame)),
-                                         **{key: sobol_result[key] for key in ("S1", "ST")}}
+                                         **{key: sobol_result[key] for key in ("S1", "ST", "runs")}}
             frames.append(sobol_frame.assign(design="sobol"))
     parameters = {**base.as_parameters(), "scenes": scenes, "trajectories": int(trajectories), "seed": int(seed),
                   "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS, "sobol": int(sobol),
                   "sobol_held_at": HELD_AT,
                   "factors": [{"name": e.name, "distribution": e.distribution, "low": e.low, "high": e.high,
                                "choices": list(e.choices), "unit": e.unit} for e in FACTORS],
-                  "left_out": dict(LEFT_OUT), "re_costed": "none: every run is simulated in full"}
+                  "left_out": dict(LEFT_OUT), "re_costed": RE_COSTED}
     for key in ("hierarchy", "cost", "layout", "background_load", "background_footprint", "page_placement",
                 "page_seed", "tree_variant", "scene"):
         parameters.pop(key)  # sampled per run, recorded per sample
@@ -170,32 +187,58 @@ def trajectory_seeds(seed: int, trajectories: int) -> list[int]:
     return [int(np.random.default_rng([int(seed), t]).integers(0, 2**31 - 1)) for t in range(int(trajectories))]
 
 
-def _sobol(base: Experiment, top, base_samples: int, seed: int, executor):
+def _sobol(base: Experiment, top, base_samples: int, seed: int, replays: _Replays):
     """Sobol's samples of one scene over the unknowns ``top`` (the rest held at :data:`HELD_AT`), and the indices."""
     names = [entry.name for entry in FACTORS]
     partial = sobol_design(top, base_samples, seed)
     design = np.full((partial.shape[0], len(names)), HELD_AT)
     design[:, [names.index(name) for name in top]] = partial
     # every Sobol sample shares one seed: the indices see no noise of the placement's draw
-    frame = pd.DataFrame(_scene_samples(base, design, trajectory_seeds(seed, 1), executor))
-    return frame, sobol_indices(top, frame["margin"].to_numpy(), seed)
+    rows, paths = _scene_samples(base, design, trajectory_seeds(seed, 1), replays)
+    frame = pd.DataFrame(rows)
+    return frame, {**sobol_indices(top, frame["margin"].to_numpy(), seed), "runs": paths}
 
 
-def _scene_samples(base: Experiment, design: np.ndarray, seeds, executor) -> list[dict]:
-    from analyses.traces import cached_trace
-    from coherence.studies import Execution
+class _Replays:
+    """One scene's traces, rendered or loaded once each (one kept in memory: the designs step one factor at a
+    time), each with a :class:`coherence.recost.RunStore`, and how many runs took each path so far."""
 
-    replays = {}  # tree variant -> (scene, trace, execution): one render per variant
+    def __init__(self, base: Experiment, executor):
+        self.base = base
+        self.executor = executor
+        self.key = None
+        self.replay = None
+        self.store = None
+        self.done = dict.fromkeys(RUN_PATHS, 0)  # runs of the stores already let go
 
-    def replay(variant):
-        if variant not in replays:
-            replays.clear()  # the design steps one factor at a time: keep one trace in memory
-            scene, trace, info = cached_trace(base.scene, base.size, cache_dir=base.cache_dir, kd=base.kd_builder(),
+    def __call__(self, variant, size=None):
+        """(scene, trace, execution) of tree ``variant`` at ``size`` (default: the base's)."""
+        from analyses.traces import cached_trace
+        from coherence.recost import RunStore
+        from coherence.studies import Execution
+
+        base = self.base
+        key = (variant, size or base.size)
+        if key != self.key:
+            self.done = self.paths()
+            scene, trace, info = cached_trace(base.scene, key[1], cache_dir=base.cache_dir, kd=base.kd_builder(),
                                               max_depth=base.max_depth, progress=base.progress,
                                               workload=base.workload, tree_variant=variant)
-            replays[variant] = (scene, trace, Execution(executor=executor, trace_folder=f"{info['path']}/trace"))
-        return replays[variant]
+            self.store = RunStore()
+            self.key = key
+            self.replay = (scene, trace, Execution(executor=self.executor, trace_folder=f"{info['path']}/trace",
+                                                   store=self.store))
+        return self.replay
 
+    def paths(self) -> dict:
+        """Runs simulated, re-costed and reused so far (:data:`RUN_PATHS`)."""
+        store = self.store
+        return {path: self.done[path] + (getattr(store, path) if store is not None else 0) for path in RUN_PATHS}
+
+
+def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replays) -> tuple[list[dict], dict]:
+    """The rows of ``design``'s samples, and how many runs took each path (:data:`RUN_PATHS`) for them."""
+    before = replays.paths()
     per_trajectory = design.shape[0] // len(seeds)
     rows = []
     with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
@@ -203,11 +246,12 @@ def _scene_samples(base: Experiment, design: np.ndarray, seeds, executor) -> lis
         for index, unit_row in enumerate(design):
             trajectory = index // per_trajectory
             values = factor_values(unit_row)
-            rows.append(_sample_row(base, replay(values["tree_variant"]), values, index, seeds[trajectory],
+            rows.append(_sample_row(base, replays(values["tree_variant"]), values, index, seeds[trajectory],
                                     trajectory))
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         warnings.warn(message, stacklevel=3)
-    return rows
+    after = replays.paths()
+    return rows, {path: after[path] - before[path] for path in RUN_PATHS}
 
 
 def _sample_row(base: Experiment, replay, values: dict, index: int, seed: int, trajectory: int) -> dict:

@@ -15,7 +15,10 @@ is sampled over its documented range by Morris trajectories (SALib, six
 levels). Each scene's trace is rendered once per tree variant (study-era
 workload) and every sample replays the trace of its variant: every mapping
 at 1 and 8 processes, all sharing the
-sample's values and seeds. Every run is simulated in full. With --sobol N,
+sample's values and seeds. A run that an earlier sample differing only in
+costs already simulated is re-costed from its miss counts when its schedule
+does not depend on cycles (one process per CPU, a static mapping or one
+process); the rest are simulated. With --sobol N,
 first-order and total Sobol indices of the top four unknowns follow.
 
 Output folder (default robustness):
