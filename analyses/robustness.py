@@ -42,15 +42,20 @@ from analyses.experiment import Experiment
 from analyses.paper_study import PAPER_EXPERIMENT
 from analyses.robustness_factors import (FACTORS, LEFT_OUT, MORRIS_LEVELS, factor_values, morris_design,
                                          morris_indices, sample_setup, sobol_design, sobol_indices)
+from analyses.robustness_size import (SIZE_CHECK_MAPPINGS, SIZE_CHECK_QUANTITIES, SIZE_CHECK_TOLERANCE,
+                                      VERDICT_MIN_SIZE, check_sizes, compare_sizes, size_check_rows)
 from analyses.verdict import VERDICT_PROCESSES
 from rtcommon.validate import InputError, require_int, require_power_of_two
 
 __all__ = ["ROBUSTNESS_EXPERIMENT", "RobustnessResult", "robustness", "sample_outputs", "scene_summary",
-           "flip_thresholds", "trajectory_seeds", "SAMPLE_COLUMNS", "PERCENTILES", "TOP"]
+           "flip_thresholds", "trajectory_seeds", "one_process_differences", "SAMPLE_COLUMNS", "PERCENTILES", "TOP"]
 
 #: The base of every sample: the paper's study-era reproduction (workload,
-#: machine) at 128 x 128, one process and the verdict's process count.
-ROBUSTNESS_EXPERIMENT = replace(PAPER_EXPERIMENT, size=128, n_processes=(1, VERDICT_PROCESSES), progress=False)
+#: machine) at 256 x 256, the smallest size the verdict is computed at
+#: (:data:`analyses.robustness_size.VERDICT_MIN_SIZE`), one process and the
+#: verdict's process count.
+ROBUSTNESS_EXPERIMENT = replace(PAPER_EXPERIMENT, size=VERDICT_MIN_SIZE, n_processes=(1, VERDICT_PROCESSES),
+                                progress=False)
 
 #: Percentiles of every distribution the summary gives.
 PERCENTILES = (5, 50, 95)
@@ -109,7 +114,7 @@ class RobustnessResult:
 
 
 def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), trajectories: int = 10,
-               seed: int = 0, sobol: int = 0, executor=None) -> RobustnessResult:
+               seed: int = 0, sobol: int = 0, size_check: bool = True, executor=None) -> RobustnessResult:
     """Morris screening of the verdict over every unknown with a mechanism, per scene.
 
     Parameters
@@ -126,6 +131,11 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     sobol : int
         Base samples ``N`` of Sobol's design (a power of two), or 0 for
         Morris screening only.
+    size_check : bool
+        Check, per scene, the one-process quantities at half and twice the
+        base's size on :data:`~analyses.robustness_size.SIZE_CHECK_POINTS`
+        samples (:mod:`analyses.robustness_size`; ``size_check`` in each
+        scene's summary).
     executor : concurrent.futures.Executor, optional
         Simulate the runs there (a Dask client's executor).
 
@@ -160,6 +170,8 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
                                "rank": ranked.index(name) + 1})
         summaries[scene] = {**scene_summary(frame, ranked, indices["mu_star"], base.mapping_names()), "runs": paths}
         frames.append(frame.assign(design="morris"))
+        if size_check:
+            summaries[scene]["size_check"] = _size_check(replace(base, scene=scene), design, seeds, replays)
         if sobol:
             top = ranked[:SOBOL_FACTORS]
             sobol_frame, sobol_result = _sobol(replace(base, scene=scene), top, sobol, seed, replays)
@@ -171,7 +183,7 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
             frames.append(sobol_frame.assign(design="sobol"))
     parameters = {**base.as_parameters(), "scenes": scenes, "trajectories": int(trajectories), "seed": int(seed),
                   "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS, "sobol": int(sobol),
-                  "sobol_held_at": HELD_AT,
+                  "sobol_held_at": HELD_AT, "size_check": bool(size_check),
                   "factors": [{"name": e.name, "distribution": e.distribution, "low": e.low, "high": e.high,
                                "choices": list(e.choices), "unit": e.unit} for e in FACTORS],
                   "left_out": dict(LEFT_OUT), "re_costed": RE_COSTED}
@@ -256,17 +268,45 @@ def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replay
 
 def _sample_row(base: Experiment, replay, values: dict, index: int, seed: int, trajectory: int) -> dict:
     """Simulate the sample of ``values`` on ``replay`` = (scene, trace, execution) and return its row."""
+    runs = _sample_runs(base, replay, values, seed)
+    return {"scene": replay[0].name, "sample": index, "trajectory": trajectory, "seed": seed,
+            **sample_outputs(runs), **values}
+
+
+def _sample_runs(base: Experiment, replay, values: dict, seed: int) -> pd.DataFrame:
+    """The run table (:attr:`coherence.StudyResult.runs`) of the sample of ``values`` on ``replay``."""
     from coherence.studies import study
 
     scene, trace, execution = replay
     setup = sample_setup(base, values, seed)
     experiment = setup.experiment
-    result = study(trace, experiment.mapping_objects(), experiment.n_processes,
-                   hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),
-                   cost=experiment.cost_model(), machine=setup.machine, scene=scene, progress=False,
-                   execution=execution)
-    return {"scene": scene.name, "sample": index, "trajectory": trajectory, "seed": seed,
-            **sample_outputs(result.runs), **setup.values}
+    return study(trace, experiment.mapping_objects(), experiment.n_processes,
+                 hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),
+                 cost=experiment.cost_model(), machine=setup.machine, scene=scene, progress=False,
+                 execution=execution).runs
+
+
+def _size_check(base: Experiment, design: np.ndarray, seeds, replays: _Replays) -> dict:
+    """The size check of one scene (:mod:`analyses.robustness_size`) on the Morris ``design``."""
+    small_size, reference_size = check_sizes(base.size)
+    rows = size_check_rows(design.shape[0])
+    per_trajectory = design.shape[0] // len(seeds)
+    # one-process runs of S, B and DB only, on the base's tree (one trace per size)
+    checked = replace(base, mappings=SIZE_CHECK_MAPPINGS, n_processes=(1,))
+    values = {size: {name: [] for name in SIZE_CHECK_QUANTITIES} for size in (small_size, reference_size)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # small images warn of idle processes; the Morris samples said so
+        for size in values:
+            for index in rows:
+                point = {**factor_values(design[index]), "tree_variant": base.tree_variant}
+                runs = _sample_runs(replace(checked, size=size), replays(base.tree_variant, size), point,
+                                    seeds[index // per_trajectory])
+                differences = one_process_differences(runs)
+                for name in SIZE_CHECK_QUANTITIES:
+                    values[size][name].append(differences[name])
+    return {"small_size": small_size, "reference_size": reference_size, "verdict_size": int(base.size),
+            "tolerance": SIZE_CHECK_TOLERANCE, "samples": rows.tolist(), "tree_variant": base.tree_variant,
+            "quantities": compare_sizes(values[small_size], values[reference_size], base.size)}
 
 
 def sample_outputs(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES) -> dict:
@@ -279,18 +319,24 @@ def sample_outputs(runs: pd.DataFrame, n_processes: int = VERDICT_PROCESSES) -> 
     """
     from analyses.verdict import verdict
 
-    one = runs[runs["n_processes"] == 1].set_index("mapping")["user_cycles_max"]
     judged = verdict(runs, n_processes)
     worst = {column: value for column, (_, value) in judged.worst.items()}
-    out = {}
-    for mapping, key in (("B", "b_minus_s"), ("DB", "db_minus_s")):
-        out[key] = float(one[mapping] / one["S"] - 1.0) if mapping in one and "S" in one else float("nan")
+    out = one_process_differences(runs)
     out["decided_by"] = judged.decided_by
     out["load_balance"] = judged.decided_by == "load balance"
     out["margin"] = float(worst["imbalance_loss"] - max(worst["coherence_loss"], worst["dispatch_loss"]))
     for row in runs[runs["n_processes"] == n_processes].itertuples(index=False):
         out[f"coherence_loss_{row.mapping}"] = float(row.coherence_loss)
         out[f"imbalance_loss_{row.mapping}"] = float(row.imbalance_loss)
+    return out
+
+
+def one_process_differences(runs: pd.DataFrame) -> dict:
+    """``b_minus_s`` and ``db_minus_s``: one-process user time of B and DB relative to S's (NaN when one did not run)."""
+    one = runs[runs["n_processes"] == 1].set_index("mapping")["user_cycles_max"]
+    out = {}
+    for mapping, key in (("B", "b_minus_s"), ("DB", "db_minus_s")):
+        out[key] = float(one[mapping] / one["S"] - 1.0) if mapping in one and "S" in one else float("nan")
     return out
 
 

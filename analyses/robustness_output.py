@@ -46,6 +46,8 @@ def robustness_command(parameters: dict) -> str:
                "--trajectories", str(parameters["trajectories"]), "--seed", str(parameters["seed"])]
     if parameters["sobol"]:
         command += ["--sobol", str(parameters["sobol"])]
+    if not parameters.get("size_check", True):
+        command.append("--no-size-check")
     return " ".join(command)
 
 
@@ -107,6 +109,15 @@ def _scene_tables(summary: dict) -> dict:
                            for mapping, kinds in summary["losses"].items() for kind, values in kinds.items()])
     flip = pd.DataFrame([{"factor": name, "flip region": _flip_text(rule)} for name, rule in summary["flip"].items()])
     tables = {"spread": spread, "losses": losses, "flip": flip}
+    if "size_check" in summary:
+        check = summary["size_check"]
+        tables["size_check"] = pd.DataFrame([
+            {"quantity": name, "sample": sample, f"at {check['small_size']}": small,
+             f"at {check['reference_size']}": reference, "relative difference": relative,
+             "passed": "yes" if entry["passed"] else "no", "size used": entry["size_used"]}
+            for name, entry in check["quantities"].items()
+            for sample, small, reference, relative in zip(check["samples"], entry["small"], entry["reference"],
+                                                          entry["relative_difference"])])
     if "sobol" in summary:
         sobol = summary["sobol"]
         tables["sobol"] = pd.DataFrame([{"factor": name, "first order": sobol["S1"][name], "total": sobol["ST"][name]}

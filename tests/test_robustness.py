@@ -148,13 +148,13 @@ def small_study(tmp_path_factory):
         warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 32x32
         first = robustness(base, scenes=["tetra"], trajectories=2, seed=3, sobol=4)
         second = robustness(base, scenes=["tetra"], trajectories=2, seed=3, sobol=4)
-    return first, second, tmp_path_factory.mktemp("out")
+    return first, second, tmp_path_factory.mktemp("out"), base
 
 
 def test_study_is_reproducible_with_a_seed(small_study):
     """Two studies with one seed give equal tables and byte-identical files. Fails if trajectory_seeds draws
     from an unseeded generator (``np.random.default_rng()``)."""
-    first, second, out = small_study
+    first, second, out, _ = small_study
     pd.testing.assert_frame_equal(first.samples, second.samples)
     a = write_robustness(first, out / "a")
     b = write_robustness(second, out / "b")
@@ -225,3 +225,44 @@ def test_samples_differing_only_in_costs_share_one_simulation(tmp_path):
             assert rows[1][key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
         elif key != "sample":
             assert rows[1][key] == value, key
+
+
+def test_size_comparison_by_hand():
+    """Within 10% of the reference value at every one of five points passes; 11% at one point, a zero
+    reference (no relative difference) or only four points fails; the check's points spread over the design.
+    Fails if compare_sizes divides by the smaller size's value (0.9 against 1.0 is then 11%)."""
+    from analyses.robustness_size import compare_sizes, size_check_rows
+
+    reference = {"a": [1.0, -2.0, 0.5, 1.0, 3.0], "b": [1.0] * 5, "c": [0.0, 1, 1, 1, 1], "d": [1.0] * 4}
+    small = {"a": [0.9, -2.1, 0.54, 1.05, 3.0], "b": [1.0, 1.0, 1.11, 1.0, 1.0], "c": [0.0, 1, 1, 1, 1],
+             "d": [1.0] * 4}
+    result = compare_sizes(small, reference, size_used=256)
+    assert {name: entry["passed"] for name, entry in result.items()} == {"a": True, "b": False, "c": False,
+                                                                         "d": False}
+    assert result["a"]["relative_difference"] == pytest.approx([0.1, 0.05, 0.08, 0.05, 0.0])
+    assert math.isnan(result["c"]["relative_difference"][0]) and result["a"]["size_used"] == 256
+    assert size_check_rows(34).tolist() == [0, 8, 16, 25, 33]
+    assert size_check_rows(3).tolist() == [0, 1, 2]
+
+
+def test_size_check_simulates_its_points_at_both_sizes(small_study):
+    """The scene's size check holds five points of the Morris design; its values at half and twice the study's
+    size are the one-process B - S and DB - S of a study of that sample (its trajectory's seed, the base's
+    tree) at that size. Fails if _size_check runs the reference points at the smaller size."""
+    from analyses.robustness import _Replays, _sample_runs, one_process_differences, trajectory_seeds
+
+    result, base = small_study[0], replace(small_study[3], scene="tetra")
+    check = result.summary["scenes"]["tetra"]["size_check"]
+    assert (check["small_size"], check["reference_size"], check["verdict_size"]) == (16, 64, 32)
+    assert len(check["samples"]) == 5 and set(check["quantities"]) == {"b_minus_s", "db_minus_s"}
+    design = morris_design(NAMES, 2, seed=3)
+    last = check["samples"][-1]
+    values = {**factor_values(design[last]), "tree_variant": base.tree_variant}
+    seed = trajectory_seeds(3, 2)[last // (len(NAMES) + 1)]
+    for size, key in ((16, "small"), (64, "reference")):
+        sized = replace(base, size=size, mappings=("S", "B", "DB"), n_processes=(1,))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            runs = _sample_runs(sized, _Replays(base, None)(base.tree_variant, size), values, seed)
+        for name, value in one_process_differences(runs).items():
+            assert check["quantities"][name][key][-1] == pytest.approx(value, rel=1e-9), (name, size)
