@@ -14,7 +14,10 @@ cores (SMT 1), L3 shared by all. Timed: :func:`cachesim.multicore.simulate_threa
 on the whole stream (compiled outside the timing), against the issue's
 target of 100 M accesses/s, and beside the peer :func:`cachesim.simulate`
 on the same addresses and writes through one private ``modern`` hierarchy.
-Rates are given by wall time and by CPU time of this process (the best of
+Then the same on a second stream: the ray-tracer-like stream of
+``bench_cachesim.py`` (10 M accesses, a seeded 5% of them 8-byte writes) cut
+into 8 consecutive parts, one per thread, interleaved 64 accesses at a time
+(Q = 64 accesses). Rates are given by wall time and by CPU time of this process (the best of
 the repeats each): on a machine shared with other work they differ. Ends
 with one JSON line.
 
@@ -31,8 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from analyses.traces import cached_trace  # noqa: E402
+from bench_cachesim import ray_tracer_like_stream  # noqa: E402
 from cachesim import modern, simulate  # noqa: E402
-from cachesim.multicore import simulate_threads  # noqa: E402
+from cachesim.multicore import interleave, simulate_threads  # noqa: E402
 from cachesim.sharing import SharedHierarchy  # noqa: E402
 from coherence.layout import get_layout  # noqa: E402
 from coherence.studies import place_layout  # noqa: E402
@@ -92,31 +96,53 @@ def main():
     addresses, threads, writes, sizes, kinds = p_mapping_stream(args.size, args.cache)
     machine = SharedHierarchy(modern(), n_cores=THREADS, smt=1, shared_by=("thread", "thread", "machine"))
     run = lambda: simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes, kinds=kinds)  # noqa: E731
+    print(f"machine: modern levels, L1 and L2 private to each of {THREADS} cores, L3 shared by all")
     simulate_threads(addresses[:1000], threads[:1000], machine, writes=writes[:1000], sizes=sizes[:1000],
                      kinds=kinds[:1000])  # compile outside the timing
     rate, cpu_rate, result = best_rates(args.repeats, addresses.size, run)
-    counts = result.to_frame().groupby("level", sort=False).sum(numeric_only=True)
     print(f"stream: balls {args.size}x{args.size} (study1997 workload, alpha1997 layout), P mapping on "
           f"{THREADS} threads, a pixel per turn (Q = 1 pixel): {addresses.size:,} accesses, "
           f"{int(writes.sum()):,} writes")
-    print(f"machine: modern levels, L1 and L2 private to each of {THREADS} cores, L3 shared by all")
+    figures = report(result, rate, cpu_rate, peer_rates(args.repeats, addresses, writes), "")
+    rng = np.random.default_rng(7)
+    parts = np.array_split(ray_tracer_like_stream(10_000_000), THREADS)
+    flags = np.array_split(rng.random(10_000_000) < 0.05, THREADS)
+    addresses, threads = interleave(parts, quantum=64)
+    writes, _ = interleave([flag.astype(np.uint64) for flag in flags], quantum=64)
+    writes = writes.astype(bool)
+    sizes = np.where(writes, 8, 1)
+    rate, cpu_rate, result = best_rates(
+        args.repeats, addresses.size, lambda: simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes))
+    print(f"stream: bench_cachesim's ray-tracer-like stream, {addresses.size:,} accesses "
+          f"({int(writes.sum()):,} writes), 8 consecutive parts on {THREADS} threads, Q = 64 accesses")
+    figures.update(report(result, rate, cpu_rate, peer_rates(args.repeats, addresses, writes), "raytracer_like_"))
+    print(json.dumps(figures))
+
+
+def peer_rates(repeats, addresses, writes):
+    """The peer's rates (wall, CPU): cachesim.simulate on the same addresses and writes, one private hierarchy."""
+    simulate(addresses[:1000], modern(), writes=writes[:1000])
+    wall, cpu, _ = best_rates(repeats, addresses.size, lambda: simulate(addresses, modern(), writes=writes))
+    return wall, cpu
+
+
+def report(result, rate, cpu_rate, peer, prefix):
+    """Print one stream's counts, rates and target; return its figures."""
+    counts = result.to_frame().groupby("level", sort=False).sum(numeric_only=True)
     print(counts[["accesses", "misses", "coherence_invalidations", "coherence_misses",
                   "false_sharing_misses"]].to_string())
     print(f"simulate_threads : {rate / 1e6:6.1f} M accesses/s wall, {cpu_rate / 1e6:6.1f} by CPU time  "
           "(8 threads, coherence on)")
-    simulate(addresses[:1000], modern(), writes=writes[:1000])
-    peer_rate, peer_cpu_rate, _ = best_rates(args.repeats, addresses.size,
-                                             lambda: simulate(addresses, modern(), writes=writes))
-    print(f"simulate (peer)  : {peer_rate / 1e6:6.1f} M accesses/s wall, {peer_cpu_rate / 1e6:6.1f} by CPU time  "
+    print(f"simulate (peer)  : {peer[0] / 1e6:6.1f} M accesses/s wall, {peer[1] / 1e6:6.1f} by CPU time  "
           "(the same addresses and writes, one private hierarchy)")
     met = cpu_rate >= 100e6
     print(f"target: >= 100 M accesses/s with a shared L3 across 8 threads, coherence on: "
           f"{cpu_rate / 1e6:.0f} M/s by CPU time: {'met' if met else 'not met'}")
-    print(json.dumps({"accesses": int(addresses.size), "writes": int(writes.sum()),
-                      "maccesses_per_s": rate / 1e6, "cpu_maccesses_per_s": cpu_rate / 1e6,
-                      "peer_maccesses_per_s": peer_rate / 1e6, "peer_cpu_maccesses_per_s": peer_cpu_rate / 1e6,
-                      "target_met": bool(met), "coherence_misses": int(counts.coherence_misses.sum()),
-                      "false_sharing_misses": int(counts.false_sharing_misses.sum())}))
+    return {f"{prefix}accesses": int(counts.accesses.iloc[0]), f"{prefix}maccesses_per_s": rate / 1e6,
+            f"{prefix}cpu_maccesses_per_s": cpu_rate / 1e6, f"{prefix}peer_maccesses_per_s": peer[0] / 1e6,
+            f"{prefix}peer_cpu_maccesses_per_s": peer[1] / 1e6, f"{prefix}target_met": bool(met),
+            f"{prefix}coherence_misses": int(counts.coherence_misses.sum()),
+            f"{prefix}false_sharing_misses": int(counts.false_sharing_misses.sum())}
 
 
 if __name__ == "__main__":

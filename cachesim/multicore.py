@@ -145,10 +145,11 @@ class SharedArrays(NamedTuple):
         Lines lost to an invalidation and not filled again: key
         ``line * n_all_instances + instance_base[level] + instance``, value
         the first byte and the end of the bytes of the invalidating write.
-    lost_in_set : ndarray of int64, shape (W,)
-        At the first way of each set of each instance, how many of ``lost``'s
-        lines map to that set: a miss or fill looks ``lost`` up only where
-        this is nonzero.
+    lost_filter : ndarray of int32, shape (F,)
+        How many of ``lost``'s keys hash (:func:`_filter_slot`) to each
+        entry: a miss or fill looks ``lost`` up only where this is nonzero.
+        ``F`` is a power of two, :data:`LOST_FILTER_SIZE` in a
+        :class:`SharedState`: small enough to stay in the host's first-level cache.
     """
 
     tags: np.ndarray
@@ -156,7 +157,18 @@ class SharedArrays(NamedTuple):
     counts: np.ndarray
     served: np.ndarray
     lost: object
-    lost_in_set: np.ndarray
+    lost_filter: np.ndarray
+
+
+#: Entries of SharedArrays.lost_filter (a power of two).
+LOST_FILTER_SIZE = 1 << 13
+
+
+@njit(cache=True, inline="always")
+def _filter_slot(key, lost_filter):
+    """The entry of ``lost_filter`` that counts ``key`` (bits 40 up of a Fibonacci hash)."""
+    mixed = (np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
+    return np.int64(mixed & np.uint64(lost_filter.shape[0] - 1))
 
 
 # The helpers take arrays, not bundles: a bundle's field read in the
@@ -177,6 +189,15 @@ def _note_miss(key, level, instance, kind, first, end, lost, counts):
         counts[level, instance, kind, COHERENCE_MISSES] += 1
         if end <= written_first or written_end <= first:
             counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+
+
+@njit(cache=True, inline="always")
+def _forget(key, lost):
+    """Remove ``key`` from the lost lines; whether it was there."""
+    if key in lost:
+        del lost[key]
+        return True
+    return False
 
 
 @njit(cache=True)
@@ -212,8 +233,9 @@ def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state
             if slot >= 0:
                 state.tags[slot] = -1
                 state.counts[level, other, kind, COHERENCE_INVALIDATIONS] += 1
-                state.lost[line * machine.n_all_instances + machine.instance_base[level] + other] = (first, end)
-                state.lost_in_set[base] += 1
+                key = line * machine.n_all_instances + machine.instance_base[level] + other
+                state.lost[key] = (first, end)
+                state.lost_filter[_filter_slot(key, state.lost_filter)] += 1
 
 
 @njit(cache=True)
@@ -250,7 +272,7 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     counts = state.counts
     served_counts = state.served
     lost = state.lost
-    lost_in_set = state.lost_in_set
+    lost_filter = state.lost_filter
     instance_of = machine.instance_of
     level_ways = machine.level_ways
     instance_base = machine.instance_base
@@ -333,9 +355,9 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
                 counts[level, instance, kind, MISSES] += 1
                 if is_write:
                     counts[level, instance, kind, WRITE_MISSES] += 1
-                if lost_in_set[base] > 0:
-                    _note_miss(line * n_all + instance_base[level] + instance, level, instance, kind, first, end,
-                               lost, counts)
+                key = line * n_all + instance_base[level] + instance
+                if lost_filter[_filter_slot(key, lost_filter)] > 0:
+                    _note_miss(key, level, instance, kind, first, end, lost, counts)
             served_counts[thread, served] += 1
             for level in range(served - 1, -1, -1):
                 if is_write and not write_allocate[level]:
@@ -344,11 +366,9 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
                 instance = instances[level]
                 base = bases[level]
                 evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
-                if lost_in_set[base] > 0:
-                    key = line * n_all + instance_base[level] + instance
-                    if key in lost:
-                        del lost[key]
-                        lost_in_set[base] -= 1
+                key = line * n_all + instance_base[level] + instance
+                if lost_filter[_filter_slot(key, lost_filter)] > 0 and _forget(key, lost):
+                    lost_filter[_filter_slot(key, lost_filter)] -= 1
                 if evicted >= 0:
                     counts[level, instance, kind, EVICTIONS] += 1
                     if inclusive and level > 0:
@@ -424,13 +444,13 @@ class SharedState:
         self.counts = np.zeros((n_levels, most, N_KINDS, N_SHARED_COUNTERS), dtype=np.int64)
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
         self.lost = _empty_lost()
-        self.lost_in_set = np.zeros(total_ways, dtype=np.int64)
+        self.lost_filter = np.zeros(LOST_FILTER_SIZE, dtype=np.int32)
         self.clock = 0
 
     @property
     def arrays(self) -> SharedArrays:
         """The contents and counters as one bundle for :func:`simulate_threads_stream` (updated in place)."""
-        return SharedArrays(self.tags, self.stamps, self.counts, self.served, self.lost, self.lost_in_set)
+        return SharedArrays(self.tags, self.stamps, self.counts, self.served, self.lost, self.lost_filter)
 
     def copy(self) -> "SharedState":
         """An independent clone: continuing either leaves the other untouched."""
@@ -438,7 +458,7 @@ class SharedState:
         clone.machine, clone.geometry, clone.machine_geometry = self.machine, self.geometry, self.machine_geometry
         clone.tags, clone.stamps = self.tags.copy(), self.stamps.copy()
         clone.counts, clone.served = self.counts.copy(), self.served.copy()
-        clone.lost_in_set = self.lost_in_set.copy()
+        clone.lost_filter = self.lost_filter.copy()
         clone.lost = _empty_lost()
         for key, value in self.lost.items():
             clone.lost[key] = value

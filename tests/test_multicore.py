@@ -65,6 +65,21 @@ def test_random_machines_match_the_reference(seed):
     np.testing.assert_array_equal(first.counts + second.counts, expected)
 
 
+def test_a_crowded_lost_line_filter_stays_exact():
+    """With a filter of two entries nearly every miss and fill collides with some lost line's entry;
+    the counts still equal the reference's.
+    Mutation: decrement the filter entry without ``and _forget(key, lost)`` in simulate_threads_stream."""
+    rng = np.random.default_rng(21)
+    machine = random_machine(rng)
+    addresses, threads, writes, sizes, kinds = random_stream(rng, machine, 1500)
+    state = SharedState(machine)
+    state.lost_filter = np.zeros(2, dtype=np.int32)
+    result = simulate_threads(addresses, threads, state, writes=writes, sizes=sizes, kinds=kinds)
+    expected, _ = reference_threads(addresses, threads, machine, writes, sizes, kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    assert expected[..., COHERENCE_MISSES].sum() > 0
+
+
 def test_a_copied_state_continues_independently():
     """Mutation: make SharedState.copy share ``lost`` with the original (``clone.lost = self.lost``)."""
     rng = np.random.default_rng(5)
