@@ -258,7 +258,11 @@ def _choose(name: str, value, allowed) -> None:
 def _hierarchy(value):
     from cachesim import get_hierarchy
 
-    return get_hierarchy(value)
+    hierarchy = get_hierarchy(value)
+    if hierarchy.prefetches:
+        raise InputError(f"Experiment.hierarchy: {value} has prefetchers, which the schedule simulation does not "
+                         "model yet; use a hierarchy without them ('coherence cachesim' runs them on addresses)")
+    return hierarchy
 
 
 def _layout(value):
