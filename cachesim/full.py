@@ -3,10 +3,12 @@
 A level of one set looks a line up by scanning all its ways, and an LRU or
 FIFO insert scans them again for the oldest stamp: a 4 MB fully associative
 level of 64-byte lines (65,536 ways) took some 60 microseconds an access.
-For a long enough stream (:func:`uses_index`) each such level (one set of at
-least :data:`INDEXED_MIN_WAYS` ways) gets, for the length of one call, an
-index (:class:`FullIndex`) built from its ``tags`` and ``stamps``, which
-makes an access O(1):
+For a long enough stream (:func:`uses_index`) passed whole to
+:func:`cachesim.kernels.simulate_stream` or ``simulate_writes`` (so through
+:func:`cachesim.simulate`; the ``_into`` kernels, for many short streams,
+scan) each such level (one set of at least :data:`INDEXED_MIN_WAYS` ways)
+gets, for the length of one call, an index (:class:`FullIndex`) built from
+its ``tags`` and ``stamps``, which makes an access O(1):
 
 - a hash table from line to way (open addressing, linear probing, at most
   half full; a removal shifts the probe chain back instead of leaving a

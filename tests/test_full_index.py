@@ -115,3 +115,38 @@ def test_uses_index_weighs_the_ways_against_the_stream():
     assert uses_index(geometry, 4096) and not uses_index(geometry, 4095)
     small = CacheState(Hierarchy((CacheLevel("FA", 64 * 64, 64, "full"),))).geometry
     assert not uses_index(small, 10**6)
+
+
+def test_only_the_whole_stream_kernels_take_the_indexed_walk(monkeypatch):
+    """Fails if ``simulate_into`` or ``simulate_writes_into`` in cachesim/kernels.py dispatch to
+    ``_simulate_indexed`` (put back their ``uses_index`` branch): every caller compiled around them,
+    the schedule's event loop among them, would compile the indexed walk too. ``simulate_writes``
+    (one whole stream) must still take it. The kernels' Python bodies run with the indexed walk
+    replaced by a spy; the callees they reach stay compiled."""
+    from cachesim import kernels as K
+
+    calls = []
+
+    def spy(*args):
+        calls.append(args[0].size)
+        return _simulate_indexed(*args)
+
+    monkeypatch.setattr(K, "_simulate_indexed", spy)
+    hierarchy = Hierarchy((CacheLevel("L1", 256, 32, 1), CacheLevel("FA", INDEXED_MIN_WAYS * 64, 64, "full")),
+                          inclusion="inclusive")
+    addresses = (np.arange(64, dtype=np.uint64) * 96) % 8192
+    flags = np.arange(64) % 5 == 0
+    served = np.zeros(0, dtype=np.uint8)
+    results = []
+    for kernel, extra in ((K.simulate_into, ()), (K.simulate_writes_into, (flags,)), (K.simulate_writes, (flags,))):
+        state = CacheState(hierarchy)
+        assert uses_index(state.geometry, addresses.size)
+        work = (chunk_buffers(),) if kernel is not K.simulate_writes else ()
+        body = getattr(kernel, "py_func", kernel)
+        if extra:
+            body(addresses, *extra, state.geometry, state.arrays, 0, served, False, *work)
+        else:
+            body(addresses, state.geometry, state.arrays, 0, served, False, *work)
+        results.append(state.counts)
+    assert calls == [addresses.size]
+    assert np.array_equal(results[1], results[2])
