@@ -28,7 +28,10 @@ margin ranks the unknowns; the flip region is a threshold on each of the
 top three (:func:`flip_thresholds`). With ``sobol=N``, Saltelli's design of
 ``N (k + 2)`` samples over the :data:`SOBOL_FACTORS` highest-ranked unknowns
 (the others at the middle of their unit range, :data:`HELD_AT`) gives their
-first-order and total Sobol indices of the margin.
+first-order and total Sobol indices of the margin. The base's size is at
+least :data:`analyses.robustness_size.VERDICT_MIN_SIZE` for the 8-process
+losses and the verdict; the size check (:mod:`analyses.robustness_size`)
+says whether the one-process quantities would hold on a smaller image.
 """
 from __future__ import annotations
 
