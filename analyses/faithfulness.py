@@ -7,8 +7,9 @@
 ``coherence robustness`` writes (:func:`analyses.robustness_output.robustness_summary`):
 every figure of the section is read from it or computed from it, none is
 typed in. Per scene: the 5th, 50th and 95th percentiles of the one-process
-B - S and DB - S time differences (in % of S's time) and of the verdict's
-margin, the verdict's probability, the three unknowns of largest Morris
+B - S and DB - S time differences (in % of S's time), of the verdict's
+margin and of every mapping's coherence and imbalance losses, the verdict's
+probability, the three unknowns of largest Morris
 ``mu*`` with their indices and flip regions. Overall: which mechanism
 (:data:`MECHANISMS`) matters most, by the rule of :func:`mechanism_shares`.
 It names the command, seed and commit the summary records, states the image
@@ -177,8 +178,9 @@ def faithfulness_markdown(summary: dict) -> str:
     ]
     if size < VERDICT_SIZE:
         lines += [f"This is a first look: the {p['verdict_n_processes']}-process losses and the verdict are meant "
-                  f"at {VERDICT_SIZE} x "
-                  f"{VERDICT_SIZE} pixels or more, and this study ran at {size} x {size}.", ""]
+                  f"at {VERDICT_SIZE} x {VERDICT_SIZE} pixels or more, and this study ran at {size} x {size}. "
+                  "On a small image the mappings have few tasks per process, so their imbalance losses, and with "
+                  "them the verdict's margin, are overstated (see each scene's losses).", ""]
     shares = mechanism_shares(scenes)
     most = next(iter(shares))
     lines += [
@@ -212,9 +214,20 @@ def faithfulness_markdown(summary: dict) -> str:
             " |",
             "| verdict's margin | " + " | ".join(_number(s["margin"][f"p{q}"]) for q in (5, 50, 95)) + " |",
             "",
-            "| rank | unknown | mechanism | mu* | flip region |",
-            "|---:|---|---|---:|---|",
         ]
+        if s.get("losses"):
+            lines += [f"Losses at {p['verdict_n_processes']} processes (fractions), 5th, 50th and 95th percentiles:",
+                      "",
+                      "| mapping | coherence 5th | coherence 50th | coherence 95th | imbalance 5th | imbalance 50th | "
+                      "imbalance 95th |",
+                      "|---|---:|---:|---:|---:|---:|---:|"]
+            for mapping, kinds in s["losses"].items():
+                cells = [_number(kinds.get(kind, {}).get(f"p{q}")) for kind in ("coherence", "imbalance")
+                         for q in (5, 50, 95)]
+                lines.append(f"| {mapping} | " + " | ".join(cells) + " |")
+            lines.append("")
+        lines += ["| rank | unknown | mechanism | mu* | flip region |",
+                  "|---:|---|---|---:|---|"]
         for rank, factor in enumerate(s["top"], start=1):
             lines.append(f"| {rank} | {factor} | {mechanism_of(factor)} | {_number(s['mu_star'][factor])} | "
                          f"{_flip_text(s['flip'][factor], units.get(factor, ''))} |")

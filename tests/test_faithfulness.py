@@ -47,7 +47,7 @@ def _close(text: str, value: float, scale: float = 1.0) -> bool:
 def test_every_figure_of_the_section_is_the_summarys(summary):
     """Parse the Markdown of a real 16x16 tetra study (2 trajectories) and check each figure against the JSON:
     command, seed, commit, size, trajectories, per scene P(load balance), evaluations, the 5/50/95th
-    percentiles of B - S, DB - S (in %) and the margin, the top three unknowns with mu* and flip regions,
+    percentiles of B - S, DB - S (in %), the margin and every mapping's losses, the top three unknowns with mu* and flip regions,
     and every mechanism's share recomputed here from mu*. Fails if faithfulness_markdown swaps two
     percentiles (for example ``(50, 5, 95)`` in the DB - S row)."""
     text = faithfulness_markdown(summary)
@@ -73,6 +73,11 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
                                   ("verdict's margin", "margin", 1.0)):
             for cell, q in zip(rows[label], (5, 50, 95)):
                 assert _close(cell, s[key][f"p{q}"], scale), (label, q, cell)
+        losses = {row[0]: row[1:] for row in _table(section, "| mapping |")}
+        assert list(losses) == list(s["losses"])
+        for mapping, cells in losses.items():
+            expected = [s["losses"][mapping][kind][f"p{q}"] for kind in ("coherence", "imbalance") for q in (5, 50, 95)]
+            assert all(_close(cell, value) for cell, value in zip(cells, expected)), (mapping, cells, expected)
         top = _table(section, "| rank |")
         assert [row[1] for row in top] == s["top"] and [int(row[0]) for row in top] == [1, 2, 3]
         for rank, factor, mechanism, mu_star, flip in top:
