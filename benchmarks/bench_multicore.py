@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from analyses.traces import cached_trace  # noqa: E402
 from bench_cachesim import ray_tracer_like_stream  # noqa: E402
 from cachesim import modern, simulate  # noqa: E402
-from cachesim.multicore import interleave, simulate_threads  # noqa: E402
+from cachesim.multicore import interleave_order, simulate_threads  # noqa: E402
 from cachesim.sharing import SharedHierarchy  # noqa: E402
 from coherence.layout import get_layout  # noqa: E402
 from coherence.studies import place_layout  # noqa: E402
@@ -85,11 +85,10 @@ def main():
           f"{int(writes.sum()):,} writes")
     figures = report(result, rate, cpu_rate, peer_rates(args.repeats, addresses, writes), "")
     rng = np.random.default_rng(7)
-    parts = np.array_split(ray_tracer_like_stream(10_000_000), THREADS)
-    flags = np.array_split(rng.random(10_000_000) < 0.05, THREADS)
-    addresses, threads = interleave(parts, quantum=64)
-    writes, _ = interleave([flag.astype(np.uint64) for flag in flags], quantum=64)
-    writes = writes.astype(bool)
+    stream = ray_tracer_like_stream(10_000_000)
+    flags = rng.random(stream.size) < 0.05
+    order, threads = interleave_order([part.size for part in np.array_split(stream, THREADS)], quantum=64)
+    addresses, writes = stream[order], flags[order]
     sizes = np.where(writes, 8, 1)
     rate, cpu_rate, result = best_rates(
         args.repeats, addresses.size, lambda: simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes))

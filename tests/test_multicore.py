@@ -4,7 +4,8 @@ import pytest
 
 from cachesim import CacheLevel, Hierarchy, alpha21164, alpha21164_with_dtb, simulate
 from cachesim.multicore import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
-                                FALSE_SHARING_MISSES, HITS, MISSES, SharedState, interleave, simulate_threads)
+                                FALSE_SHARING_MISSES, HITS, MISSES, SharedState, interleave, interleave_order,
+                                simulate_threads)
 from cachesim.sharing import SHARING, SharedHierarchy, private
 from reference_multicore import reference_threads
 
@@ -206,6 +207,23 @@ def test_interleave_takes_quantum_accesses_per_turn():
     assert threads.tolist() == [0, 0, 1, 1, 2, 2, 0, 0, 2, 0]
     with pytest.raises(ValueError, match="quantum must be an integer >= 1"):
         interleave([[1]], quantum=0)
+
+
+def test_interleave_by_time_takes_windows_of_quantum():
+    """Thread 0 issues at cycles 0, 1, 5, 9 and thread 1 at 2, 3, 4, 10; in windows of 4 cycles:
+    [0, 4): 0's 0, 1 then 1's 2, 3; [4, 8): 0's 5, 1's 4; [8, 12): 0's 9, 1's 10 (by hand). With one
+    access a cycle each and quantum 1 the threads alternate access by access.
+    Mutation: ``rounds.append(stamps)`` (windows of one cycle whatever the quantum)."""
+    addresses, threads = interleave([[10, 11, 12, 13], [20, 21, 22, 23]], quantum=4,
+                                    times=[[0, 1, 5, 9], [2, 3, 4, 10]])
+    assert addresses.tolist() == [10, 11, 20, 21, 12, 22, 13, 23]
+    assert threads.tolist() == [0, 0, 1, 1, 0, 1, 0, 1]
+    order, threads = interleave_order([3, 2], 1, times=[np.arange(3), np.arange(2)])
+    assert order.tolist() == [0, 3, 1, 4, 2] and threads.tolist() == [0, 1, 0, 1, 0]
+    with pytest.raises(ValueError, match=r"times\[1\] must not decrease; it does at access 2"):
+        interleave_order([2, 3], 2, times=[[0, 1], [0, 5, 4]])
+    with pytest.raises(ValueError, match=r"times\[0\] must have shape \(2,\)"):
+        interleave_order([2], 2, times=[[0, 1, 2]])
 
 
 @pytest.mark.parametrize("kwargs, message", [
