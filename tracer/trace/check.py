@@ -29,7 +29,7 @@ from numba import njit
 from rtcommon.files import read_npy_header
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.validate import InputError, require_int
-from tracer.trace.records import (COUNTER_NAMES, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind,
+from tracer.trace.records import (COUNTER_NAMES, INDEX_MASK, READABLE_VERSIONS, KIND_SHIFT, N_KINDS, RecordKind,
                                   record_id, record_kind)
 
 #: The hash recorded for each array and header in ``meta.json`` (xxHash's XXH3, 64 bits).
@@ -299,8 +299,9 @@ def read_meta(directory: Path) -> dict:
         raise _refuse(where, f"meta.json is damaged ({meta})")
     if not isinstance(meta, dict):
         raise _refuse(where, "meta.json is damaged (not an object)")
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise _refuse(where, f"unsupported format_version {meta.get('format_version')!r}")
+    if meta.get("format_version") not in READABLE_VERSIONS:
+        raise _refuse(where, f"unsupported format_version {meta.get('format_version')!r} (this code reads "
+                             f"{', '.join(map(str, READABLE_VERSIONS))})")
     checksums = meta.get("checksums") if isinstance(meta.get("checksums"), dict) else {}
     headers = checksums.get("headers") if isinstance(checksums.get("headers"), dict) else {}
     missing = [ARRAY_FILES[name] for name in DTYPES if not isinstance(checksums.get(name), str)]
