@@ -107,7 +107,7 @@ def peer_rates(repeats, addresses, writes):
 
 def report(result, rate, cpu_rate, peer, prefix):
     """Print one stream's counts, rates and target; return its figures."""
-    counts = result.to_frame().groupby("level", sort=False).sum(numeric_only=True)
+    counts = result.level_frame().set_index("level")
     print(counts[["accesses", "misses", "coherence_invalidations", "coherence_misses",
                   "false_sharing_misses"]].to_string())
     print(f"simulate_threads : {rate / 1e6:6.1f} M accesses/s wall, {cpu_rate / 1e6:6.1f} by CPU time  "

@@ -533,6 +533,29 @@ class SharedResult:
             frame[column] = values[:, index]
         return frame
 
+    def level_frame(self) -> pd.DataFrame:
+        """One row per level, summed over its instances and kinds: level, instances, then the
+        counts of :meth:`to_frame`."""
+        machine = self.machine
+        totals = self.level_counts()
+        frame = pd.DataFrame({
+            "level": pd.Series(machine.hierarchy.level_names, dtype="string"),
+            "instances": np.array([machine.n_instances(level) for level in range(len(totals))], dtype=np.int64),
+        })
+        for column, index in _COLUMNS:
+            frame[column] = totals[:, index].astype(np.int64)
+        return frame
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready numbers: the machine, per level totals, per instance (and kind) rows,
+        and each thread's accesses by serving level (``served``, the last entry memory)."""
+        def records(frame):
+            return [{key: (value.item() if hasattr(value, "item") else value) for key, value in row.items()}
+                    for row in frame.astype(object).to_dict(orient="records")]
+
+        return {"machine": self.machine.to_dict(), "levels": records(self.level_frame()),
+                "instances": records(self.to_frame()), "served": self.served.tolist()}
+
 
 def _stream(addresses, thread_ids, machine: SharedHierarchy, writes, sizes, kinds) -> ThreadStream:
     """Validate and convert the per-access arrays of :func:`simulate_threads`."""

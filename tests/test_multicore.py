@@ -173,6 +173,25 @@ def test_a_ghost_lasts_until_its_way_is_filled():
     assert l1_coherence_misses([a, a, a, a], [1, 0, 1, 1], [False, True, True, False], allocate=False) == 2
 
 
+def test_level_totals_and_json_agree_with_the_instance_rows():
+    """Mutation: sum only instance 0 in level_counts (``self.counts[:, 0].sum(axis=1)``)."""
+    import json
+
+    rng = np.random.default_rng(3)
+    machine = random_machine(rng)
+    addresses, threads, writes, sizes, kinds = random_stream(rng, machine, 800)
+    result = simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes, kinds=kinds)
+    rows = result.to_frame()
+    levels = result.level_frame()
+    summed = rows.drop(columns=["instance", "threads", "kind"]).groupby("level", sort=False).sum()
+    assert summed.to_dict(orient="list") == levels.drop(columns="instances").set_index("level").to_dict(orient="list")
+    assert levels.instances.tolist() == [machine.n_instances(level) for level in range(len(levels))]
+    table = json.loads(json.dumps(result.to_dict()))
+    assert table["levels"][0]["coherence_misses"] == int(levels.coherence_misses[0])
+    assert len(table["instances"]) == len(rows) and table["served"] == result.served.tolist()
+    assert SharedHierarchy.from_dict(table["machine"]) == machine
+
+
 def test_a_read_only_shared_line_is_never_invalidated():
     """Both threads read one line 20 times in turn: one cold L1 miss each, one L2 miss, nothing lost.
     Mutation: call _invalidate_others for reads too (``if True:``)."""
