@@ -3,9 +3,10 @@
 Renders (or loads from the trace cache) every trace the study will read
 (each scene's tree variants at ``--size``, the base's tree at half and
 twice it for the size check) and compiles the kernels first, untimed. Then
-one :func:`analyses.robustness.robustness` call with ``--trajectories``
-Morris trajectories, the size check and Sobol's design of ``--sobol`` base
-samples, every phase timed per scene (wall and this process's CPU time).
+one :func:`analyses.robustness.robustness` call per scene with
+``--trajectories`` Morris trajectories, the size check and Sobol's design of
+``--sobol`` base samples, every phase timed (wall and this process's CPU
+time) and printed as the scene ends.
 
 The budgeted designs are larger than the measured ones; their times are
 **projected** from the measured rates (a design's time grows with its
@@ -64,19 +65,27 @@ def prepare(base, scenes) -> float:
     return time.perf_counter() - start
 
 
-def phase_totals(result, timings, phase: str) -> dict:
-    """Seconds, CPU seconds, samples and run paths of one phase, summed over the scenes."""
-    design = "sobol" if phase == "sobol" else "morris"
-    totals = {"seconds": sum(t[phase]["seconds"] for t in timings.values()),
-              "cpu_seconds": sum(t[phase]["cpu_seconds"] for t in timings.values()),
-              "samples": int((result.samples["design"] == design).sum()) if phase != "size_check" else 0}
-    runs = {"simulated": 0, "re_costed": 0, "reused": 0}
-    for summary in result.summary["scenes"].values():
-        paths = summary["sobol"]["runs"] if phase == "sobol" else summary["runs"] if phase == "morris" else {}
-        for path, count in paths.items():
-            runs[path] += count
-    totals["runs"] = runs
-    return totals
+def scene_phases(result, timings) -> dict:
+    """Per phase of one scene's study: seconds, CPU seconds, samples and run paths."""
+    (scene, summary), = result.summary["scenes"].items()
+    phases = {}
+    for phase in ("morris", "size_check", "sobol"):
+        design = result.samples["design"]
+        phases[phase] = {**timings[scene][phase], "samples": int((design == phase).sum()),
+                         "runs": summary["sobol"]["runs"] if phase == "sobol" else
+                         summary["runs"] if phase == "morris" else dict.fromkeys(("simulated", "re_costed", "reused"), 0)}
+    return phases
+
+
+def add_phases(totals: dict, phases: dict) -> None:
+    """Add one scene's ``phases`` into ``totals`` (same shape)."""
+    for phase, figures in phases.items():
+        total = totals.setdefault(phase, {"seconds": 0.0, "cpu_seconds": 0.0, "samples": 0,
+                                          "runs": dict.fromkeys(figures["runs"], 0)})
+        for key in ("seconds", "cpu_seconds", "samples"):
+            total[key] += figures[key]
+        for path, count in figures["runs"].items():
+            total["runs"][path] += count
 
 
 def share(runs: dict) -> str:
@@ -99,10 +108,19 @@ def main():
     base = replace(ROBUSTNESS_EXPERIMENT, size=args.size)
     warnings.simplefilter("ignore")
     prepared = prepare(base, args.scenes)
-    timings = {}
-    result = robustness(base, scenes=args.scenes, trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
-                        timings=timings)
-    morris, check, sobol = (phase_totals(result, timings, phase) for phase in ("morris", "size_check", "sobol"))
+    print(f"{len(args.scenes)} scene(s) at {args.size}x{args.size}; {os.cpu_count()} CPUs here; traces and "
+          f"compilation before, untimed: {prepared:.0f} s", flush=True)
+    totals, per_scene = {}, {}
+    for scene in args.scenes:
+        timings = {}
+        result = robustness(base, scenes=[scene], trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
+                            timings=timings)
+        per_scene[scene] = scene_phases(result, timings)
+        add_phases(totals, per_scene[scene])
+        print(f"{scene}: " + "; ".join(f"{phase} {f['samples']} samples {f['seconds']:.0f} s wall "
+                                       f"{f['cpu_seconds']:.0f} s CPU" for phase, f in per_scene[scene].items()),
+              flush=True)
+    morris, check, sobol = (totals[phase] for phase in ("morris", "size_check", "sobol"))
     n_scenes = len(args.scenes)
     morris_samples = BUDGET_TRAJECTORIES * (len(FACTORS) + 1) * n_scenes
     sobol_samples = BUDGET_SOBOL * (SOBOL_FACTORS + 2) * n_scenes
@@ -112,8 +130,6 @@ def main():
         projected[rate] = {
             "morris": (morris[measured] * morris_samples / morris["samples"] + check[measured]) / spread,
             "sobol": sobol[measured] * sobol_samples / sobol["samples"] / spread}
-    print(f"{n_scenes} scene(s) ({' '.join(args.scenes)}) at {args.size}x{args.size}; {os.cpu_count()} CPUs here; "
-          f"traces and compilation before, untimed: {prepared:.0f} s")
     print(f"measured Morris: {args.trajectories} trajectories x {len(FACTORS) + 1} samples a scene: "
           f"{morris['samples']} samples in {morris['seconds']:.0f} s wall, {morris['cpu_seconds']:.0f} s CPU; "
           f"{share(morris['runs'])}")
@@ -133,7 +149,7 @@ def main():
               f"target <= {target:.0f} s: {verdict}")
     print(json.dumps({"size": args.size, "scenes": args.scenes, "trajectories": args.trajectories,
                       "sobol": args.sobol, "morris": morris, "size_check": check, "sobol_phase": sobol,
-                      "per_scene": timings, "budget_morris_samples": morris_samples,
+                      "per_scene": per_scene, "budget_morris_samples": morris_samples,
                       "budget_sobol_samples": sobol_samples,
                       "projected_seconds": {k: {p: round(v, 1) for p, v in d.items()} for k, d in projected.items()},
                       "targets": {"morris": MORRIS_TARGET_SECONDS, "sobol": SOBOL_TARGET_SECONDS},
