@@ -53,7 +53,7 @@ from numba import njit
 
 from cachesim.inputs import as_addresses, as_writes
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
-                           CacheGeometry, _find, _insert, _set_base)
+                           CacheGeometry, _find, _insert)
 from cachesim.sharing import SharedHierarchy
 from cachesim.simulate import _check_line_range, cache_geometry
 from rtcommon.jit import NO_REFCOUNTS
@@ -405,8 +405,8 @@ def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tupl
     per_instance = np.array([machine.threads_per_instance(level) for level in range(n_levels)], dtype=np.int64)
     instance_base = np.concatenate(([0], np.cumsum(n_instances)[:-1])).astype(np.int64)
     over_instances = CacheGeometry(geometry.line_shift, geometry.rel_shift, geometry.n_sets, geometry.set_mask,
-                               geometry.ways, geometry.policy, offset, geometry.inclusion, geometry.seeds,
-                               geometry.write_allocate)
+                                   geometry.ways, geometry.policy, offset, geometry.inclusion, geometry.seeds,
+                                   geometry.write_allocate)
     return (over_instances,
             MachineGeometry(instance_of, n_instances, level_ways.astype(np.int64), per_instance, instance_base,
                             int(n_instances.sum())))
@@ -439,13 +439,18 @@ class SharedState:
         machine = self.machine
         n_levels = len(machine.hierarchy.levels)
         total_ways = int(np.sum(self.machine_geometry.level_ways * self.machine_geometry.n_instances))
-        self.tags = np.full(total_ways, -1, dtype=np.int64)
-        self.stamps = np.zeros(total_ways, dtype=np.int64)
+        try:
+            self.tags = np.full(total_ways, -1, dtype=np.int64)
+            self.stamps = np.zeros(total_ways, dtype=np.int64)
+            self.ghosts = np.full(total_ways, -1, dtype=np.int64)
+            self.ghost_bytes = np.zeros((total_ways, 2), dtype=np.int64)
+        except MemoryError:
+            raise MemoryError(f"shared hierarchy {machine.name!r}: the {total_ways:,} cache lines of its instances "
+                              f"need {40 * total_ways / 2**30:,.1f} GiB of simulator state (40 bytes each), more "
+                              "than this machine can allocate") from None
         most = int(self.machine_geometry.n_instances.max())
         self.counts = np.zeros((n_levels, most, N_KINDS, N_SHARED_COUNTERS), dtype=np.int64)
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
-        self.ghosts = np.full(total_ways, -1, dtype=np.int64)
-        self.ghost_bytes = np.zeros((total_ways, 2), dtype=np.int64)
         self.ghost_filter = np.zeros(GHOST_FILTER_SIZE, dtype=np.int32)
         self.clock = 0
 
@@ -569,7 +574,7 @@ def _stream(addresses, thread_ids, machine: SharedHierarchy, writes, sizes, kind
     if sizes is None:
         byte_counts = np.zeros(0, dtype=np.int64)
     else:
-        byte_counts = _small_integers(sizes, n, "sizes", 1 << 20, "a megabyte", lowest=1)
+        byte_counts = _small_integers(sizes, n, "sizes", 1 << 20, "bytes, below a megabyte", lowest=1)
     _check_line_range(addresses, machine.hierarchy)
     return ThreadStream(addresses, threads, flags, byte_counts, kind_codes)
 
