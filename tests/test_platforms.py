@@ -6,6 +6,7 @@ import pytest
 
 from coherence.cost import COST_MODELS, MEASURED_CYCLES, get_cost_model
 from coherence.platforms import PLATFORMS, Platform, get_platform
+from test_simulate_cli import saved  # noqa: F401  (the saved random trace fixture)
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "platforms.md"
 
@@ -102,3 +103,60 @@ def test_bad_platforms_are_refused_by_name():
     with pytest.raises(ValueError, match="Platform.hierarchy"):
         replace(zen, hierarchy=zen.hierarchy.hierarchy)
     assert isinstance(get_platform(zen), Platform) and "modern" in COST_MODELS
+
+
+def test_experiment_under_a_platform_takes_its_machine():
+    """The Experiment's hierarchy, cost and CPUs are the platform's (a thread's share of each level, one CPU a
+    hardware thread) and its parameters say that shared levels are not interleaved; without a platform the
+    parameters have no platform key, so every output is as before.
+    Mutation: return ``_hierarchy(self.hierarchy)`` in hierarchy_object whatever the platform."""
+    from analyses.experiment import Experiment
+
+    zen = get_platform("zen4-7950x")
+    experiment = Experiment(scene="tetra", size=8, platform="zen4-7950x")
+    assert experiment.hierarchy_object() == zen.thread_view()
+    assert experiment.cost_model() == zen.cost and experiment.machine().n_cpus == 32
+    parameters = experiment.as_parameters()
+    assert parameters["n_cpus"] == 32 and parameters["hierarchy"]["name"] == "zen4-7950x-thread"
+    assert parameters["platform"]["name"] == "zen4-7950x" and parameters["platform"]["smt"] == 2
+    assert "shared levels not yet interleaved" in parameters["platform"]["shared_levels"]
+    assert "platform" not in Experiment(scene="tetra", size=8).as_parameters()
+
+
+@pytest.mark.parametrize("field, value", [("hierarchy", "modern"), ("cost", "modern"), ("n_cpus", 4)])
+def test_experiment_refuses_a_platform_beside_what_it_sets(field, value):
+    """Mutation: drop the ("n_cpus", STUDY_CPUS) pair from _check_platform (the n_cpus case passes)."""
+    from analyses.experiment import Experiment
+
+    with pytest.raises(ValueError, match=f"Experiment.platform apple-m1 sets .* leave Experiment.{field}"):
+        Experiment(platform="apple-m1", **{field: value})
+    with pytest.raises(ValueError, match="Experiment.platform: unknown platform 'm9'"):
+        Experiment(platform="m9")
+
+
+def test_simulate_under_a_platform(saved, capsys):
+    """``coherence simulate --platform``: process counts 1..2 x hardware threads, the platform's CPUs,
+    thread view and costs, the same runs as study() given them; with --hierarchy, --cost or --cpus a
+    one-line error naming the option.
+    Mutation: drop ``args.processes = list(platform.default_processes())`` in simulate.run."""
+    import json
+
+    from analyses.cli import main
+    from coherence.simulation import Machine
+    from coherence.studies import study
+
+    trace, folder = saved
+    m1 = get_platform("apple-m1")
+    assert main(["simulate", str(folder), "--mapping", "S", "--platform", "apple-m1", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [run["n_processes"] for run in report["runs"]] == list(range(1, 9))
+    expected = study(trace, ["S"], list(range(1, 9)), hierarchy=m1.thread_view(), cost=m1.cost,
+                     machine=Machine(n_cpus=4), progress=False).runs
+    assert [run["speedup_user"] for run in report["runs"]] == pytest.approx(expected["speedup_user"].tolist())
+    assert report["parameters"]["platform"]["name"] == "apple-m1"
+    assert report["parameters"]["machine"]["n_cpus"] == 4
+    for option, value in (("--hierarchy", "modern"), ("--cost", "modern"), ("--cpus", "4")):
+        assert main(["simulate", str(folder), "--platform", "apple-m1", option, value]) == 2
+        err = capsys.readouterr().err
+        assert f"--platform apple-m1 sets the hierarchy, the cost model and the CPUs; drop {option}" in err
+        assert "Traceback" not in err
