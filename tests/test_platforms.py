@@ -160,3 +160,20 @@ def test_simulate_under_a_platform(saved, capsys):
         err = capsys.readouterr().err
         assert f"--platform apple-m1 sets the hierarchy, the cost model and the CPUs; drop {option}" in err
         assert "Traceback" not in err
+
+
+def test_whatif_under_a_platform_varies_the_platforms_machine():
+    """A what-if study whose base has a platform configures each point from the platform's thread view, cost
+    model and hardware threads; a grid over what the platform sets is refused.
+    Mutation: ``n_cpus = property(lambda self: self.experiment.n_cpus)`` in WhatIf (the CPUs stay 8)."""
+    from analyses.whatif import WhatIf, configure
+
+    m1 = get_platform("apple-m1")
+    study = WhatIf.of("latency", {"memory_latency": [100, 200]}, scene="tetra", size=8, platform="apple-m1")
+    hierarchy, _, cost, machine, n_processes = configure(study, {"memory_latency": 200})
+    assert hierarchy == replace(m1.thread_view(), memory_latency=200)
+    assert cost == m1.cost and machine.n_cpus == 4 and n_processes == 8
+    assert study.hierarchy == "apple-m1-thread" and study.cost == "apple-m1"
+    for key, values in (("n_cpus", [2, 4]), ("cost", ["modern"]), ("hierarchy", ["modern"])):
+        with pytest.raises(ValueError, match=rf"grid\['{key}'\]: the platform apple-m1 sets"):
+            WhatIf.of("bad", {key: values}, scene="tetra", size=8, platform="apple-m1")

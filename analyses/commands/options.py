@@ -25,7 +25,7 @@ __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", 
            "tree_options", "size_options", "cache_options", "mappings_options",
            "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS", "PAGE_PLACEMENTS",
            "WORKLOADS", "TREE_VARIANTS", "workload_options", "workload_from_args", "EXPERIMENT_OPTIONS",
-           "experiment_from_args", "PLATFORMS", "ExplicitStore", "given", "check_platform_options"]
+           "experiment_from_args", "PLATFORMS", "platform_options", "ExplicitStore", "given", "check_platform_options"]
 
 
 class RegistryNames(Sequence):
@@ -208,12 +208,19 @@ def model_options() -> argparse.ArgumentParser:
                         help="memory layout of scene records: %(choices)s (default %(default)s)")
     parent.add_argument("--cost", default="alpha8400", choices=COST_MODELS, metavar="NAME", action=ExplicitStore,
                         help="cycles per operation and clock rate: %(choices)s (default %(default)s)")
+    return argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter, parents=[parent, platform_options()])
+
+
+def platform_options(processes: str = "process counts default to 1..2 x hardware threads, at most 32"
+                     ) -> argparse.ArgumentParser:
+    """``--platform NAME``: a machine of today (:data:`coherence.platforms.PLATFORMS`); ``processes`` says
+    what it does to the subcommand's process counts."""
+    parent = _parent()
     parent.add_argument("--platform", choices=PLATFORMS, metavar="NAME",
                         help="a machine of today: %(choices)s (docs/platforms.md). It sets the hierarchy, the cost "
                              "model and the CPUs (one per hardware thread), so it is not combined with --hierarchy, "
-                             "--cost or --cpus; process counts default to 1..2 x hardware threads, at most 32. "
-                             "Shared levels are not yet interleaved: each hardware thread is simulated with its "
-                             "share of every level (default: the study's machine)")
+                             f"--cost or --cpus; {processes}. Shared levels are not yet interleaved: each hardware "
+                             "thread is simulated with its share of every level (default: the study's machine)")
     return parent
 
 
