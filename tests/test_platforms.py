@@ -177,3 +177,20 @@ def test_whatif_under_a_platform_varies_the_platforms_machine():
     for key, values in (("n_cpus", [2, 4]), ("cost", ["modern"]), ("hierarchy", ["modern"])):
         with pytest.raises(ValueError, match=rf"grid\['{key}'\]: the platform apple-m1 sets"):
             WhatIf.of("bad", {key: values}, scene="tetra", size=8, platform="apple-m1")
+
+
+def test_report_under_a_platform_takes_its_process_counts(tmp_path, capsys):
+    """``coherence report --platform apple-m1`` simulates 1..8 processes (2 x its 4 threads) on 4 CPUs and
+    records the platform; --max-processes still bounds the counts when given.
+    Mutation: drop the platform branch that sets ``counts`` in report.run (counts 1..16)."""
+    import json
+
+    from analyses.cli import main
+
+    common = ["report", "tetra", "--size", "8", "--mappings", "S", "--cache", str(tmp_path / "cache"), "--json"]
+    assert main([*common, "--platform", "apple-m1", "--out", str(tmp_path / "a")]) == 0
+    parameters = json.loads(capsys.readouterr().out)["parameters"]
+    assert parameters["n_processes"] == list(range(1, 9)) and parameters["n_cpus"] == 4
+    assert parameters["platform"]["name"] == "apple-m1"
+    assert main([*common, "--platform", "apple-m1", "--max-processes", "3", "--out", str(tmp_path / "b")]) == 0
+    assert json.loads(capsys.readouterr().out)["parameters"]["n_processes"] == [1, 2, 3]
