@@ -38,7 +38,8 @@ MAX_DEFAULT_PROCESSES = 32
 #: What runs under a platform say about their shared levels, in their parameters.
 SHARED_LEVELS_NOTE = ("shared levels not yet interleaved: each hardware thread is simulated with its own copy of "
                       "every level, a shared level cut to the thread's share of its capacity (size / threads "
-                      "sharing it); see docs/platforms.md")
+                      "sharing it), which overstates misses and shows no coherence miss: a pessimistic bound; see "
+                      "docs/platforms.md")
 
 _KB = 1024
 _MB = 1024 * 1024
