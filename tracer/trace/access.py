@@ -37,8 +37,9 @@ from tracer.trace.records import (  # noqa: F401  (re-exported: the format's nam
     Counter, RecordKind, pack, record_id, record_kind, unpack,
 )
 from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityError, array_checksum)
-    ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, META_FILE,
+    ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_FILE,
     TraceIntegrityError, array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
+    write_with_checksum,
 )
 from rtcommon.validate import InputError
 
@@ -281,9 +282,7 @@ def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: di
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
             "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums, "headers": header_checksums(tmp)}}
     data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
-    (tmp / META_FILE).write_bytes(data)
-    # beside it rather than inside, so meta.json stays a plain, comparable record of the render
-    (tmp / _META_CHECKSUM).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
+    write_with_checksum(tmp / META_FILE, data)
 
 
 def _publish(tmp: Path, directory: Path) -> None:

@@ -61,6 +61,29 @@ def _refuse(where: str, detail: str, hint: str = "") -> TraceIntegrityError:
     return TraceIntegrityError(f"{where}: {detail}{hint}", detail)
 
 
+def write_with_checksum(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path``, and its XXH3-64 (16 hex digits and a newline) to ``<path>.xxh3`` beside it.
+
+    Beside the file rather than inside it, so that the file stays a plain,
+    comparable record (a trace's ``meta.json``, a trace cache entry's
+    ``render.json``).
+    """
+    path.write_bytes(data)
+    path.with_name(path.name + ".xxh3").write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
+
+
+def matches_checksum(path: Path, data: bytes) -> bool | None:
+    """Whether ``data``, the bytes read from ``path``, match the checksum in ``<path>.xxh3``.
+
+    None when there is no such file (missing, or a folder in its place).
+    """
+    try:
+        recorded = path.with_name(path.name + ".xxh3").read_text(encoding="ascii", errors="replace")
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError):
+        return None
+    return recorded.strip() == xxhash.xxh3_64_hexdigest(data)
+
+
 def array_checksum(array: np.ndarray) -> str:
     """XXH3-64 of an array's bytes in C order, as 16 hex digits (streamed in chunks; the pages of a
     memory-mapped array leave the resident set as they are hashed)."""
@@ -289,11 +312,11 @@ def read_meta(directory: Path) -> dict:
         meta = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         meta = error
-    if not (directory / META_CHECKSUM).is_file():
+    matches = matches_checksum(directory / META_FILE, data)
+    if matches is None:
         raise _refuse(where, f"{META_CHECKSUM} (the checksum of meta.json) is missing, so the trace cannot be "
                              "verified", rerender_hint(directory, meta))
-    if (directory / META_CHECKSUM).read_text(encoding="ascii", errors="replace").strip() != \
-            xxhash.xxh3_64_hexdigest(data):
+    if not matches:
         raise _refuse(where, "meta.json does not match its checksum (file damaged)")
     if isinstance(meta, Exception):
         raise _refuse(where, f"meta.json is damaged ({meta})")
