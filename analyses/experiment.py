@@ -31,14 +31,12 @@ from coherence.page_placement import PAGE_PLACEMENTS
 from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
 from rtcommon.validate import InputError, require_bool, require_int
 from tracer.rendering.tree_variants import STUDY_TREE_VARIANT
+from tracer.scenes.model import MAX_DEPTH
 
-__all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
+__all__ = ["Experiment", "REPORT_PROCESSES"]
 
 #: Process counts of a report unless told otherwise: 1..16, the study's range.
 REPORT_PROCESSES = tuple(range(1, 17))
-
-#: The deepest ray tree a run may ask for.
-MAX_DEPTH_LIMIT = 64
 
 
 @dataclass(frozen=True)
@@ -63,7 +61,7 @@ class Experiment:
         kd-tree builder (:data:`tracer.kd.tree.BUILDERS`); None: the
         workload's.
     max_depth : int, optional
-        Ray-tree depth, primary = 1, in [1, :data:`MAX_DEPTH_LIMIT`]; None:
+        Ray-tree depth, primary = 1, in [1, :data:`tracer.scenes.model.MAX_DEPTH`]; None:
         the scene's.
     mappings : tuple of str or coherence.mappings.Mapping
         Mappings compared, distinct, at least one.
@@ -159,7 +157,7 @@ class Experiment:
             raise InputError(f"Experiment.kd must be None or {variant.builder} for tree_variant {self.tree_variant}, "
                              f"got {self.kd!r}")
         if self.max_depth is not None:
-            require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH_LIMIT)
+            require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH)
         mappings = (self.mappings,) if isinstance(self.mappings, str) else tuple(self.mappings)
         names = []
         for mapping in mappings:

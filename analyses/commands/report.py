@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     # every user error surfaces here or in build_report, before rendering
     check_at_least(args, size=1, max_processes=1, cpus=1, background=0, background_footprint=0, page_seed=0,
                    processes=1)
-    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    checks.check_max_depth(args.max_depth)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
