@@ -1254,6 +1254,35 @@ def test_ctrl_c_while_python_m_analyses_loads_prints_one_line():
     assert (done.returncode, done.stderr) == (-signal.SIGINT, "coherence: interrupted\n")
 
 
+_LOADING_INTERRUPT_SIGINT_BLOCKED = textwrap.dedent('''
+    import runpy, signal, sys
+
+    class InterruptWhileLoading:
+        """Ctrl-C as the command line imports its interrupt handling, in a process whose SIGINT is blocked."""
+        def find_spec(self, name, path=None, target=None):
+            if name == "analyses.interrupts" and not hasattr(self, "done"):
+                self.done = True
+                raise KeyboardInterrupt
+            return None
+
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    sys.meta_path.insert(0, InterruptWhileLoading())
+    sys.argv = ["coherence", "--version"]
+    runpy.run_module("analyses", run_name="__main__", alter_sys=True)
+''')
+
+
+def test_python_m_analyses_interrupted_while_loading_exits_130_when_sigint_cannot_kill_it():
+    """``python -m analyses`` interrupted while it loads, in a process where SIGINT cannot end it, exits with
+    status 130 after its one line, as the ``coherence`` script's ``exit_by_sigint`` does.
+
+    Fails (a NameError traceback for ``main``, status 1) if ``analyses/__main__.py`` sends itself SIGINT
+    without ``exit_by_sigint``'s fallback (its ``os.kill`` alone, as before).
+    """
+    done = _python(_LOADING_INTERRUPT_SIGINT_BLOCKED)
+    assert (done.returncode, done.stderr) == (130, "coherence: interrupted\n")
+
+
 def test_the_toolkit_raises_no_bare_value_error():
     """Every error the toolkit raises for bad input is an InputError, which the command line tells apart
     from a bug's ValueError (exit 2 with one line, not exit 1 with a traceback).
