@@ -118,8 +118,8 @@ def main():
         per_scene[scene] = scene_phases(result, timings)
         add_phases(totals, per_scene[scene])
         print(f"{scene}: " + "; ".join(f"{phase} {f['samples']} samples {f['seconds']:.0f} s wall "
-                                       f"{f['cpu_seconds']:.0f} s CPU" for phase, f in per_scene[scene].items()),
-              flush=True)
+                                       f"{f['cpu_seconds']:.0f} s CPU, {share(f['runs'])}"
+                                       for phase, f in per_scene[scene].items()), flush=True)
     morris, check, sobol = (totals[phase] for phase in ("morris", "size_check", "sobol"))
     n_scenes = len(args.scenes)
     morris_samples = BUDGET_TRAJECTORIES * (len(FACTORS) + 1) * n_scenes
