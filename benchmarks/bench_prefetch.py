@@ -7,8 +7,12 @@ and the inclusive ``alpha21164``: without prefetchers (the default kernels),
 with a next-line prefetcher (tagged, degree 1) on L1, and with a stride
 prefetcher (degree 2) on L1 and a next-line one on L2. The PC-like id of an
 access is its 1 MB region of the scene (four ids), a stand-in for record kinds.
-Prints accesses/s, L1 and last-level misses and the prefetchers' counts, then
-one JSON line.
+Then the shared-cache simulator (:func:`cachesim.multicore.simulate_threads`)
+on the same stream cut into 8 consecutive parts, one per thread, interleaved
+64 accesses at a time (Q = 64 accesses), on ``modern``'s levels with L1 and
+L2 private to each of 8 cores and L3 shared: off, and with the same
+prefetchers (the region as the kind). Prints accesses/s, L1 and last-level
+misses and the prefetchers' counts, then one JSON line.
 
     python benchmarks/bench_prefetch.py [--accesses N] [--repeats R]
 """
@@ -19,7 +23,8 @@ from dataclasses import replace
 import numpy as np
 
 from bench_cachesim import ray_tracer_like_stream
-from cachesim import Hierarchy, Prefetcher, get_hierarchy, simulate
+from cachesim import Hierarchy, Prefetcher, SharedHierarchy, get_hierarchy, simulate
+from cachesim.multicore import interleave, simulate_threads
 from timing import best_of
 
 
@@ -60,6 +65,29 @@ def main():
             print(line, flush=True)
             figures[f"{preset} {label}"] = {"maccesses_per_s": rate, "l1_misses": int(result.misses[0]),
                                             "memory_accesses": result.memory_accesses}
+    n_threads = 8
+    parts = np.array_split(np.arange(stream.size), n_threads)
+    addresses, threads = interleave([stream[part] for part in parts], quantum=64)
+    kinds = np.empty_like(pcs)
+    for thread, part in enumerate(parts):
+        kinds[threads == thread] = pcs[part]
+    off_rate = None
+    for label, prefetchers in setups.items():
+        machine = SharedHierarchy(with_prefetchers(get_hierarchy("modern"), prefetchers), n_cores=n_threads,
+                                  shared_by=("core", "core", "machine"))
+        simulate_threads(addresses[:1000], threads[:1000], machine, kinds=kinds[:1000])
+        seconds, result = best_of(args.repeats, lambda: simulate_threads(addresses, threads, machine, kinds=kinds))
+        rate = addresses.size / seconds / 1e6
+        off_rate = rate if off_rate is None else off_rate
+        totals = result.level_counts()
+        line = (f"8 threads   {label:26s} {rate:7.2f} M accesses/s ({rate / off_rate:5.2f} x off)  "
+                f"L1 misses {totals[0, 2]:>9,}  memory {totals[-1, 2]:>8,}")
+        if result.prefetch_counts is not None:
+            issued, useful, useless = result.prefetch_counts.sum(axis=(0, 1))
+            line += f"  prefetches issued {issued:,} useful {useful:,} useless {useless:,}"
+        print(line, flush=True)
+        figures[f"8 threads Q=64 {label}"] = {"maccesses_per_s": rate, "l1_misses": int(totals[0, 2]),
+                                              "memory_accesses": int(totals[-1, 2])}
     print(json.dumps(figures))
 
 

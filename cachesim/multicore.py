@@ -39,7 +39,8 @@ counts, per record kind:
 
 Supported: every replacement policy (random draws use the global access
 clock and the level's seed, the same for every instance), non-inclusive and
-inclusive hierarchies. Refused with a clear error: exclusive hierarchies and
+inclusive hierarchies, prefetchers (:mod:`cachesim.multicore_prefetch`, a
+walk of its own). Refused with a clear error: exclusive hierarchies and
 hierarchies with a data TLB.
 """
 from __future__ import annotations
@@ -51,6 +52,7 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
+from cachesim import prefetch as P
 from cachesim.inputs import as_addresses, as_writes
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
                            CacheGeometry, _find, _insert)
@@ -432,6 +434,7 @@ class SharedState:
                              "give the hierarchy without its tlb")
         self.machine = machine
         self.geometry, self.machine_geometry = _machine_geometry(machine, cache_geometry(machine.hierarchy))
+        self.prefetch_geometry = P.prefetch_geometry(machine.hierarchy, self.machine_geometry.n_instances)
         self.reset()
 
     def reset(self) -> None:
@@ -453,6 +456,8 @@ class SharedState:
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
         self.ghost_filter = np.zeros(GHOST_FILTER_SIZE, dtype=np.int32)
         self.clock = 0
+        self.prefetch = None if self.prefetch_geometry is None else P.empty_prefetch_arrays(
+            self.prefetch_geometry, total_ways, self.machine_geometry.n_instances)
 
     @property
     def arrays(self) -> SharedArrays:
@@ -466,6 +471,8 @@ class SharedState:
         clone.machine, clone.geometry, clone.machine_geometry = self.machine, self.geometry, self.machine_geometry
         for name in ("tags", "stamps", "ghosts", "ghost_bytes", "ghost_filter", "counts", "served"):
             setattr(clone, name, getattr(self, name).copy())
+        clone.prefetch_geometry = self.prefetch_geometry
+        clone.prefetch = None if self.prefetch is None else P.PrefetchArrays(*(array.copy() for array in self.prefetch))
         clone.clock = self.clock
         return clone
 
@@ -493,6 +500,11 @@ class SharedResult:
         Whether the call was given record kinds (the frame then has a ``kind`` column).
     state : SharedState
         The state after the call, to continue from.
+    prefetch_counts : ndarray of int64, shape (L, G, 3), or None
+        With prefetchers: per level and instance, the prefetches issued,
+        useful and useless in this call (:mod:`cachesim.prefetch`).
+    prefetch_pending : ndarray of int64, shape (L, G), or None
+        Prefetched lines still unused in each instance after the call.
     """
 
     machine: SharedHierarchy
@@ -500,6 +512,8 @@ class SharedResult:
     served: np.ndarray
     by_kind: bool
     state: SharedState
+    prefetch_counts: np.ndarray | None = None
+    prefetch_pending: np.ndarray | None = None
 
     def level_counts(self) -> np.ndarray:
         """Counts summed over instances and kinds, int64 (L, N_SHARED_COUNTERS)."""
@@ -613,21 +627,37 @@ def simulate_threads(addresses, thread_ids, machine: SharedHierarchy | SharedSta
         each touches its whole first-level line (no false sharing can then show).
     kinds : array_like of int, shape (N,), optional
         Record kind of each access, in [0, :data:`N_KINDS`); counts are then
-        reported per kind.
+        reported per kind. Stride prefetchers take it as the access's PC-like id.
 
     Returns
     -------
     SharedResult
         Counts of this call only, and the state after it. The rules are in
-        this module's docstring.
+        this module's docstring, and for prefetchers in
+        :mod:`cachesim.multicore_prefetch`.
     """
     state = machine if isinstance(machine, SharedState) else SharedState(machine)
     stream = _stream(addresses, thread_ids, state.machine, writes, sizes, kinds)
     counts_before, served_before = state.counts.copy(), state.served.copy()
-    state.clock = int(simulate_threads_stream(stream, state.geometry, state.machine_geometry, state.arrays,
-                                              state.clock))
+    if state.prefetch is None:
+        state.clock = int(simulate_threads_stream(stream, state.geometry, state.machine_geometry, state.arrays,
+                                                  state.clock))
+        return SharedResult(state.machine, state.counts - counts_before, state.served - served_before,
+                            kinds is not None, state)
+    from cachesim import multicore_prefetch as MP
+
+    if stream.addresses.size and stream.addresses.max() >= 2**63:
+        raise InputError("with prefetchers, addresses must be below 2**63")
+    prefetch_before = state.prefetch.counts.copy()
+    pending_before = MP.pending_by_instance(state.prefetch, state.tags, state.geometry, state.machine_geometry)
+    state.clock = int(MP.simulate_threads_prefetching(stream, state.geometry, state.machine_geometry, state.arrays,
+                                                      state.clock, state.prefetch_geometry, state.prefetch))
+    pending = MP.pending_by_instance(state.prefetch, state.tags, state.geometry, state.machine_geometry)
+    issued_useful = state.prefetch.counts - prefetch_before
+    useless = issued_useful[..., P.ISSUED] - issued_useful[..., P.USEFUL] - (pending - pending_before)
     return SharedResult(state.machine, state.counts - counts_before, state.served - served_before,
-                        kinds is not None, state)
+                        kinds is not None, state, np.concatenate([issued_useful, useless[..., None]], axis=-1),
+                        pending)
 
 
 def interleave_order(lengths, quantum: int = 1, times=None) -> tuple[np.ndarray, np.ndarray]:

@@ -148,30 +148,44 @@ class PrefetchArrays(NamedTuple):
     counts: np.ndarray
 
 
-def prefetch_geometry(hierarchy) -> PrefetchGeometry | None:
-    """The kernels' view of a hierarchy's prefetchers (None when it has none)."""
+def prefetch_geometry(hierarchy, instances=None) -> PrefetchGeometry | None:
+    """The kernels' view of a hierarchy's prefetchers (None when it has none).
+
+    ``instances`` (int, (L,)) gives the instances of each level on a machine
+    of shared levels (:mod:`cachesim.multicore`), each with its own stride
+    table: instance ``g`` of level ``l`` owns the ``table_size[l]`` rows from
+    ``table_offset[l] + g * table_size[l]``. None: one instance per level.
+    """
     if not hierarchy.prefetches:
         return None
     prefetchers = [level.prefetcher for level in hierarchy.levels]
     sizes = np.array([p.table_size if p is not None and p.kind == "stride" else 0 for p in prefetchers],
                      dtype=np.int64)
+    rows = sizes if instances is None else sizes * np.asarray(instances, dtype=np.int64)
     return PrefetchGeometry(
         kind=np.array([NO_PREFETCH if p is None else _KIND_CODES[p.kind] for p in prefetchers], dtype=np.int64),
         trigger=np.array([ON_MISS if p is None else _TRIGGER_CODES[p.trigger] for p in prefetchers],
                          dtype=np.int64),
         degree=np.array([0 if p is None else p.degree for p in prefetchers], dtype=np.int64),
         distance=np.array([0 if p is None else p.distance for p in prefetchers], dtype=np.int64),
-        table_offset=np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64),
+        table_offset=np.concatenate(([0], np.cumsum(rows)[:-1])).astype(np.int64),
         table_size=sizes,
     )
 
 
-def empty_prefetch_arrays(geometry: PrefetchGeometry, n_ways: int) -> PrefetchArrays:
-    """Fresh prefetcher state for a hierarchy of ``n_ways`` ways in all."""
-    table = np.zeros((int(geometry.table_size.sum()), 4), dtype=np.int64)
+def empty_prefetch_arrays(geometry: PrefetchGeometry, n_ways: int, instances=None) -> PrefetchArrays:
+    """Fresh prefetcher state for a hierarchy of ``n_ways`` ways in all.
+
+    With ``instances`` (as for :func:`prefetch_geometry`), ``counts`` has
+    shape (L, G, N_PREFETCH_COUNTERS), ``G`` the most instances of a level.
+    """
+    n_levels = geometry.kind.shape[0]
+    per_level = np.ones(n_levels, dtype=np.int64) if instances is None else np.asarray(instances, dtype=np.int64)
+    table = np.zeros((int((geometry.table_size * per_level).sum()), 4), dtype=np.int64)
     table[:, TABLE_ID] = -1
-    return PrefetchArrays(np.full(n_ways, -1, dtype=np.int64), table,
-                          np.zeros((geometry.kind.shape[0], N_PREFETCH_COUNTERS), dtype=np.int64))
+    shape = (n_levels, N_PREFETCH_COUNTERS) if instances is None else (n_levels, int(per_level.max()),
+                                                                       N_PREFETCH_COUNTERS)
+    return PrefetchArrays(np.full(n_ways, -1, dtype=np.int64), table, np.zeros(shape, dtype=np.int64))
 
 
 def pending_prefetches(prefetch: PrefetchArrays, tags: np.ndarray, cache_geometry) -> np.ndarray:
