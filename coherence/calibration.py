@@ -51,7 +51,7 @@ from coherence.cost import CLOCK_HZ, OPERATIONS, SQUARE_ROOT_CYCLES_21164, CostM
 from coherence.unknowns import unknown
 from rtcommon.validate import InputError
 
-#: Floating-point operations (+, -, *, /, sqrt and compares each count one)
+#: Floating-point operations (``+``, ``-``, ``*``, ``/``, sqrt and compares each count one)
 #: on the full path of each routine, counted by hand in this project's code.
 #: Only their ratios are used: they tie the other costs to the sphere test.
 #:

@@ -4,21 +4,21 @@ NFF is parsed by whitespace-separated tokens, not by lines, because writers
 differ in where they break lines (``c`` may put its two ends on one line or
 two). ``#`` starts a comment to the end of the line. Directives:
 
-==============================  ==============================================
-``v``                           start of the view, followed by any of
-                                ``from x y z``, ``at x y z``, ``up x y z``,
-                                ``angle deg``, ``hither d``,
-                                ``resolution w h``; the view precedes objects
-``b r g b``                     background colour
-``l x y z [r g b]``             point light, white without a colour
-``f r g b Kd Ks shine T ior``   material of the objects that follow
-``c bx by bz br ax ay az ar``   cone/cylinder without caps (negative radii:
-                                inside visible)
-``s x y z r``                   sphere
-``p n`` + n vertices            planar polygon; 3 vertices make a TRIANGLE
-                                element, more a POLYGON element
-``pp n`` + n ``x y z nx ny nz`` polygon patch with vertex normals (PATCH)
-==============================  ==============================================
+================================  ==============================================
+``v``                             start of the view, followed by any of
+                                  ``from x y z``, ``at x y z``, ``up x y z``,
+                                  ``angle deg``, ``hither d``,
+                                  ``resolution w h``; the view precedes objects
+``b r g b``                       background colour
+``l x y z [r g b]``               point light, white without a colour
+``f r g b Kd Ks shine T ior``     material of the objects that follow
+``c bx by bz br ax ay az ar``     cone/cylinder without caps (negative radii:
+                                  inside visible)
+``s x y z r``                     sphere
+``p n`` + n vertices              planar polygon; 3 vertices make a TRIANGLE
+                                  element, more a POLYGON element
+``pp n`` + n ``x y z nx ny nz``   polygon patch with vertex normals (PATCH)
+================================  ==============================================
 
 The texture extension (our own; a file without these keywords is plain NFF):
 
@@ -66,7 +66,7 @@ positional reader run to say where (``benchmarks/bench_nff.py`` compares
 
 NFF has no recursion depth. :func:`write_nff` records the scene's depth in a
 comment line ``# max_depth N`` and the reader honours such a line (N in
-1..``MAX_DEPTH`` (64), else an error naming file and line, unless ``max_depth`` is given);
+1..64, else an error naming file and line, unless ``max_depth`` is given);
 without it the depth is the SPD procedure's 5 (the
 :class:`~tracer.scenes.model.Scene` default). :func:`tracer.scenes.catalog.load`
 applies the paper's depth per named scene instead.
@@ -90,13 +90,15 @@ from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PR
                                     MATERIAL_FIELDS, OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS,
                                     Fallback, SceneParts, assemble, parse_fast, polygon_measures,
                                     view_direction_problem)
-from tracer.scenes.model import MAX_DEPTH, Camera, ElementKind, Scene, unread_texture
+from tracer.scenes.model import Camera, ElementKind, Scene, unread_texture
 from rtcommon.validate import InputError
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
 
 #: A UTF-8 byte-order mark (as decoded) at the start of a file: skipped.
 BYTE_ORDER_MARK = "\ufeff"
+#: The largest ``# max_depth N`` the renderer takes.
+MAX_DEPTH = 64
 
 class NFFError(InputError):
     """A malformed NFF file.
@@ -131,7 +133,7 @@ def _normalise_line_breaks(text: str) -> str:
 
 
 def _depth_pragma(text: str, source: str) -> int | None:
-    """The depth of the file's last ``# max_depth N`` line (None without one); refused outside 1..``MAX_DEPTH``."""
+    """The depth of the file's last ``# max_depth N`` line (None without one); refused outside 1..64."""
     found = None
     for found in DEPTH_PRAGMA.finditer(text):
         pass

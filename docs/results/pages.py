@@ -1,0 +1,212 @@
+"""Write the results pages (MyST Markdown) from the outputs ``generate.py run`` left.
+
+Each page is built from one job's folder; every table and figure on it is
+followed by :func:`stamp_line`, naming the command and commit that produced
+it, the date and the machine. Nothing here computes a result: it selects
+columns, rounds and copies figures.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+
+#: What every stamp line starts with; ``tests/test_results_pages.py`` looks for it.
+STAMP_PREFIX = "**Produced by**"
+
+
+def stamp_line(stamp: dict) -> str:
+    """The line under a table or figure: command, commit, date, wall time and machine.
+
+    Parameters
+    ----------
+    stamp : dict
+        A job's ``stamp.json`` (``command``, ``commit``, ``date``,
+        ``seconds``, ``machine``).
+    """
+    return (f"{STAMP_PREFIX} `{stamp['command']}` at commit `{stamp['commit']}` "
+            f"({stamp['date']}, {stamp['seconds']:.0f} s on {stamp['machine']}).")
+
+
+def markdown_table(frame: pd.DataFrame, digits: int = 3) -> str:
+    """A pipe table of ``frame`` (index dropped), floats rounded to ``digits`` significant figures."""
+    def cell(value):
+        if isinstance(value, float):
+            return f"{value:.{digits}g}"
+        return str(value).replace("|", "\\|")
+    lines = ["| " + " | ".join(str(column) for column in frame.columns) + " |",
+             "|" + "---|" * len(frame.columns)]
+    lines += ["| " + " | ".join(cell(value) for value in row) + " |" for row in frame.itertuples(index=False)]
+    return "\n".join(lines)
+
+
+class _Page:
+    """A page being written: text blocks, each table or figure stamped."""
+
+    def __init__(self, title: str, intro: str):
+        self.blocks = [f"# {title}", intro.strip()]
+
+    def text(self, text: str):
+        self.blocks.append(text.strip())
+
+    def table(self, frame: pd.DataFrame, stamp: dict, digits: int = 3):
+        self.blocks += [markdown_table(frame, digits), stamp_line(stamp)]
+
+    def figure(self, source: Path, target: Path, alt: str, stamp: dict):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+        self.blocks += [f"![{alt}](figures/{target.name})", stamp_line(stamp)]
+
+    def write(self, path: Path):
+        path.write_text("\n\n".join(self.blocks) + "\n", encoding="utf-8")
+
+
+def _stamp(folder: Path) -> dict:
+    return json.loads((folder / "stamp.json").read_text(encoding="utf-8"))
+
+
+def _job(work: Path, name: str, summary_file: str):
+    """A finished job's folder, stamp, JSON summary and image size; None when it did not run."""
+    folder = work / name
+    if not (folder / "stamp.json").exists():
+        return None
+    summary = json.loads((folder / summary_file).read_text(encoding="utf-8"))
+    return folder, _stamp(folder), summary, summary["parameters"].get("size", "?")
+
+
+def paper_page(job: tuple, pages: Path) -> str:
+    folder, stamp, summary, size = job
+    page = _Page("The study reproduced", f"""
+`coherence paper` at {size}×{size} pixels: the study's five scenes on its
+machine (the 21164's inclusive caches, 8 CPUs, other users' load), the
+study-era tracer, the cost model fitted to the study's five sequential Strip
+times only (targets scaled by pixel count), then every mapping at every
+process count. The study used 512×512; a smaller image changes the
+per-process loads, so compare the verdicts, not the last digit.""")
+    page.text("## The study's table beside ours")
+    scenes = pd.read_csv(folder / "scenes.csv")
+    page.table(scenes[["scene", "study_elements", "our_elements", "study_tests_1e6", "our_tests_1e6",
+                       "study_seconds", "target_seconds", "fitted_seconds", "relative_error"]], stamp)
+    page.text("""`our_tests_1e6` counts tests at this image size; `target_seconds` is the
+study's sequential time scaled to it, `fitted_seconds` what the fitted
+costs give, `relative_error` their relative difference (negative: the fit
+falls short).""")
+    page.text("## Verdicts at 8 processes")
+    verdicts = pd.DataFrame(summary["verdicts"])
+    page.table(verdicts[["scene", "best_mapping", "best_speedup_user", "best_speedup_real",
+                         "max_imbalance_loss", "max_imbalance_mapping", "max_coherence_loss",
+                         "max_coherence_mapping", "decided_by"]], stamp)
+    page.text("## Sequential times of every mapping, predicted from the fit")
+    page.table(pd.read_csv(folder / "predictions.csv"), stamp)
+    page.text("## Speed-up figures")
+    for column, what in (("speedup_user", "user time"), ("speedup_real", "real time")):
+        page.figure(folder / f"{column}.png", pages / "figures" / f"paper-{column}.png",
+                    f"speed-up by {what}, one panel per scene", stamp)
+    page.write(pages / "paper.md")
+    return "paper"
+
+
+def report_page(job: tuple, pages: Path) -> str:
+    folder, stamp, summary, size = job
+    page = _Page("One scene's report: balls", f"""
+`coherence report balls` at {size}×{size} pixels on today's SAH tracer and the
+default machine. The verdict, as the report states it:
+
+> {summary['verdict']['headline']}""")
+    results = pd.read_csv(folder / "results.csv")
+    runs = results[(results["section"] == "runs") & (results["n_processes"] == summary["verdict"]["n_processes"])]
+    if not runs.empty:
+        wide = runs.pivot_table(index="mapping", columns="metric", values="value", sort=False).reset_index()
+        keep = [c for c in ("mapping", "speedup_user", "speedup_real", "efficiency", "load_balance",
+                            "coherence_factor", "dispatch_factor", "L1_hit_rate", "L2_hit_rate", "L3_hit_rate")
+                if c in wide.columns]
+        page.text(f"## Runs at {summary['verdict']['n_processes']} processes")
+        page.table(wide[keep], stamp)
+    page.text("## Misses per pixel")
+    page.figure(folder / "miss_map.png", pages / "figures" / "report-balls-miss_map.png",
+                "misses per pixel and cache level", stamp)
+    page.write(pages / "report-balls.md")
+    return "report-balls"
+
+
+def whatif_page(work: Path, pages: Path) -> str | None:
+    jobs = [name for name in ("whatif-caches", "whatif-texture") if (work / name / "stamp.json").exists()]
+    if not jobs:
+        return None
+    page = _Page("What-if studies", """
+Built-in `coherence whatif` studies at their own default size (128×128, 8
+processes; balls, and its textured version for the texture study). A positive `coherence_minus_imbalance` means coherence
+lost more efficiency than imbalance at that point.""")
+    for name in jobs:
+        folder = work / name
+        stamp = _stamp(folder)
+        table = pd.read_csv(folder / f"{name}.csv")
+        grid = list(table.columns[:list(table.columns).index("mapping")])
+        wide = table.pivot_table(index=grid + ["mapping"], columns="metric", values="value",
+                                 sort=False).reset_index()
+        wide["coherence_minus_imbalance"] = wide["coherence_loss"] - wide["imbalance_loss"]
+        keep = grid + ["mapping", "imbalance_loss", "coherence_loss", "coherence_minus_imbalance"]
+        keep += [c for c in wide.columns if c.startswith("texel_L1")]
+        page.text(f"## `{name.removeprefix('whatif-')}`: {', '.join(grid)}")
+        page.table(wide[keep], stamp)
+        page.figure(folder / f"{name}.png", pages / "figures" / f"{name}.png", name, stamp)
+    page.write(pages / "whatif.md")
+    return "whatif"
+
+
+def faithfulness_page(work: Path, pages: Path) -> str | None:
+    folder = work / "robustness"
+    source = folder / "faithfulness.md"
+    if not (folder / "stamp.json").exists() or not source.exists():
+        return None
+    stamp = _stamp(folder)
+    body = source.read_text(encoding="utf-8").strip().split("\n")
+    title = body[0].lstrip("# ").strip() if body and body[0].startswith("#") else "How faithful the model is"
+    rest = "\n".join(body[1:] if body and body[0].startswith("#") else body)
+    page = _Page(title, "Generated by `analyses.faithfulness` from the `robustness.json` of the command below.")
+    blocks = []
+    current = []
+    for line in rest.split("\n"):
+        in_table = line.startswith("|")
+        if current and (current[-1].startswith("|")) != in_table:
+            blocks.append(current)
+            current = []
+        current.append(line)
+    if current:
+        blocks.append(current)
+    for block in blocks:
+        page.text("\n".join(block))
+        if block[0].startswith("|"):
+            page.blocks.append(stamp_line(stamp))
+    page.text(stamp_line(stamp))
+    page.write(pages / "faithfulness.md")
+    return "faithfulness"
+
+
+def write_pages(work: Path, pages: Path) -> list[str]:
+    """Write every page whose job's outputs are in ``work``, and the index.
+
+    Returns
+    -------
+    list of str
+        The pages written (without ``.md``), in the index's order.
+    """
+    paper = _job(work, "paper", "paper.json")
+    report = _job(work, "report-balls", "summary.json")
+    written = [paper_page(paper, pages) if paper else None, report_page(report, pages) if report else None,
+               whatif_page(work, pages), faithfulness_page(work, pages)]
+    written = [name for name in written if name]
+    if (pages / "performance.json").exists():
+        from performance import write_performance_page  # noqa: PLC0415 (beside this script)
+        write_performance_page(pages)
+        written.append("performance")
+    index = ["# Results", "",
+             "Generated pages: each table and figure names the command and the commit that",
+             "produced it. `python docs/results/generate.py run --work DIR` reruns the",
+             "commands, `python docs/results/generate.py pages --work DIR` rewrites the pages;",
+             "the documentation build never reruns them.", "",
+             "```{toctree}", ":maxdepth: 1", ""] + written + ["```", ""]
+    (pages / "index.md").write_text("\n".join(index), encoding="utf-8")
+    return written
