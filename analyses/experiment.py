@@ -31,14 +31,12 @@ from coherence.page_placement import PAGE_PLACEMENTS
 from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
 from rtcommon.validate import InputError, require_bool, require_int
 from tracer.rendering.tree_variants import STUDY_TREE_VARIANT
+from tracer.scenes.model import MAX_DEPTH
 
-__all__ = ["Experiment", "MAX_DEPTH_LIMIT", "REPORT_PROCESSES"]
+__all__ = ["Experiment", "REPORT_PROCESSES"]
 
 #: Process counts of a report unless told otherwise: 1..16, the study's range.
 REPORT_PROCESSES = tuple(range(1, 17))
-
-#: The deepest ray tree a run may ask for.
-MAX_DEPTH_LIMIT = 64
 
 
 @dataclass(frozen=True)
@@ -63,7 +61,7 @@ class Experiment:
         kd-tree builder (:data:`tracer.kd.tree.BUILDERS`); None: the
         workload's.
     max_depth : int, optional
-        Ray-tree depth, primary = 1, in [1, :data:`MAX_DEPTH_LIMIT`]; None:
+        Ray-tree depth, primary = 1, in [1, :data:`tracer.scenes.model.MAX_DEPTH`]; None:
         the scene's.
     mappings : tuple of str or coherence.mappings.Mapping
         Mappings compared, distinct, at least one.
@@ -97,6 +95,16 @@ class Experiment:
         :data:`analyses.memory_budget.MIN_MEMORY_BUDGET`.
     progress : bool
         Progress bars on stderr.
+    platform : str or coherence.platforms.Platform, optional
+        A machine of today (:data:`coherence.platforms.PLATFORMS`): it sets
+        the hierarchy, the cost model and the CPUs (one a hardware thread),
+        so ``hierarchy``, ``cost`` and ``n_cpus`` must stay at their
+        defaults. Shared levels are not yet interleaved: each hardware
+        thread is simulated with its share of every level
+        (:meth:`coherence.platforms.Platform.thread_view`), and the
+        parameters say so. Its process counts are
+        :meth:`~coherence.platforms.Platform.default_processes` when a
+        caller takes them from it. None: the study's machine.
 
     Raises
     ------
@@ -125,6 +133,7 @@ class Experiment:
     dask: object = None
     memory_budget: int = DEFAULT_MEMORY_BUDGET
     progress: bool = True
+    platform: object = None
 
     def __post_init__(self):
         from coherence.mappings import get_mapping
@@ -148,7 +157,7 @@ class Experiment:
             raise InputError(f"Experiment.kd must be None or {variant.builder} for tree_variant {self.tree_variant}, "
                              f"got {self.kd!r}")
         if self.max_depth is not None:
-            require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH_LIMIT)
+            require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH)
         mappings = (self.mappings,) if isinstance(self.mappings, str) else tuple(self.mappings)
         names = []
         for mapping in mappings:
@@ -170,6 +179,8 @@ class Experiment:
             except (ValueError, OSError) as error:
                 raise InputError(f"Experiment.{name}: {error}") from None
         require_int("Experiment.n_cpus", self.n_cpus, 1)
+        if self.platform is not None:
+            _check_platform(self)
         require_int("Experiment.background", self.background, 0)
         require_int("Experiment.background_footprint", self.background_footprint, 0)
         _choose("page_placement", self.page_placement, PAGE_PLACEMENTS)
@@ -192,17 +203,31 @@ class Experiment:
     def mapping_names(self) -> list[str]:
         return [mapping.name for mapping in self.mapping_objects()]
 
+    def platform_object(self):
+        """The :class:`coherence.platforms.Platform`, or None."""
+        from coherence.platforms import get_platform
+
+        return None if self.platform is None else get_platform(self.platform)
+
     def hierarchy_object(self):
-        """The :class:`cachesim.Hierarchy` (a preset or file is read again each call)."""
-        return _hierarchy(self.hierarchy)
+        """The :class:`cachesim.Hierarchy` (a preset or file is read again each call); under a
+        platform, one hardware thread's view of its levels."""
+        platform = self.platform_object()
+        return _hierarchy(self.hierarchy) if platform is None else platform.thread_view()
 
     def layout_object(self):
         """The :class:`coherence.layout.MemoryLayout`."""
         return _layout(self.layout)
 
     def cost_model(self):
-        """The :class:`coherence.cost.CostModel`."""
-        return _cost(self.cost)
+        """The :class:`coherence.cost.CostModel` (the platform's under one)."""
+        platform = self.platform_object()
+        return _cost(self.cost) if platform is None else platform.cost
+
+    def cpus(self) -> int:
+        """CPUs of the simulated machine: ``n_cpus``, or the platform's hardware threads."""
+        platform = self.platform_object()
+        return int(self.n_cpus) if platform is None else platform.n_threads
 
     def machine(self):
         """The simulated :class:`coherence.simulation.Machine`: ``n_cpus`` CPUs, ``background`` load of
@@ -210,7 +235,7 @@ class Experiment:
         from coherence.page_placement import PagePlacement
         from coherence.simulation import Machine
 
-        return Machine(n_cpus=self.n_cpus, background_load=self.background,
+        return Machine(n_cpus=self.cpus(), background_load=self.background,
                        background_footprint=self.background_footprint,
                        page_placement=PagePlacement(self.page_placement, seed=self.page_seed))
 
@@ -238,15 +263,40 @@ class Experiment:
         ``page_placement``, ``page_seed`` and ``tree_variant``
         (:meth:`tree_variant_used`: None where no variant is built).
         ``cache_dir``, ``dask``, ``memory_budget`` and ``progress`` are
-        left out: no result depends on them.
+        left out: no result depends on them. Under a platform, ``platform``
+        too (:func:`platform_parameters`); without one there is no such key.
         """
+        platform = self.platform_object()
+        extra = {} if platform is None else {"platform": platform_parameters(platform)}
         return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
                 "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
                 "n_processes": list(self.n_processes), "hierarchy": self.hierarchy_object().to_dict(),
                 "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
-                "n_cpus": int(self.n_cpus), "background_load": int(self.background),
+                "n_cpus": self.cpus(), "background_load": int(self.background),
                 "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,
-                "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used()}
+                "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used(), **extra}
+
+
+def platform_parameters(platform) -> dict:
+    """What a run records of its platform: name, machine, clock, source and how shared levels were simulated."""
+    from coherence.platforms import SHARED_LEVELS_NOTE
+
+    machine = platform.hierarchy
+    return {"name": platform.name, "n_cores": machine.n_cores, "smt": machine.smt,
+            "cores_per_complex": machine.cores_per_complex, "shared_by": list(machine.shared_by),
+            "clock_hz": platform.clock_hz, "source": platform.source, "shared_levels": SHARED_LEVELS_NOTE}
+
+
+def _check_platform(experiment) -> None:
+    """The platform exists and ``hierarchy``, ``cost`` and ``n_cpus`` were left to it."""
+    try:
+        platform = experiment.platform_object()
+    except ValueError as error:
+        raise InputError(f"Experiment.platform: {error}") from None
+    for field, default in (("hierarchy", DEFAULT_HIERARCHY), ("cost", DEFAULT_COST_MODEL), ("n_cpus", STUDY_CPUS)):
+        if getattr(experiment, field) != default:
+            raise InputError(f"Experiment.platform {platform.name} sets the hierarchy, the cost and the CPUs: "
+                             f"leave Experiment.{field} at its default ({default}), got {getattr(experiment, field)!r}")
 
 
 
@@ -258,7 +308,11 @@ def _choose(name: str, value, allowed) -> None:
 def _hierarchy(value):
     from cachesim import get_hierarchy
 
-    return get_hierarchy(value)
+    hierarchy = get_hierarchy(value)
+    if hierarchy.prefetches:
+        raise InputError(f"Experiment.hierarchy: {value} has prefetchers, which the schedule simulation does not "
+                         "model yet; use a hierarchy without them ('coherence cachesim' runs them on addresses)")
+    return hierarchy
 
 
 def _layout(value):

@@ -28,10 +28,14 @@ margin ranks the unknowns; the flip region is a threshold on each of the
 top three (:func:`flip_thresholds`). With ``sobol=N``, Saltelli's design of
 ``N (k + 2)`` samples over the :data:`SOBOL_FACTORS` highest-ranked unknowns
 (the others at the middle of their unit range, :data:`HELD_AT`) gives their
-first-order and total Sobol indices of the margin.
+first-order and total Sobol indices of the margin. The base's size is at
+least :data:`analyses.robustness_size.VERDICT_MIN_SIZE` for the 8-process
+losses and the verdict; the size check (:mod:`analyses.robustness_size`)
+says whether the one-process quantities would hold on a smaller image.
 """
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass, field, replace
 
@@ -114,7 +118,8 @@ class RobustnessResult:
 
 
 def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), trajectories: int = 10,
-               seed: int = 0, sobol: int = 0, size_check: bool = True, executor=None) -> RobustnessResult:
+               seed: int = 0, sobol: int = 0, size_check: bool = True, executor=None,
+               timings: dict | None = None) -> RobustnessResult:
     """Morris screening of the verdict over every unknown with a mechanism, per scene.
 
     Parameters
@@ -138,6 +143,10 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
         scene's summary).
     executor : concurrent.futures.Executor, optional
         Simulate the runs there (a Dask client's executor).
+    timings : dict, optional
+        Filled with scene -> phase (``morris``, ``size_check``, ``sobol``)
+        -> ``seconds`` (wall) and ``cpu_seconds`` (this process's, every
+        thread's), for benchmarks; the results do not depend on it.
 
     Returns
     -------
@@ -159,7 +168,9 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     design = morris_design(names, trajectories, seed)
     seeds = trajectory_seeds(seed, trajectories)
     frames, index_rows, summaries = [], [], {}
+    timings = {} if timings is None else timings
     for scene in scenes:
+        clock = _Clock(timings.setdefault(scene, {}))
         replays = _Replays(replace(base, scene=scene), executor)
         rows, paths = _scene_samples(replace(base, scene=scene), design, seeds, replays)
         frame = pd.DataFrame(rows)
@@ -170,8 +181,10 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
                                "rank": ranked.index(name) + 1})
         summaries[scene] = {**scene_summary(frame, ranked, indices["mu_star"], base.mapping_names()), "runs": paths}
         frames.append(frame.assign(design="morris"))
+        clock.lap("morris")
         if size_check:
             summaries[scene]["size_check"] = _size_check(replace(base, scene=scene), design, seeds, replays)
+            clock.lap("size_check")
         if sobol:
             top = ranked[:SOBOL_FACTORS]
             sobol_frame, sobol_result = _sobol(replace(base, scene=scene), top, sobol, seed, replays)
@@ -181,6 +194,7 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
                                          "n_evaluations": int(len(sobol_frame)),
                                          **{key: sobol_result[key] for key in ("S1", "ST", "runs")}}
             frames.append(sobol_frame.assign(design="sobol"))
+            clock.lap("sobol")
     parameters = {**base.as_parameters(), "scenes": scenes, "trajectories": int(trajectories), "seed": int(seed),
                   "verdict_n_processes": VERDICT_PROCESSES, "morris_levels": MORRIS_LEVELS, "sobol": int(sobol),
                   "sobol_held_at": HELD_AT, "size_check": bool(size_check),
@@ -192,6 +206,19 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
         parameters.pop(key)  # sampled per run, recorded per sample
     return RobustnessResult(pd.concat(frames, ignore_index=True), pd.DataFrame(index_rows),
                             {"parameters": parameters, "scenes": summaries})
+
+
+class _Clock:
+    """Wall and CPU time of consecutive phases, written into ``phases`` (phase -> seconds, cpu_seconds)."""
+
+    def __init__(self, phases: dict):
+        self.phases = phases
+        self.start = (time.perf_counter(), time.process_time())
+
+    def lap(self, phase: str) -> None:
+        now = (time.perf_counter(), time.process_time())
+        self.phases[phase] = {"seconds": now[0] - self.start[0], "cpu_seconds": now[1] - self.start[1]}
+        self.start = now
 
 
 def trajectory_seeds(seed: int, trajectories: int) -> list[int]:

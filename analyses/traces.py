@@ -61,7 +61,7 @@ import xxhash
 from rtcommon.files import make_temp_dir, remove_stale_temporaries
 from rtcommon.jsonio import json_default
 from rtcommon.validate import InputError, require_int
-from tracer.trace.check import META_CHECKSUM
+from tracer.trace.check import META_CHECKSUM, matches_checksum, write_with_checksum
 
 __all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir", "trace_key", "CACHE_ENV"]
 
@@ -354,11 +354,10 @@ def _read_entry(entry: Path) -> dict | None:
         data = (entry / _INFO).read_bytes()
     except (FileNotFoundError, NotADirectoryError):
         return None
-    try:
-        recorded = (entry / _INFO_DIGEST).read_text(encoding="ascii", errors="replace").strip()
-    except (FileNotFoundError, NotADirectoryError):
-        raise TraceIntegrityError(f"{_INFO_DIGEST} is missing") from None
-    if recorded != xxhash.xxh3_64_hexdigest(data):
+    matches = matches_checksum(entry / _INFO, data)
+    if matches is None:
+        raise TraceIntegrityError(f"{_INFO_DIGEST} is missing")
+    if not matches:
         raise TraceIntegrityError(f"{_INFO} does not match its checksum")
     try:
         info = json.loads(data.decode("utf-8"))
@@ -422,8 +421,7 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload, key: str, en
             "trace_digest": (tmp / "trace" / _TRACE_DIGEST).read_text(encoding="ascii").strip(),
         }
         data = (json.dumps(info, indent=1, default=json_default) + "\n").encode("utf-8")
-        (tmp / _INFO).write_bytes(data)
-        (tmp / _INFO_DIGEST).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
+        write_with_checksum(tmp / _INFO, data)
         del result
         try:
             os.replace(tmp, entry)

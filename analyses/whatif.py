@@ -66,7 +66,10 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 #: Fields of the base :class:`~analyses.experiment.Experiment` a study file or
 #: :meth:`WhatIf.of` may set.
 BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
-               "layout", "cost", "n_cpus", "background", "memory_budget")
+               "layout", "cost", "n_cpus", "background", "memory_budget", "platform")
+
+#: Grid parameters a platform sets, so a study under one may not vary them.
+PLATFORM_PARAMETERS = ("hierarchy", "cost", "n_cpus")
 
 
 @dataclass(frozen=True)
@@ -82,7 +85,10 @@ class WhatIf:
         scheduler, memory budget); default :data:`WHATIF_EXPERIMENT`.
         Every grid point varies it. ``scene``, ``size``, ``mappings``,
         ``n_processes`` (the one count, an int), ``hierarchy``, ``cost``,
-        ``layout``, ``n_cpus`` and ``background`` read through to it.
+        ``layout``, ``n_cpus`` and ``background`` read through to it;
+        under a platform, ``hierarchy`` names its thread view, ``cost`` its
+        cost model and ``n_cpus`` its hardware threads, and the grid may
+        not vary them (:data:`PLATFORM_PARAMETERS`).
     grid : dict of str to list
         Values per parameter; the study runs every combination.
 
@@ -111,6 +117,9 @@ class WhatIf:
             _check_parameter(key)
             if not isinstance(values, (list, tuple)) or not values:
                 raise InputError(f"grid[{key!r}] must be a non-empty list of values")
+            if key in PLATFORM_PARAMETERS and self.experiment.platform is not None:
+                raise InputError(f"grid[{key!r}]: the platform {self.experiment.platform_object().name} sets the "
+                                 f"hierarchy, the cost and the CPUs; vary them without a platform")
         base = self.base_hierarchy()
         for point in self.points():  # every point must make a valid configuration
             configure(self, point, base)
@@ -128,14 +137,24 @@ class WhatIf:
     size = property(lambda self: self.experiment.size)
     mappings = property(lambda self: self.experiment.mappings)
     n_processes = property(lambda self: self.experiment.n_processes[0])
-    hierarchy = property(lambda self: self.experiment.hierarchy)
-    cost = property(lambda self: self.experiment.cost)
     layout = property(lambda self: self.experiment.layout)
-    n_cpus = property(lambda self: self.experiment.n_cpus)
+    n_cpus = property(lambda self: self.experiment.cpus())
     background = property(lambda self: self.experiment.background)
 
+    @property
+    def hierarchy(self):
+        """The base's hierarchy as given, or the name of its platform's thread view."""
+        platform = self.experiment.platform_object()
+        return self.experiment.hierarchy if platform is None else platform.thread_view().name
+
+    @property
+    def cost(self):
+        """The base's cost model as given, or its platform's cost model's name."""
+        platform = self.experiment.platform_object()
+        return self.experiment.cost if platform is None else platform.cost.name
+
     def base_hierarchy(self) -> Hierarchy:
-        return get_hierarchy(self.hierarchy)
+        return self.experiment.hierarchy_object()
 
     def points(self) -> list[dict]:
         """Every combination of the grid's values, in grid order."""

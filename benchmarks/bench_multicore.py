@@ -4,9 +4,10 @@ The stream: balls at 64x64 rendered by the study-era workload (which logs
 its ray stack, hit records, shading temporaries and frame-buffer writes),
 pixel ``k`` on thread ``k mod 8`` (the P mapping) and the pixels in image
 order, so the threads take turns one pixel at a time (interleaving
-granularity Q = one pixel). Each record is one access per line it spans,
-with its bytes in that line and its kind; the per-ray data (kinds 9 to 11)
-gets a region of its own per thread, the scene and frame buffer stay shared.
+granularity Q = one pixel), built by :func:`coherence.thread_streams.thread_stream`:
+each record is one access per line it spans, with its bytes in that line
+and its kind; the per-ray data (kinds 9 to 11) gets a region of its own per
+thread, the scene and frame buffer stay shared.
 
 The machine: the ``modern`` hierarchy's three levels (32 KB 8-way L1, 1 MB
 16-way L2, 32 MB 16-way L3, 64-byte lines), L1 and L2 private to each of 8
@@ -36,42 +37,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from analyses.traces import cached_trace  # noqa: E402
 from bench_cachesim import ray_tracer_like_stream  # noqa: E402
 from cachesim import modern, simulate  # noqa: E402
-from cachesim.multicore import interleave, simulate_threads  # noqa: E402
+from cachesim.multicore import interleave_order, simulate_threads  # noqa: E402
 from cachesim.sharing import SharedHierarchy  # noqa: E402
 from coherence.layout import get_layout  # noqa: E402
 from coherence.studies import place_layout  # noqa: E402
-from tracer.trace.records import INDEX_MASK, KIND_SHIFT, WRITE_FLAG, RecordKind  # noqa: E402
+from coherence.thread_streams import thread_stream  # noqa: E402
 
 THREADS = 8
 LINE = 64
-#: Bytes between threads' copies of the per-ray data.
-PRIVATE_STRIDE = 1 << 28
-PRIVATE_KINDS = (RecordKind.RAY_STACK, RecordKind.HIT_RECORD, RecordKind.SHADING_TEMP)
 
 
 def p_mapping_stream(size: int, folder: Path):
     """Addresses, thread ids, writes, sizes and kinds of the stream the module docstring names."""
     scene, trace, _ = cached_trace("balls", size, cache_dir=folder, progress=False, workload="study1997")
-    placed = place_layout(get_layout("alpha1997"), trace, scene)
-    records = np.asarray(trace.records, dtype=np.uint32)
-    kinds = (records >> KIND_SHIFT).astype(np.int64)
-    rows = placed.kind_first[kinds] + (records & INDEX_MASK).astype(np.int64)
-    starts = placed.record_start[rows]
-    ends = starts + placed.record_size[rows]
-    pixel = np.repeat(np.arange(trace.pixel_offsets.size - 1), np.diff(trace.pixel_offsets))
-    threads = pixel % THREADS
-    private = np.isin(kinds, [int(kind) for kind in PRIVATE_KINDS])
-    starts = starts + np.where(private, threads * PRIVATE_STRIDE, 0)
-    ends = ends + np.where(private, threads * PRIVATE_STRIDE, 0)
-    # one access per line a record spans, with its bytes in that line
-    spans = (ends - 1) // LINE - starts // LINE + 1
-    record = np.repeat(np.arange(records.size), spans)
-    piece = np.arange(record.size) - np.repeat(np.cumsum(spans) - spans, spans)
-    line_start = (starts[record] // LINE + piece) * LINE
-    first = np.maximum(starts[record], line_start)
-    last = np.minimum(ends[record], line_start + LINE)
-    writes = (records[record] & WRITE_FLAG) != 0
-    return first.astype(np.uint64), threads[record], writes, last - first, kinds[record]
+    stream = thread_stream(trace, place_layout(get_layout("alpha1997"), trace, scene), "P", THREADS, line_size=LINE)
+    return stream.addresses, stream.threads, stream.writes, stream.sizes, stream.kinds
 
 
 def best_rates(repeats, n_accesses, function):
@@ -105,11 +85,10 @@ def main():
           f"{int(writes.sum()):,} writes")
     figures = report(result, rate, cpu_rate, peer_rates(args.repeats, addresses, writes), "")
     rng = np.random.default_rng(7)
-    parts = np.array_split(ray_tracer_like_stream(10_000_000), THREADS)
-    flags = np.array_split(rng.random(10_000_000) < 0.05, THREADS)
-    addresses, threads = interleave(parts, quantum=64)
-    writes, _ = interleave([flag.astype(np.uint64) for flag in flags], quantum=64)
-    writes = writes.astype(bool)
+    stream = ray_tracer_like_stream(10_000_000)
+    flags = rng.random(stream.size) < 0.05
+    order, threads = interleave_order([part.size for part in np.array_split(stream, THREADS)], quantum=64)
+    addresses, writes = stream[order], flags[order]
     sizes = np.where(writes, 8, 1)
     rate, cpu_rate, result = best_rates(
         args.repeats, addresses.size, lambda: simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes))
@@ -128,7 +107,7 @@ def peer_rates(repeats, addresses, writes):
 
 def report(result, rate, cpu_rate, peer, prefix):
     """Print one stream's counts, rates and target; return its figures."""
-    counts = result.to_frame().groupby("level", sort=False).sum(numeric_only=True)
+    counts = result.level_frame().set_index("level")
     print(counts[["accesses", "misses", "coherence_invalidations", "coherence_misses",
                   "false_sharing_misses"]].to_string())
     print(f"simulate_threads : {rate / 1e6:6.1f} M accesses/s wall, {cpu_rate / 1e6:6.1f} by CPU time  "

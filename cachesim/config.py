@@ -14,6 +14,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from cachesim.prefetch_config import Prefetcher
 from cachesim.sets import MAX_LEVELS
 from cachesim.tlb_config import Tlb, alpha21164_dtb
 from rtcommon.files import read_text_file, write_text_atomic
@@ -50,6 +51,9 @@ class CacheLevel:
         read-allocate cache such as the 21164 D-cache: the write passes on to
         the next level and leaves this one unchanged. A write hit is served
         like a read either way (see :mod:`cachesim.by_access`).
+    prefetcher : Prefetcher or None
+        A hardware prefetcher of this level (:mod:`cachesim.prefetch`), or
+        None for none (the default: demand fetching only).
     """
 
     name: str
@@ -60,6 +64,7 @@ class CacheLevel:
     latency: float = 1.0
     seed: int = 0
     write_allocate: bool = True
+    prefetcher: Prefetcher | None = None
 
     def __post_init__(self):
         owner = f"CacheLevel({self.name!r})" if isinstance(self.name, str) else "CacheLevel"
@@ -88,6 +93,8 @@ class CacheLevel:
         object.__setattr__(self, "latency", require_number(f"{owner}.latency", self.latency, 0, "cycles"))
         object.__setattr__(self, "seed", require_int(f"{owner}.seed", self.seed, 0))
         object.__setattr__(self, "write_allocate", require_bool(f"{owner}.write_allocate", self.write_allocate))
+        if self.prefetcher is not None and not isinstance(self.prefetcher, Prefetcher):
+            raise InputError(f"{owner}.prefetcher must be a Prefetcher or None, got {type(self.prefetcher).__name__}")
 
     @property
     def ways(self) -> int:
@@ -114,6 +121,7 @@ class CacheLevel:
             "latency": self.latency,
             "seed": self.seed,
             "write_allocate": self.write_allocate,
+            **({"prefetcher": self.prefetcher.to_dict()} if self.prefetcher is not None else {}),
         }
 
 
@@ -199,6 +207,9 @@ class Hierarchy:
                 )
         if self.inclusion == "exclusive":
             for level in levels:
+                if level.prefetcher is not None:
+                    raise InputError(f"Hierarchy: prefetchers are modelled in non-inclusive and inclusive "
+                                     f"hierarchies only; {level.name} of this exclusive one has one")
                 if not level.write_allocate:
                     raise InputError(f"Hierarchy: exclusive levels must allocate on writes; "
                                      f"{level.name} has write_allocate=False")
@@ -210,6 +221,11 @@ class Hierarchy:
     @property
     def level_names(self) -> list[str]:
         return [level.name for level in self.levels]
+
+    @property
+    def prefetches(self) -> bool:
+        """Whether any level has a prefetcher."""
+        return any(level.prefetcher is not None for level in self.levels)
 
     def to_dict(self) -> dict:
         return {
@@ -236,7 +252,7 @@ class Hierarchy:
         if not isinstance(raw_levels, list) or not raw_levels:
             raise InputError(f"{source}: 'levels' must be a non-empty list of tables")
         levels = []
-        allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed", "write_allocate"}
+        allowed = {"name", "size", "line_size", "assoc", "policy", "latency", "seed", "write_allocate", "prefetcher"}
         for index, raw in enumerate(raw_levels):
             where = f"{source}: levels[{index}]"
             if not isinstance(raw, dict):
@@ -247,6 +263,8 @@ class Hierarchy:
             missing = {"name", "size", "line_size"} - set(raw)
             if missing:
                 raise InputError(f"{where}: missing field(s) {sorted(missing)}")
+            if raw.get("prefetcher") is not None:
+                raw = {**raw, "prefetcher": Prefetcher.from_dict(raw["prefetcher"], f"{where}: prefetcher")}
             try:
                 levels.append(CacheLevel(**raw))
             except ValueError as error:

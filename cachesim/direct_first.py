@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from cachesim.full import _fill_levels, _serving_level
-from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _insert
+from cachesim.sets import EVICTIONS, EXCLUSIVE, INCLUSIVE, LRU, _add_counts, _insert, _zeroed_counts
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
 
 
@@ -89,12 +89,7 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     second_evictions = np.int64(0)
     first_invalidations = np.int64(0)
     n_writes = np.int64(0)
-    level_hits = work.level_hits
-    level_write_hits = work.level_write_hits
-    invalidations = work.level_invalidations
-    level_hits[:n_levels] = 0
-    level_write_hits[:n_levels] = 0
-    invalidations[:n_levels] = 0
+    level_hits, level_write_hits, invalidations = _zeroed_counts(work, n_levels)
     n = addresses.shape[0]
     i = 0
     while i < n:

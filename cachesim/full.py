@@ -3,10 +3,12 @@
 A level of one set looks a line up by scanning all its ways, and an LRU or
 FIFO insert scans them again for the oldest stamp: a 4 MB fully associative
 level of 64-byte lines (65,536 ways) took some 60 microseconds an access.
-For a long enough stream (:func:`uses_index`) each such level (one set of at
-least :data:`INDEXED_MIN_WAYS` ways) gets, for the length of one call, an
-index (:class:`FullIndex`) built from its ``tags`` and ``stamps``, which
-makes an access O(1):
+For a long enough stream (:func:`uses_index`) passed whole to
+:func:`cachesim.kernels.simulate_stream` or ``simulate_writes`` (so through
+:func:`cachesim.simulate`; the ``_into`` kernels, for many short streams,
+scan) each such level (one set of at least :data:`INDEXED_MIN_WAYS` ways)
+gets, for the length of one call, an index (:class:`FullIndex`) built from
+its ``tags`` and ``stamps``, which makes an access O(1):
 
 - a hash table from line to way (open addressing, linear probing, at most
   half full; a removal shifts the probe chain back instead of leaving a
@@ -18,11 +20,12 @@ makes an access O(1):
   the scan does (O(log ways) only while the level fills up, or after
   back-invalidations empty ways again).
 
-The operations (:func:`_lookup`, :func:`_place`, :func:`_serving_level`,
-:func:`_fill_levels` ...) take the index or None; with None numba compiles
-the scans alone. The walk of :mod:`cachesim.by_access` runs on them either
-way, so the semantics (inclusion, writes, counters, ``served_by``, the
-clock and the stamps left) are one. The state stays in ``tags`` and
+The operations (lookup, place, serving level, fill levels ...) are written
+once (:func:`level_operations`) and compiled in two forms: :data:`SCANNING`
+takes ``index`` None and holds the scans alone, :data:`INDEXED` takes the
+index. The walk of :mod:`cachesim.by_access` runs on either, so the
+semantics (inclusion, writes, counters, ``served_by``, the clock and the
+stamps left) are one. The state stays in ``tags`` and
 ``stamps`` only, so every other kernel, and other packages' compiled code,
 continue from it unchanged.
 """
@@ -226,134 +229,172 @@ def _heap_pop(index, level, base):
 
 
 # ------------------------------------------------------------ level operations
-# Each takes ``index`` None (numba then compiles the scans alone, as for a
-# hierarchy without indexed levels) or a FullIndex.
-@njit(cache=True, inline="always")
-def _lookup(line, level, geometry, state, index):
-    """The way of ``level`` holding ``line``, or -1."""
-    if index is not None and index.indexed[level]:
-        return _hash_find(index, level, line)
-    base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
-    return _find(state.tags, base, geometry.ways[level], line)
+class LevelOperations(NamedTuple):
+    """The per-access walk's operations on the levels, in one of two forms (:func:`level_operations`).
+
+    Each function takes an ``index`` argument: None in the scanning form, a
+    :class:`FullIndex` in the indexed one. All are inlined into their callers.
+    """
+
+    lookup: object
+    touch: object
+    place: object
+    serving_level: object
+    fill_levels: object
 
 
-@njit(cache=True, inline="always")
-def _touch(slot, level, state, index, clock):
-    """A hit in an LRU level: stamp the way (and in an indexed level make it the newest)."""
-    state.stamps[slot] = clock
-    if index is not None and index.indexed[level] and index.tail[level] != slot:
-        _unlink(index, level, slot)
-        _append(index, level, slot)
+def level_operations(indexed):
+    """The level operations, written once, compiled with the index's code or without.
 
+    Parameters
+    ----------
+    indexed : bool
+        True: the operations take a :class:`FullIndex` and use it on its
+        indexed levels (and scan the others); False: they take ``index``
+        None and scan every level.
 
-@njit(cache=True, inline="always")
-def _empty(slot, level, geometry, state, index):
-    """Empty a way (a back-invalidation, or an exclusive line moving up); its stamp stays."""
-    if index is not None and index.indexed[level]:
-        _hash_remove(index, level, state.tags[slot])
-        if geometry.policy[level] != RANDOM:
+    Returns
+    -------
+    LevelOperations
+
+    Numba's ``inline="always"`` copies a callee's code, and that of all it
+    calls, into the caller before the caller's types are known; a branch
+    that tests ``index`` against None is dropped only after that, so every
+    kernel that inlined the operations without an index would copy in, and
+    then discard, all of the index's code, at each place an operation is
+    inlined (several times the compile time of the scans alone). ``indexed``
+    is a constant of each form, whose branches numba drops before it copies
+    their callees.
+    """
+
+    @njit(inline="always")
+    def lookup(line, level, geometry, state, index):
+        """The way of ``level`` holding ``line``, or -1."""
+        if indexed and index.indexed[level]:
+            return _hash_find(index, level, line)
+        base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
+        return _find(state.tags, base, geometry.ways[level], line)
+
+    @njit(inline="always")
+    def touch(slot, level, state, index, clock):
+        """A hit in an LRU level: stamp the way (and in an indexed level make it the newest)."""
+        state.stamps[slot] = clock
+        if indexed and index.indexed[level] and index.tail[level] != slot:
             _unlink(index, level, slot)
-        _heap_push(index, level, index.node_base[level], slot)
-    state.tags[slot] = -1
+            _append(index, level, slot)
 
+    @njit(inline="always")
+    def empty(slot, level, geometry, state, index):
+        """Empty a way (a back-invalidation, or an exclusive line moving up); its stamp stays."""
+        if indexed and index.indexed[level]:
+            _hash_remove(index, level, state.tags[slot])
+            if geometry.policy[level] != RANDOM:
+                _unlink(index, level, slot)
+            _heap_push(index, level, index.node_base[level], slot)
+        state.tags[slot] = -1
 
-@njit(cache=True, inline="always")
-def _place(line, level, geometry, state, index, clock):
-    """:func:`cachesim.sets._insert` for any level: the lowest empty way, else
-    the random draw or the oldest stamp; returns the evicted line or -1."""
-    if index is None or not index.indexed[level]:
+    @njit(inline="always")
+    def place(line, level, geometry, state, index, clock):
+        """:func:`cachesim.sets._insert` for any level: the lowest empty way, else
+        the random draw or the oldest stamp; returns the evicted line or -1."""
+        if indexed and index.indexed[level]:
+            ordered = geometry.policy[level] != RANDOM
+            if index.heap_size[level] > 0:
+                victim = _heap_pop(index, level, index.node_base[level])
+            elif ordered:
+                victim = index.head[level]
+            else:
+                victim = geometry.offset[level] + _random_way(geometry.seeds[level], clock, geometry.ways[level])
+            evicted = state.tags[victim]
+            if evicted >= 0:
+                _hash_remove(index, level, evicted)
+                if ordered:
+                    _unlink(index, level, victim)
+            state.tags[victim] = line
+            state.stamps[victim] = clock
+            _hash_add(index, level, line, victim)
+            if ordered:
+                _append(index, level, victim)
+            return evicted
         base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
         return _insert(state.tags, state.stamps, geometry.seeds[level], base, geometry.ways[level],
                        geometry.policy[level], line, clock)
-    base = geometry.offset[level]
-    ordered = geometry.policy[level] != RANDOM
-    if index.heap_size[level] > 0:
-        victim = _heap_pop(index, level, index.node_base[level])
-    elif ordered:
-        victim = index.head[level]
-    else:
-        victim = base + _random_way(geometry.seeds[level], clock, geometry.ways[level])
-    evicted = state.tags[victim]
-    if evicted >= 0:
-        _hash_remove(index, level, evicted)
-        if ordered:
-            _unlink(index, level, victim)
-    state.tags[victim] = line
-    state.stamps[victim] = clock
-    _hash_add(index, level, line, victim)
-    if ordered:
-        _append(index, level, victim)
-    return evicted
 
+    @njit(inline="always")
+    def back_invalidate(evicted, level, geometry, state, index, invalidations):
+        """Inclusion: remove every line of the levels above ``level`` that lies in
+        its ``evicted`` line, counting them in ``invalidations`` per level."""
+        for upper in range(level):
+            spread = geometry.rel_shift[level] - geometry.rel_shift[upper]
+            first = evicted << spread
+            for sub in range(first, first + (np.int64(1) << spread)):
+                slot = lookup(sub, upper, geometry, state, index)
+                if slot >= 0:
+                    empty(slot, upper, geometry, state, index)
+                    invalidations[upper] += 1
 
-@njit(cache=True, inline="always")
-def _back_invalidate(evicted, level, geometry, state, index, invalidations):
-    """Inclusion: remove every line of the levels above ``level`` that lies in
-    its ``evicted`` line, counting them in ``invalidations`` per level."""
-    for upper in range(level):
-        spread = geometry.rel_shift[level] - geometry.rel_shift[upper]
-        first = evicted << spread
-        for sub in range(first, first + (np.int64(1) << spread)):
-            slot = _lookup(sub, upper, geometry, state, index)
+    @njit(inline="always")
+    def serving_level(line0, first_level, geometry, state, index, clock, is_write, work):
+        """Look ``line0`` up from ``first_level`` down; return the level that holds it (the number of levels: memory).
+
+        Leaves each level's line in ``work.level_lines``, counts the hit in
+        ``work.level_hits`` (and ``level_write_hits``), stamps an LRU hit and,
+        in an exclusive hierarchy, takes the line out of the level that held it
+        (it moves up). The walk of :mod:`cachesim.by_access` and, below its
+        first two levels, of :mod:`cachesim.direct_first`; their kernels run
+        without reference counting, so reading the bundles here costs nothing
+        per access.
+        """
+        n_levels = geometry.rel_shift.shape[0]
+        for level in range(first_level, n_levels):
+            line = line0 >> geometry.rel_shift[level]
+            work.level_lines[level] = line
+            slot = lookup(line, level, geometry, state, index)
             if slot >= 0:
-                _empty(slot, upper, geometry, state, index)
-                invalidations[upper] += 1
+                work.level_hits[level] += 1
+                if is_write:
+                    work.level_write_hits[level] += 1
+                if geometry.policy[level] == LRU:
+                    touch(slot, level, state, index, clock)
+                if geometry.inclusion == EXCLUSIVE:
+                    empty(slot, level, geometry, state, index)  # the line moves up to the first level
+                return level
+        return n_levels
+
+    @njit(inline="always")
+    def fill_levels(served, last_level, geometry, state, index, clock, is_write, work):
+        """Place the line of ``serving_level`` in levels ``served - 1`` down to ``last_level``.
+
+        Bottom-up, so that back-invalidations of lower levels never remove the
+        line just placed above them; a write skips the levels that do not
+        allocate writes. Counts evictions, and in an inclusive hierarchy
+        back-invalidates the levels above an evicted line.
+        """
+        tags = state.tags
+        for level in range(served - 1, last_level - 1, -1):
+            if is_write and not geometry.write_allocate[level]:
+                continue
+            line = work.level_lines[level]
+            if geometry.ways[level] == 1:
+                # Direct-mapped: no choice and no order to keep (no stamp).
+                base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
+                evicted = tags[base]
+                tags[base] = line
+            else:
+                evicted = place(line, level, geometry, state, index, clock)
+            if evicted >= 0:
+                state.counts[level, EVICTIONS] += 1
+                if geometry.inclusion == INCLUSIVE and level > 0:
+                    back_invalidate(evicted, level, geometry, state, index, work.level_invalidations)
+
+    return LevelOperations(lookup, touch, place, serving_level, fill_levels)
 
 
-@njit(cache=True, inline="always")
-def _serving_level(line0, first_level, geometry, state, index, clock, is_write, work):
-    """Look ``line0`` up from ``first_level`` down; return the level that holds it (the number of levels: memory).
-
-    Leaves each level's line in ``work.level_lines``, counts the hit in
-    ``work.level_hits`` (and ``level_write_hits``), stamps an LRU hit and,
-    in an exclusive hierarchy, takes the line out of the level that held it
-    (it moves up). The walk of :mod:`cachesim.by_access` and, below its
-    first two levels, of :mod:`cachesim.direct_first`; their kernels run
-    without reference counting, so reading the bundles here costs nothing
-    per access.
-    """
-    n_levels = geometry.rel_shift.shape[0]
-    for level in range(first_level, n_levels):
-        line = line0 >> geometry.rel_shift[level]
-        work.level_lines[level] = line
-        slot = _lookup(line, level, geometry, state, index)
-        if slot >= 0:
-            work.level_hits[level] += 1
-            if is_write:
-                work.level_write_hits[level] += 1
-            if geometry.policy[level] == LRU:
-                _touch(slot, level, state, index, clock)
-            if geometry.inclusion == EXCLUSIVE:
-                _empty(slot, level, geometry, state, index)  # the line moves up to the first level
-            return level
-    return n_levels
-
-
-@njit(cache=True, inline="always")
-def _fill_levels(served, last_level, geometry, state, index, clock, is_write, work):
-    """Place the line of :func:`_serving_level` in levels ``served - 1`` down to ``last_level``.
-
-    Bottom-up, so that back-invalidations of lower levels never remove the
-    line just placed above them; a write skips the levels that do not
-    allocate writes. Counts evictions, and in an inclusive hierarchy
-    back-invalidates the levels above an evicted line.
-    """
-    tags = state.tags
-    for level in range(served - 1, last_level - 1, -1):
-        if is_write and not geometry.write_allocate[level]:
-            continue
-        line = work.level_lines[level]
-        if geometry.ways[level] == 1:
-            # Direct-mapped: no choice and no order to keep (no stamp).
-            base = _set_base(line, level, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset)
-            evicted = tags[base]
-            tags[base] = line
-        else:
-            evicted = _place(line, level, geometry, state, index, clock)
-        if evicted >= 0:
-            state.counts[level, EVICTIONS] += 1
-            if geometry.inclusion == INCLUSIVE and level > 0:
-                _back_invalidate(evicted, level, geometry, state, index, work.level_invalidations)
+#: The operations for ``index`` None: the scans alone.
+SCANNING = level_operations(False)
+#: The operations for a :class:`FullIndex`.
+INDEXED = level_operations(True)
+_lookup, _touch, _place, _serving_level, _fill_levels = SCANNING
 
 
 # ------------------------------------------------------------------- building

@@ -1,4 +1,4 @@
-"""Validation of simulator inputs: byte addresses and per-access write flags."""
+"""Validation of simulator inputs: byte addresses, per-access write flags and PC-like ids."""
 from __future__ import annotations
 
 import numpy as np
@@ -60,3 +60,20 @@ def as_writes(writes, n_accesses: int, name: str = "writes") -> np.ndarray:
     if not array.any():
         return np.zeros(0, dtype=np.bool_)
     return np.ascontiguousarray(array)
+
+
+def as_pcs(pcs, n_accesses: int, name: str = "pcs") -> np.ndarray:
+    """Validate per-access PC-like ids: non-negative integers of shape (N,), or None (id 0 for all).
+
+    Returns a contiguous int64 array; (0,) for None.
+    """
+    if pcs is None:
+        return np.zeros(0, dtype=np.int64)
+    array = np.asarray(pcs)
+    if array.size and array.dtype.kind not in "iu":
+        raise InputError(f"{name} must be integers, one per address; got dtype {array.dtype}")
+    if array.ndim != 1 or array.size != n_accesses:
+        raise InputError(f"{name} must have shape ({n_accesses},), one id per address; got {array.shape}")
+    if array.size and (array.min() < 0 or (array.dtype.kind == "u" and array.max() >= 2**63)):
+        raise InputError(f"{name} must be non-negative integers below 2**63")
+    return np.ascontiguousarray(array, dtype=np.int64)

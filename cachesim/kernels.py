@@ -94,8 +94,11 @@ def simulate_stream(addresses, geometry, state, clock, served_by, record):
     -------
     int
         The clock after the last access.
+
+    A long stream through a large fully associative level is indexed, as in
+    :func:`simulate_writes`.
     """
-    return simulate_into(addresses, geometry, state, clock, served_by, record, chunk_buffers())
+    return simulate_writes(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by, record)
 
 
 @njit(cache=True, inline="always")
@@ -106,10 +109,13 @@ def simulate_into(addresses, geometry, state, clock, served_by, record, work):
     (:class:`ChunkBuffers`), reused across calls: the entry point for other
     packages' compiled code that feeds many short streams (one pixel's reads,
     say) to one state. Every access is a read.
+
+    Large fully associative levels are scanned here, never indexed
+    (:mod:`cachesim.full`): a short stream would not repay building the
+    index, and leaving the indexed walk out keeps its compilation (a good
+    part of the walk's) out of every caller compiled around this kernel.
+    :func:`simulate_stream` indexes a long stream.
     """
-    if uses_index(geometry, addresses.shape[0]):
-        return _simulate_indexed(addresses, np.zeros(0, dtype=np.bool_), geometry, state, clock, served_by, record,
-                                 work)
     if geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):
@@ -141,13 +147,11 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     (:mod:`cachesim.by_level`, the fast path); everything else walks each
     access down the levels (:mod:`cachesim.by_access`, which documents the
     write semantics), with the first two levels looked up at once when the
-    first is direct-mapped (:mod:`cachesim.direct_first`), and with large
-    fully associative levels indexed on a long enough stream
-    (:mod:`cachesim.full`). All give identical states and counts where they
-    apply.
+    first is direct-mapped (:mod:`cachesim.direct_first`). All give
+    identical states and counts where they apply. Large fully associative
+    levels are scanned, as in :func:`simulate_into`; :func:`simulate_writes`
+    indexes them on a long stream.
     """
-    if uses_index(geometry, addresses.shape[0]):
-        return _simulate_indexed(addresses, writes, geometry, state, clock, served_by, record, work)
     if writes.shape[0] == 0 and geometry.inclusion == NON_INCLUSIVE:
         return _simulate_by_level(addresses, geometry, state, clock, served_by, record, work)
     if serves_direct_first(geometry):
@@ -157,8 +161,17 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
 
 @njit(cache=True)
 def simulate_writes(addresses, writes, geometry, state, clock, served_by, record):
-    """:func:`simulate_writes_into` with fresh work buffers."""
-    return simulate_writes_into(addresses, writes, geometry, state, clock, served_by, record, chunk_buffers())
+    """:func:`simulate_writes_into` with fresh work buffers, for one whole stream.
+
+    A long enough stream through a hierarchy with a large fully associative
+    level (:func:`cachesim.full.uses_index`) runs on the indexed walk
+    (:func:`cachesim.by_access._simulate_indexed`): same results, O(1) an
+    access in that level instead of a scan of its ways.
+    """
+    work = chunk_buffers()
+    if uses_index(geometry, addresses.shape[0]):
+        return _simulate_indexed(addresses, writes, geometry, state, clock, served_by, record, work)
+    return simulate_writes_into(addresses, writes, geometry, state, clock, served_by, record, work)
 
 
 @njit(cache=True, parallel=True)

@@ -16,29 +16,31 @@ the counts are exactly those of :func:`cachesim.simulate`.
 
 Coherence (write-invalidate, like MESI without its states): every write by
 thread ``t``, wherever it was served, removes the line from every instance,
-at every level, that does not serve ``t`` (a read removes nothing). Each
-instance counts, per record kind:
+at every level, that does not serve ``t`` (a read removes nothing). As a
+MESI cache keeps an invalidated line's tag in state I, the emptied way keeps
+the line as a *ghost*, with the bytes of the write, until a fill takes that
+way (a fill takes an empty way first, the lowest, as everywhere in
+cachesim) or the line itself is filled into the set again. Each instance
+counts, per record kind:
 
 - **coherence invalidations**: lines it lost so (attributed to the kind of
   the write);
-- **coherence misses**: misses on a line it lost to an invalidation and has
-  not filled again since (attributed to the kind of the missing access); a
-  miss that does not fill (a write in a level that does not allocate on
-  writes) leaves the line lost, so the next miss on it counts again;
+- **coherence misses**: misses on a line that has a ghost in its set
+  (attributed to the kind of the missing access): the line was lost to an
+  invalidation and not evicted since. A miss that does not fill (a write in
+  a level that does not allocate on writes) leaves the ghost, so the next
+  miss on it counts again. A lost line whose way a fill took before its
+  next use counts as an ordinary miss, so the count is a lower bound of the
+  misses that invalidations caused;
 - **false-sharing misses**: those coherence misses where the bytes the
   invalidating write touched and the bytes of the missing access are
-  disjoint. The invalidating write is the one that removed the line; later
-  writes by other threads find nothing to remove and change nothing.
-
-An access touches bytes ``[address, address + size)``; without ``sizes`` it
-touches its whole first-level line, so no miss is counted as false sharing.
-Lines are not held in states (modified, shared ...): a read of a line
-another thread has written costs no write-back, and a write to a line no one
-else holds costs nothing more than the access itself.
+  disjoint. Later writes by other threads find no copy to remove and change
+  nothing.
 
 Supported: every replacement policy (random draws use the global access
 clock and the level's seed, the same for every instance), non-inclusive and
-inclusive hierarchies. Refused with a clear error: exclusive hierarchies and
+inclusive hierarchies, prefetchers (:mod:`cachesim.multicore_prefetch`, a
+walk of its own). Refused with a clear error: exclusive hierarchies and
 hierarchies with a data TLB.
 """
 from __future__ import annotations
@@ -48,19 +50,20 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
-from numba import njit, types
-from numba.typed import Dict
+from numba import njit
 
+from cachesim import prefetch as P
 from cachesim.inputs import as_addresses, as_writes
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
-                           CacheGeometry, _find, _insert, _set_base)
+                           CacheGeometry, _find, _insert)
 from cachesim.sharing import SharedHierarchy
-from cachesim.simulate import cache_geometry
+from cachesim.simulate import _check_line_range, cache_geometry
+from rtcommon.jit import NO_REFCOUNTS
 from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
            "N_KINDS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult", "SharedState",
-           "ThreadStream", "interleave", "simulate_threads", "simulate_threads_stream"]
+           "ThreadStream", "interleave", "interleave_order", "simulate_threads", "simulate_threads_stream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
 # cachesim.kernels (accesses ... write misses, back-invalidations at 4).
@@ -69,8 +72,6 @@ COHERENCE_INVALIDATIONS, COHERENCE_MISSES, FALSE_SHARING_MISSES = 8, 9, 10
 N_SHARED_COUNTERS = 11
 #: Record kinds are integers below this (the trace's four-bit kinds).
 N_KINDS = 16
-#: Line numbers times instances must stay below 2**63: the key of a lost line.
-_KEY_LIMIT = 1 << 63
 
 _COLUMNS = (("accesses", ACCESSES), ("hits", HITS), ("misses", MISSES), ("evictions", EVICTIONS),
             ("back_invalidations", BACK_INVALIDATIONS), ("write_accesses", WRITES), ("write_hits", WRITE_HITS),
@@ -136,39 +137,44 @@ class SharedArrays(NamedTuple):
     ----------
     tags, stamps : ndarray of int64, shape (W,)
         As in :class:`~cachesim.sets.CacheArrays`, for the instances of all levels.
+    ghosts : ndarray of int64, shape (W,)
+        Per way emptied by a coherence invalidation, the line it held (its
+        tag kept, marked invalid), until a fill takes the way or the line
+        comes back to the set; -1 elsewhere.
+    ghost_bytes : ndarray of int64, shape (W, 2)
+        The first byte and the end of the bytes of the write that invalidated each ghost.
+    ghost_filter : ndarray of int32, shape (F,)
+        How many ghosts hash (:func:`_filter_slot`) to each entry: a miss
+        or fill looks for a ghost in its set only where this is nonzero.
+        ``F`` is a power of two, :data:`GHOST_FILTER_SIZE` in a
+        :class:`SharedState`: small enough to stay in the host's first-level cache.
     counts : ndarray of int64, shape (L, G, N_KINDS, N_SHARED_COUNTERS)
         Per level, instance (``G`` the most instances of a level), record
         kind and counter column (:data:`COHERENCE_MISSES` ...).
     served : ndarray of int64, shape (T, L + 1)
         Accesses of each hardware thread served by each level (``L``: memory).
-    lost : numba typed Dict of int64 to (int64, int64)
-        Lines lost to an invalidation and not filled again: key
-        ``line * n_all_instances + instance_base[level] + instance``, value
-        the first byte and the end of the bytes of the invalidating write.
-    lost_filter : ndarray of int32, shape (F,)
-        How many of ``lost``'s keys hash (:func:`_filter_slot`) to each
-        entry: a miss or fill looks ``lost`` up only where this is nonzero.
-        ``F`` is a power of two, :data:`LOST_FILTER_SIZE` in a
-        :class:`SharedState`: small enough to stay in the host's first-level cache.
     """
 
     tags: np.ndarray
     stamps: np.ndarray
+    ghosts: np.ndarray
+    ghost_bytes: np.ndarray
+    ghost_filter: np.ndarray
     counts: np.ndarray
     served: np.ndarray
-    lost: object
-    lost_filter: np.ndarray
 
 
-#: Entries of SharedArrays.lost_filter (a power of two).
-LOST_FILTER_SIZE = 1 << 13
+#: Entries of SharedArrays.ghost_filter (a power of two).
+GHOST_FILTER_SIZE = 1 << 13
 
 
 @njit(cache=True, inline="always")
-def _filter_slot(key, lost_filter):
-    """The entry of ``lost_filter`` that counts ``key`` (bits 40 up of a Fibonacci hash)."""
-    mixed = (np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
-    return np.int64(mixed & np.uint64(lost_filter.shape[0] - 1))
+def _filter_slot(line, instance_number, ghost_filter):
+    """The entry of ``ghost_filter`` that counts a ghost of ``line`` in the instance numbered
+    ``instance_number`` among all instances (bits 40 up of a Fibonacci hash of the two)."""
+    key = (np.uint64(line) << np.uint64(16)) ^ np.uint64(instance_number)
+    mixed = (key * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
+    return np.int64(mixed & np.uint64(ghost_filter.shape[0] - 1))
 
 
 # The helpers take arrays, not bundles: a bundle's field read in the
@@ -182,25 +188,12 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
 
 
 @njit(cache=True, inline="always")
-def _note_miss(key, level, instance, kind, first, end, lost, counts):
-    """Count a coherence (and false-sharing) miss when ``key``'s line was lost to an invalidation."""
-    if key in lost:
-        written_first, written_end = lost[key]
-        counts[level, instance, kind, COHERENCE_MISSES] += 1
-        if end <= written_first or written_end <= first:
-            counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+def _drop_ghost(slot, filter_entry, ghosts, ghost_filter):
+    ghosts[slot] = -1
+    ghost_filter[filter_entry] -= 1
 
 
 @njit(cache=True, inline="always")
-def _forget(key, lost):
-    """Remove ``key`` from the lost lines; whether it was there."""
-    if key in lost:
-        del lost[key]
-        return True
-    return False
-
-
-@njit(cache=True)
 def _back_invalidate(evicted, level, instance, kind, geometry, machine, state):
     """Inclusion: remove the evicted line from the instances above that ``instance`` serves."""
     width = machine.threads_per_instance[level]
@@ -218,9 +211,10 @@ def _back_invalidate(evicted, level, instance, kind, geometry, machine, state):
                     state.counts[upper, above, kind, BACK_INVALIDATIONS] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state):
-    """A write by ``thread``: remove its line from every instance that does not serve the thread."""
+    """A write by ``thread``: remove its line from every instance that does not serve the thread,
+    leaving a ghost with the write's bytes."""
     for level in range(geometry.rel_shift.shape[0]):
         line = line0 >> geometry.rel_shift[level]
         own = machine.instance_of[level, thread]
@@ -232,10 +226,12 @@ def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state
             slot = _find(state.tags, base, geometry.ways[level], line)
             if slot >= 0:
                 state.tags[slot] = -1
+                state.ghosts[slot] = line
+                state.ghost_bytes[slot, 0] = first
+                state.ghost_bytes[slot, 1] = end
+                state.ghost_filter[_filter_slot(line, machine.instance_base[level] + other,
+                                                state.ghost_filter)] += 1
                 state.counts[level, other, kind, COHERENCE_INVALIDATIONS] += 1
-                key = line * machine.n_all_instances + machine.instance_base[level] + other
-                state.lost[key] = (first, end)
-                state.lost_filter[_filter_slot(key, state.lost_filter)] += 1
 
 
 @njit(cache=True)
@@ -259,6 +255,18 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     int
         The clock after the last access.
     """
+    clock = _replay(stream, geometry, machine, state, clock, np.empty((3, geometry.rel_shift.shape[0]), np.int64))
+    # Every access is a hit or a miss: the totals follow.
+    counts = state.counts
+    counts[..., ACCESSES] = counts[..., HITS] + counts[..., MISSES]
+    counts[..., WRITES] = counts[..., WRITE_HITS] + counts[..., WRITE_MISSES]
+    return clock
+
+
+@njit(cache=True, **NO_REFCOUNTS)
+def _replay(stream, geometry, machine, state, clock, scratch):
+    """The loop of :func:`simulate_threads_stream`, which counts hits and misses only;
+    ``scratch`` (3, L) holds one access's line, instance and set at each level."""
     addresses = stream.addresses
     threads = stream.threads
     writes = stream.writes
@@ -269,14 +277,14 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     has_kinds = kinds.shape[0] > 0
     tags = state.tags
     stamps = state.stamps
+    ghosts = state.ghosts
+    ghost_bytes = state.ghost_bytes
+    ghost_filter = state.ghost_filter
     counts = state.counts
     served_counts = state.served
-    lost = state.lost
-    lost_filter = state.lost_filter
     instance_of = machine.instance_of
     level_ways = machine.level_ways
     instance_base = machine.instance_base
-    n_all = machine.n_all_instances
     rel_shift = geometry.rel_shift
     n_sets = geometry.n_sets
     set_mask = geometry.set_mask
@@ -289,9 +297,9 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     n_levels = rel_shift.shape[0]
     shift = np.uint64(geometry.line_shift)
     line_bytes = np.int64(1) << geometry.line_shift
-    lines = np.empty(n_levels, dtype=np.int64)
-    instances = np.empty(n_levels, dtype=np.int64)
-    bases = np.empty(n_levels, dtype=np.int64)
+    lines = scratch[0]
+    instances = scratch[1]
+    bases = scratch[2]
     # The first level serves most accesses: its geometry in scalars.
     mask0 = set_mask[0]
     sets0 = n_sets[0]
@@ -309,8 +317,12 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
         is_write = has_writes and writes[i]
         kind = np.int64(kinds[i]) if has_kinds else np.int64(0)
         instance0 = instance_of[0, thread]
-        first = np.int64(0)
-        end = np.int64(0)
+        if has_sizes:
+            first = np.int64(address)
+            end = first + sizes[i]
+        else:
+            first = line0 << geometry.line_shift
+            end = first + line_bytes
         if line0 == previous_line and thread == previous_thread:
             # The previous access, by the same thread, left the line in its
             # first level as the set's most recent entry: a hit that changes nothing.
@@ -325,15 +337,7 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
             if is_write:
                 counts[0, instance0, kind, WRITE_HITS] += 1
             served_counts[thread, 0] += 1
-            previous_line = line0
-            previous_thread = thread
         else:
-            if has_sizes:
-                first = np.int64(address)
-                end = first + sizes[i]
-            else:
-                first = line0 << geometry.line_shift
-                end = first + line_bytes
             served = n_levels
             for level in range(n_levels):
                 line = line0 >> rel_shift[level]
@@ -355,9 +359,12 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
                 counts[level, instance, kind, MISSES] += 1
                 if is_write:
                     counts[level, instance, kind, WRITE_MISSES] += 1
-                key = line * n_all + instance_base[level] + instance
-                if lost_filter[_filter_slot(key, lost_filter)] > 0:
-                    _note_miss(key, level, instance, kind, first, end, lost, counts)
+                if ghost_filter[_filter_slot(line, instance_base[level] + instance, ghost_filter)] > 0:
+                    ghost = _find(ghosts, base, ways[level], line)
+                    if ghost >= 0:
+                        counts[level, instance, kind, COHERENCE_MISSES] += 1
+                        if end <= ghost_bytes[ghost, 0] or ghost_bytes[ghost, 1] <= first:
+                            counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
             served_counts[thread, served] += 1
             for level in range(served - 1, -1, -1):
                 if is_write and not write_allocate[level]:
@@ -365,27 +372,27 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
                 line = lines[level]
                 instance = instances[level]
                 base = bases[level]
+                number = instance_base[level] + instance
+                entry = _filter_slot(line, number, ghost_filter)
+                if ghost_filter[entry] > 0:
+                    ghost = _find(ghosts, base, ways[level], line)
+                    if ghost >= 0:  # the line is back: its ghost goes
+                        _drop_ghost(ghost, entry, ghosts, ghost_filter)
                 evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
-                key = line * n_all + instance_base[level] + instance
-                if lost_filter[_filter_slot(key, lost_filter)] > 0 and _forget(key, lost):
-                    lost_filter[_filter_slot(key, lost_filter)] -= 1
                 if evicted >= 0:
                     counts[level, instance, kind, EVICTIONS] += 1
                     if inclusive and level > 0:
                         _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
-            previous_line = line0 if (allocate0 or not is_write) else np.int64(-1)
-            previous_thread = thread
+                else:
+                    # The fill took an empty way, which may hold another line's ghost: evicted now.
+                    taken = _find(tags, base, ways[level], line)
+                    if ghosts[taken] >= 0:
+                        _drop_ghost(taken, _filter_slot(ghosts[taken], number, ghost_filter), ghosts, ghost_filter)
+            slot = np.int64(-1) if (is_write and not allocate0) else np.int64(0)
+        previous_line = line0 if slot >= 0 else np.int64(-1)
+        previous_thread = thread
         if is_write:
-            if not has_sizes:
-                first = line0 << geometry.line_shift
-                end = first + line_bytes
-            elif slot >= 0:
-                first = np.int64(address)
-                end = first + sizes[i]
             _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
-    # Every access is a hit or a miss: the totals follow.
-    counts[..., ACCESSES] = counts[..., HITS] + counts[..., MISSES]
-    counts[..., WRITES] = counts[..., WRITE_HITS] + counts[..., WRITE_MISSES]
     return clock
 
 
@@ -400,15 +407,11 @@ def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tupl
     per_instance = np.array([machine.threads_per_instance(level) for level in range(n_levels)], dtype=np.int64)
     instance_base = np.concatenate(([0], np.cumsum(n_instances)[:-1])).astype(np.int64)
     over_instances = CacheGeometry(geometry.line_shift, geometry.rel_shift, geometry.n_sets, geometry.set_mask,
-                               geometry.ways, geometry.policy, offset, geometry.inclusion, geometry.seeds,
-                               geometry.write_allocate)
+                                   geometry.ways, geometry.policy, offset, geometry.inclusion, geometry.seeds,
+                                   geometry.write_allocate)
     return (over_instances,
             MachineGeometry(instance_of, n_instances, level_ways.astype(np.int64), per_instance, instance_base,
                             int(n_instances.sum())))
-
-
-def _empty_lost():
-    return Dict.empty(key_type=types.int64, value_type=types.UniTuple(types.int64, 2))
 
 
 class SharedState:
@@ -431,6 +434,7 @@ class SharedState:
                              "give the hierarchy without its tlb")
         self.machine = machine
         self.geometry, self.machine_geometry = _machine_geometry(machine, cache_geometry(machine.hierarchy))
+        self.prefetch_geometry = P.prefetch_geometry(machine.hierarchy, self.machine_geometry.n_instances)
         self.reset()
 
     def reset(self) -> None:
@@ -438,30 +442,37 @@ class SharedState:
         machine = self.machine
         n_levels = len(machine.hierarchy.levels)
         total_ways = int(np.sum(self.machine_geometry.level_ways * self.machine_geometry.n_instances))
-        self.tags = np.full(total_ways, -1, dtype=np.int64)
-        self.stamps = np.zeros(total_ways, dtype=np.int64)
+        try:
+            self.tags = np.full(total_ways, -1, dtype=np.int64)
+            self.stamps = np.zeros(total_ways, dtype=np.int64)
+            self.ghosts = np.full(total_ways, -1, dtype=np.int64)
+            self.ghost_bytes = np.zeros((total_ways, 2), dtype=np.int64)
+        except MemoryError:
+            raise MemoryError(f"shared hierarchy {machine.name!r}: the {total_ways:,} cache lines of its instances "
+                              f"need {40 * total_ways / 2**30:,.1f} GiB of simulator state (40 bytes each), more "
+                              "than this machine can allocate") from None
         most = int(self.machine_geometry.n_instances.max())
         self.counts = np.zeros((n_levels, most, N_KINDS, N_SHARED_COUNTERS), dtype=np.int64)
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
-        self.lost = _empty_lost()
-        self.lost_filter = np.zeros(LOST_FILTER_SIZE, dtype=np.int32)
+        self.ghost_filter = np.zeros(GHOST_FILTER_SIZE, dtype=np.int32)
         self.clock = 0
+        self.prefetch = None if self.prefetch_geometry is None else P.empty_prefetch_arrays(
+            self.prefetch_geometry, total_ways, self.machine_geometry.n_instances)
 
     @property
     def arrays(self) -> SharedArrays:
         """The contents and counters as one bundle for :func:`simulate_threads_stream` (updated in place)."""
-        return SharedArrays(self.tags, self.stamps, self.counts, self.served, self.lost, self.lost_filter)
+        return SharedArrays(self.tags, self.stamps, self.ghosts, self.ghost_bytes, self.ghost_filter, self.counts,
+                            self.served)
 
     def copy(self) -> "SharedState":
         """An independent clone: continuing either leaves the other untouched."""
         clone = SharedState.__new__(SharedState)
         clone.machine, clone.geometry, clone.machine_geometry = self.machine, self.geometry, self.machine_geometry
-        clone.tags, clone.stamps = self.tags.copy(), self.stamps.copy()
-        clone.counts, clone.served = self.counts.copy(), self.served.copy()
-        clone.lost_filter = self.lost_filter.copy()
-        clone.lost = _empty_lost()
-        for key, value in self.lost.items():
-            clone.lost[key] = value
+        for name in ("tags", "stamps", "ghosts", "ghost_bytes", "ghost_filter", "counts", "served"):
+            setattr(clone, name, getattr(self, name).copy())
+        clone.prefetch_geometry = self.prefetch_geometry
+        clone.prefetch = None if self.prefetch is None else P.PrefetchArrays(*(array.copy() for array in self.prefetch))
         clone.clock = self.clock
         return clone
 
@@ -489,6 +500,11 @@ class SharedResult:
         Whether the call was given record kinds (the frame then has a ``kind`` column).
     state : SharedState
         The state after the call, to continue from.
+    prefetch_counts : ndarray of int64, shape (L, G, 3), or None
+        With prefetchers: per level and instance, the prefetches issued,
+        useful and useless in this call (:mod:`cachesim.prefetch`).
+    prefetch_pending : ndarray of int64, shape (L, G), or None
+        Prefetched lines still unused in each instance after the call.
     """
 
     machine: SharedHierarchy
@@ -496,6 +512,8 @@ class SharedResult:
     served: np.ndarray
     by_kind: bool
     state: SharedState
+    prefetch_counts: np.ndarray | None = None
+    prefetch_pending: np.ndarray | None = None
 
     def level_counts(self) -> np.ndarray:
         """Counts summed over instances and kinds, int64 (L, N_SHARED_COUNTERS)."""
@@ -534,6 +552,29 @@ class SharedResult:
             frame[column] = values[:, index]
         return frame
 
+    def level_frame(self) -> pd.DataFrame:
+        """One row per level, summed over its instances and kinds: level, instances, then the
+        counts of :meth:`to_frame`."""
+        machine = self.machine
+        totals = self.level_counts()
+        frame = pd.DataFrame({
+            "level": pd.Series(machine.hierarchy.level_names, dtype="string"),
+            "instances": np.array([machine.n_instances(level) for level in range(len(totals))], dtype=np.int64),
+        })
+        for column, index in _COLUMNS:
+            frame[column] = totals[:, index].astype(np.int64)
+        return frame
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready numbers: the machine, per level totals, per instance (and kind) rows,
+        and each thread's accesses by serving level (``served``, the last entry memory)."""
+        def records(frame):
+            return [{key: (value.item() if hasattr(value, "item") else value) for key, value in row.items()}
+                    for row in frame.astype(object).to_dict(orient="records")]
+
+        return {"machine": self.machine.to_dict(), "levels": records(self.level_frame()),
+                "instances": records(self.to_frame()), "served": self.served.tolist()}
+
 
 def _stream(addresses, thread_ids, machine: SharedHierarchy, writes, sizes, kinds) -> ThreadStream:
     """Validate and convert the per-access arrays of :func:`simulate_threads`."""
@@ -547,18 +588,9 @@ def _stream(addresses, thread_ids, machine: SharedHierarchy, writes, sizes, kind
     if sizes is None:
         byte_counts = np.zeros(0, dtype=np.int64)
     else:
-        byte_counts = _small_integers(sizes, n, "sizes", 1 << 20, "a megabyte", lowest=1)
-    line_shift = machine.hierarchy.levels[0].line_size.bit_length() - 1
-    if n and (int(addresses.max()) >> line_shift) + 1 > _KEY_LIMIT // machine_instances(machine):
-        raise InputError(f"addresses must be below {(_KEY_LIMIT // machine_instances(machine)) << line_shift:#x} "
-                         f"on this machine (line numbers times its {machine_instances(machine)} cache "
-                         f"instances must fit in 63 bits); found {int(addresses.max()):#x}")
+        byte_counts = _small_integers(sizes, n, "sizes", 1 << 20, "bytes, below a megabyte", lowest=1)
+    _check_line_range(addresses, machine.hierarchy)
     return ThreadStream(addresses, threads, flags, byte_counts, kind_codes)
-
-
-def machine_instances(machine: SharedHierarchy) -> int:
-    """Cache instances of all levels of a machine."""
-    return sum(machine.n_instances(level) for level in range(len(machine.hierarchy.levels)))
 
 
 def _small_integers(values, n: int, name: str, limit: int, what: str, lowest: int = 0) -> np.ndarray:
@@ -595,25 +627,91 @@ def simulate_threads(addresses, thread_ids, machine: SharedHierarchy | SharedSta
         each touches its whole first-level line (no false sharing can then show).
     kinds : array_like of int, shape (N,), optional
         Record kind of each access, in [0, :data:`N_KINDS`); counts are then
-        reported per kind.
+        reported per kind. Stride prefetchers take it as the access's PC-like id.
 
     Returns
     -------
     SharedResult
         Counts of this call only, and the state after it. The rules are in
-        this module's docstring.
+        this module's docstring, and for prefetchers in
+        :mod:`cachesim.multicore_prefetch`.
     """
     state = machine if isinstance(machine, SharedState) else SharedState(machine)
     stream = _stream(addresses, thread_ids, state.machine, writes, sizes, kinds)
     counts_before, served_before = state.counts.copy(), state.served.copy()
-    state.clock = int(simulate_threads_stream(stream, state.geometry, state.machine_geometry, state.arrays,
-                                              state.clock))
+    if state.prefetch is None:
+        state.clock = int(simulate_threads_stream(stream, state.geometry, state.machine_geometry, state.arrays,
+                                                  state.clock))
+        return SharedResult(state.machine, state.counts - counts_before, state.served - served_before,
+                            kinds is not None, state)
+    from cachesim import multicore_prefetch as MP
+
+    if stream.addresses.size and stream.addresses.max() >= 2**63:
+        raise InputError("with prefetchers, addresses must be below 2**63")
+    prefetch_before = state.prefetch.counts.copy()
+    pending_before = MP.pending_by_instance(state.prefetch, state.tags, state.geometry, state.machine_geometry)
+    state.clock = int(MP.simulate_threads_prefetching(stream, state.geometry, state.machine_geometry, state.arrays,
+                                                      state.clock, state.prefetch_geometry, state.prefetch))
+    pending = MP.pending_by_instance(state.prefetch, state.tags, state.geometry, state.machine_geometry)
+    issued_useful = state.prefetch.counts - prefetch_before
+    useless = issued_useful[..., P.ISSUED] - issued_useful[..., P.USEFUL] - (pending - pending_before)
     return SharedResult(state.machine, state.counts - counts_before, state.served - served_before,
-                        kinds is not None, state)
+                        kinds is not None, state, np.concatenate([issued_useful, useless[..., None]], axis=-1),
+                        pending)
 
 
-def interleave(streams, quantum: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Interleave per-thread streams round-robin, ``quantum`` accesses of each thread at a time.
+def interleave_order(lengths, quantum: int = 1, times=None) -> tuple[np.ndarray, np.ndarray]:
+    """The round-robin order of per-thread streams laid one after another.
+
+    Parameters
+    ----------
+    lengths : sequence of int, length T
+        Accesses of hardware thread ``t``'s stream, at position ``t``.
+    quantum : int
+        Length of a turn (>= 1): ``quantum`` accesses, or with ``times``
+        ``quantum`` units of time (cycles, say).
+    times : sequence of array_like of int, length T, optional
+        When each thread issues each of its accesses, non-decreasing per
+        thread. A turn then holds a thread's accesses issued in one window
+        of ``quantum`` units: window ``w`` is times ``[w * quantum, (w + 1) * quantum)``,
+        every thread's accesses of window ``w`` come before any of ``w + 1``,
+        and within a window thread 0's come first, then thread 1's, and so
+        on. With ``quantum=1`` and one access per unit of time per thread,
+        the threads alternate access by access.
+
+    Returns
+    -------
+    order : ndarray of int64, shape (N,)
+        Positions in the concatenated streams, in interleaved order.
+    thread_ids : ndarray of int64, shape (N,)
+        The thread of each access of the interleaved stream.
+    """
+    if isinstance(quantum, bool) or not isinstance(quantum, (int, np.integer)) or quantum < 1:
+        raise InputError(f"interleave: quantum must be an integer >= 1, got {quantum!r}")
+    lengths = [int(length) for length in lengths]
+    if times is None:
+        # Access j of thread t runs in round j // quantum, after the earlier threads' turns of that round.
+        rounds = [np.arange(length, dtype=np.int64) // quantum for length in lengths]
+    else:
+        times = list(times)
+        if len(times) != len(lengths):
+            raise InputError(f"interleave: {len(lengths)} streams but {len(times)} arrays of times")
+        rounds = []
+        for thread, (stamps, length) in enumerate(zip(times, lengths)):
+            stamps = _small_integers(stamps, length, f"times[{thread}]", 1 << 62, "a time")
+            if stamps.size > 1 and (np.diff(stamps) < 0).any():
+                at = int(np.flatnonzero(np.diff(stamps) < 0)[0]) + 1
+                raise InputError(f"interleave: times[{thread}] must not decrease; it does at access {at}")
+            rounds.append(stamps // quantum)
+    if not lengths:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    threads = np.concatenate([np.full(length, thread, dtype=np.int64) for thread, length in enumerate(lengths)])
+    order = np.lexsort((threads, np.concatenate(rounds)))
+    return order.astype(np.int64), threads[order]
+
+
+def interleave(streams, quantum: int = 1, times=None) -> tuple[np.ndarray, np.ndarray]:
+    """Interleave per-thread address streams round-robin (turns as in :func:`interleave_order`).
 
     Parameters
     ----------
@@ -621,7 +719,9 @@ def interleave(streams, quantum: int = 1) -> tuple[np.ndarray, np.ndarray]:
         Stream of hardware thread ``t`` at position ``t``; an exhausted
         stream drops out of the rotation.
     quantum : int
-        Consecutive accesses a thread makes before the next thread's turn (>= 1).
+        Accesses per turn (>= 1), or units of time per turn with ``times``.
+    times : sequence of array_like of int, optional
+        Issue time of each access of each stream (see :func:`interleave_order`).
 
     Returns
     -------
@@ -630,13 +730,8 @@ def interleave(streams, quantum: int = 1) -> tuple[np.ndarray, np.ndarray]:
         Which thread made each access; ``addresses[thread_ids == t]`` is
         stream ``t`` in its order.
     """
-    if isinstance(quantum, bool) or not isinstance(quantum, (int, np.integer)) or quantum < 1:
-        raise InputError(f"interleave: quantum must be an integer >= 1, got {quantum!r}")
     arrays = [as_addresses(stream, name=f"streams[{index}]") for index, stream in enumerate(streams)]
+    order, threads = interleave_order([array.size for array in arrays], quantum, times)
     if not arrays:
-        return np.zeros(0, dtype=np.uint64), np.zeros(0, dtype=np.int64)
-    # Access j of thread t runs in round j // quantum, after the earlier threads' turns of that round.
-    rounds = np.concatenate([np.arange(array.size, dtype=np.int64) // quantum for array in arrays])
-    threads = np.concatenate([np.full(array.size, thread, dtype=np.int64) for thread, array in enumerate(arrays)])
-    order = np.lexsort((threads, rounds))
-    return np.concatenate(arrays)[order], threads[order]
+        return np.zeros(0, dtype=np.uint64), threads
+    return np.concatenate(arrays)[order], threads

@@ -189,6 +189,16 @@ def _insert(tags, stamps, seed, base, n_ways, policy, line, clock):
 
 
 @njit(cache=True, inline="always")
+def _zeroed_counts(work, n_levels):
+    """``work``'s per-level hits, write hits and invalidations, zeroed for ``n_levels`` levels, to
+    count one call of a per-access walk before :func:`_add_counts` adds them up."""
+    work.level_hits[:n_levels] = 0
+    work.level_write_hits[:n_levels] = 0
+    work.level_invalidations[:n_levels] = 0
+    return work.level_hits, work.level_write_hits, work.level_invalidations
+
+
+@njit(cache=True, inline="always")
 def _add_counts(counts, n_accesses, n_writes, level_hits, level_write_hits, invalidations):
     """Add one call's per-level hits, write hits and invalidations to
     ``counts``: only misses go down a level, so the accesses of level

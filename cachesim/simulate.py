@@ -18,9 +18,10 @@ import numpy as np
 import pandas as pd
 
 from cachesim import kernels as K
+from cachesim import prefetch as P
 from cachesim import tlb as T
 from cachesim.config import Hierarchy
-from cachesim.inputs import as_addresses, as_writes
+from cachesim.inputs import as_addresses, as_pcs, as_writes
 from rtcommon.validate import InputError
 
 __all__ = ["CacheState", "SimulationResult", "as_addresses", "as_writes", "cache_geometry", "simulate",
@@ -85,6 +86,7 @@ class CacheState:
         self.hierarchy = hierarchy
         self._geometry = cache_geometry(hierarchy)
         self._tlb_geometry = tlb_geometry(hierarchy)
+        self._prefetch_geometry = P.prefetch_geometry(hierarchy)
         self.reset()
 
     @property
@@ -108,6 +110,12 @@ class CacheState:
         """The TLB's contents and counters for :func:`cachesim.tlb.tlb_lookup` (None: no TLB)."""
         return self.tlb
 
+    @property
+    def prefetch_geometry(self) -> P.PrefetchGeometry | None:
+        """The prefetchers' parameters as :func:`cachesim.prefetch.simulate_prefetching` takes them
+        (None: no level has a prefetcher)."""
+        return self._prefetch_geometry
+
     def reset(self) -> None:
         """Empty every level and zero the counters."""
         n_levels = len(self.hierarchy.levels)
@@ -122,6 +130,8 @@ class CacheState:
         self.counts = np.zeros((n_levels, K.N_COUNTERS), dtype=np.int64)
         self.clock = 0
         self.tlb = T.empty_tlb(self.hierarchy.tlb.entries) if self.hierarchy.tlb is not None else None
+        self.prefetch = (None if self._prefetch_geometry is None
+                         else P.empty_prefetch_arrays(self._prefetch_geometry, total_ways))
 
     def copy(self) -> "CacheState":
         """An independent clone: continuing either leaves the other untouched."""
@@ -129,6 +139,8 @@ class CacheState:
         clone.hierarchy = self.hierarchy
         clone._geometry = self._geometry
         clone._tlb_geometry = self._tlb_geometry
+        clone._prefetch_geometry = self._prefetch_geometry
+        clone.prefetch = None if self.prefetch is None else P.PrefetchArrays(*(array.copy() for array in self.prefetch))
         clone.tlb = None if self.tlb is None else T.TlbArrays(*(array.copy() for array in self.tlb))
         clone.tags = self.tags.copy()
         clone.stamps = self.stamps.copy()
@@ -138,8 +150,22 @@ class CacheState:
 
     def totals(self) -> "SimulationResult":
         """Cumulative counts of everything run on this state since the last reset."""
+        prefetch_counts, pending = self._prefetch_counts(None, None)
         return SimulationResult(self.hierarchy, self.counts.copy(),
-                                tlb_counts=None if self.tlb is None else self.tlb.counts.copy())
+                                tlb_counts=None if self.tlb is None else self.tlb.counts.copy(),
+                                prefetch_counts=prefetch_counts, prefetch_pending=pending)
+
+    def _prefetch_counts(self, before: np.ndarray | None, pending_before: np.ndarray | None):
+        """Prefetches issued, useful and useless per level (int64, (L, 3)) since ``before`` (the
+        kernel's counts then; None: since the reset), and the pending ones now; (None, None) without
+        prefetchers. A line that left unused is one issued that is neither useful nor pending."""
+        if self.prefetch is None:
+            return None, None
+        pending = P.pending_prefetches(self.prefetch, self.tags, self._geometry)
+        issued_useful = self.prefetch.counts - (0 if before is None else before)
+        useless = issued_useful[:, P.ISSUED] - issued_useful[:, P.USEFUL] - (pending - (0 if pending_before is None
+                                                                                      else pending_before))
+        return np.column_stack([issued_useful, useless]).astype(np.int64), pending
 
     def resident_lines(self, level: int | str) -> np.ndarray:
         """Sorted line numbers (address // line_size) held by one level."""
@@ -168,6 +194,13 @@ class SimulationResult:
         The state after the call, to continue from.
     tlb_counts : ndarray of int64, shape (3,), or None
         TLB lookups, hits and misses, when the hierarchy has a TLB.
+    prefetch_counts : ndarray of int64, shape (L, 3), or None
+        When a level has a prefetcher: per level, the prefetches issued,
+        useful (a demand access hit the prefetched line in that level) and
+        useless (the line left the level unused, evicted or invalidated),
+        in this call (:mod:`cachesim.prefetch`); zero where a level has none.
+    prefetch_pending : ndarray of int64, shape (L,), or None
+        Prefetched lines still unused in each level after the call.
     """
 
     hierarchy: Hierarchy
@@ -175,6 +208,8 @@ class SimulationResult:
     served_by: np.ndarray | None = None
     state: CacheState | None = None
     tlb_counts: np.ndarray | None = None
+    prefetch_counts: np.ndarray | None = None
+    prefetch_pending: np.ndarray | None = None
 
     @property
     def tlb_accesses(self) -> int | None:
@@ -192,6 +227,18 @@ class SimulationResult:
     def tlb_cycles(self) -> float | None:
         """TLB misses times the TLB's fixed miss penalty (None: no TLB)."""
         return None if self.tlb_counts is None else self.tlb_misses * self.hierarchy.tlb.miss_cycles
+
+    @property
+    def prefetches_issued(self) -> np.ndarray | None:
+        return None if self.prefetch_counts is None else self.prefetch_counts[:, 0]
+
+    @property
+    def prefetches_useful(self) -> np.ndarray | None:
+        return None if self.prefetch_counts is None else self.prefetch_counts[:, 1]
+
+    @property
+    def prefetches_useless(self) -> np.ndarray | None:
+        return None if self.prefetch_counts is None else self.prefetch_counts[:, 2]
 
     @property
     def accesses(self) -> np.ndarray:
@@ -251,8 +298,16 @@ class SimulationResult:
     def to_frame(self) -> pd.DataFrame:
         """One row per level: level, size, line_size, ways, accesses, hits,
         misses, evictions, invalidations, hit_rate, then write_accesses,
-        write_hits, write_misses (the writes among accesses, hits, misses)."""
+        write_hits, write_misses (the writes among accesses, hits, misses);
+        with prefetchers, then prefetches_issued, prefetches_useful,
+        prefetches_useless and prefetches_pending."""
         levels = self.hierarchy.levels
+        prefetch = {} if self.prefetch_counts is None else {
+            "prefetches_issued": self.prefetches_issued.astype(np.int64),
+            "prefetches_useful": self.prefetches_useful.astype(np.int64),
+            "prefetches_useless": self.prefetches_useless.astype(np.int64),
+            "prefetches_pending": self.prefetch_pending.astype(np.int64),
+        }
         return pd.DataFrame({
             "level": pd.Series([level.name for level in levels], dtype="string"),
             "size": np.array([level.size for level in levels], dtype=np.int64),
@@ -267,6 +322,7 @@ class SimulationResult:
             "write_accesses": self.write_accesses.astype(np.int64),
             "write_hits": self.write_hits.astype(np.int64),
             "write_misses": self.write_misses.astype(np.int64),
+            **prefetch,
         })
 
     def to_dict(self) -> dict:
@@ -291,7 +347,7 @@ def _check_line_range(addresses: np.ndarray, hierarchy: Hierarchy) -> None:
         raise InputError("with a 1-byte first-level line, addresses must be below 2**63")
 
 
-def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None,
+def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None, pcs=None,
              return_levels: bool = False) -> SimulationResult:
     """Run a stream of byte addresses through a cache hierarchy in one compiled call.
 
@@ -307,6 +363,10 @@ def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None,
         True where the access is a write. Omitted (or all false): every
         access is a read, with results identical to a call without it.
         Semantics of writes per level: :mod:`cachesim.by_access`.
+    pcs : array_like of int, shape (N,), optional
+        A non-negative PC-like id per access (the record kind, say), which
+        indexes stride prefetchers' tables; omitted: id 0 for every access.
+        Used only by stride prefetchers.
     return_levels : bool
         Also return ``served_by`` (uint8, (N,)): the level index that served
         each access, ``L`` meaning memory.
@@ -316,18 +376,32 @@ def simulate(addresses, hierarchy: Hierarchy | CacheState, *, writes=None,
     SimulationResult
         Counts of this call only, and the state after it (``.state``); with
         the TLB's lookups, hits and misses when the hierarchy has a TLB
-        (every access, read or write, is looked up).
+        (every access, read or write, is looked up), and the prefetchers'
+        counts when a level has one (rules in :mod:`cachesim.prefetch`;
+        the access clock then also advances once per issued prefetch).
     """
     state = hierarchy if isinstance(hierarchy, CacheState) else CacheState(hierarchy)
     addresses = as_addresses(addresses)
     flags = as_writes(writes, addresses.size)
     _check_line_range(addresses, state.hierarchy)
+    ids = as_pcs(pcs, addresses.size)
     served_by = np.zeros(addresses.size if return_levels else 0, dtype=np.uint8)
     before = state.counts.copy()
-    state.clock = int(K.simulate_writes(addresses, flags, state.geometry, state.arrays, state.clock, served_by,
-                                        return_levels))
-    return SimulationResult(state.hierarchy, state.counts - before,
-                            served_by if return_levels else None, state, _run_tlb(addresses, state))
+    if state.prefetch is None:
+        state.clock = int(K.simulate_writes(addresses, flags, state.geometry, state.arrays, state.clock, served_by,
+                                            return_levels))
+        prefetch_counts = pending = None
+    else:
+        if addresses.size and addresses.max() >= 2**63:
+            raise InputError("with prefetchers, addresses must be below 2**63")
+        prefetch_before = state.prefetch.counts.copy()
+        pending_before = P.pending_prefetches(state.prefetch, state.tags, state.geometry)
+        state.clock = int(P.simulate_prefetching(addresses, flags, ids, state.geometry, state.arrays, state.clock,
+                                                 served_by, return_levels, state.prefetch_geometry,
+                                                 state.prefetch))
+        prefetch_counts, pending = state._prefetch_counts(prefetch_before, pending_before)
+    return SimulationResult(state.hierarchy, state.counts - before, served_by if return_levels else None, state,
+                            _run_tlb(addresses, state), prefetch_counts, pending)
 
 
 def _run_tlb(addresses: np.ndarray, state: CacheState) -> np.ndarray | None:
@@ -392,6 +466,11 @@ def simulate_many(streams, hierarchy: Hierarchy | None = None, *, states: list[C
         _check_line_range(streams[index], reference)
     lengths = np.array([stream.size for stream in streams], dtype=np.int64)
     starts = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
+    if reference.prefetches:
+        # The prefetching walk has no parallel entry: the streams run one after another.
+        return [simulate(stream, state, writes=all_writes[start:stop] if all_writes.size else None,
+                         return_levels=return_levels)
+                for stream, state, start, stop in zip(streams, states, starts[:-1], starts[1:])]
     addresses = np.concatenate(streams)
     tags = np.stack([state.tags for state in states])
     stamps = np.stack([state.stamps for state in states])

@@ -222,11 +222,42 @@ def modern() -> CostModel:
                      name="modern")
 
 
-COST_MODELS = {"alpha8400": alpha8400, "modern": modern}
+#: Cycles per operation of this project's own tracer, measured once on one machine by
+#: ``benchmarks/bench_platform_costs.py`` (the paper scenes at 256x256, both tree builders, depth 1 and
+#: the scene's, CPU time of one core at the 2.6 GHz clock of the machine; docs/platforms.md gives the
+#: machine, the renders and the fit). A zero is an operation the fit could not separate from others
+#: (its cost is inside theirs); patches and cones, in no paper scene, cost a polygon test.
+MEASURED_CYCLES = {"ray": 317.34, "node_visit": 13.85, "index_read": 0.0, "test_sphere": 9.2,
+                   "test_triangle": 0.0, "test_polygon": 30.01, "test_patch": 30.01, "test_cone": 30.01,
+                   "shading": 0.0, "light_read": 0.0, "test_root": 5.11}
+
+
+def measured(name: str, clock_hz: float) -> CostModel:
+    """:data:`MEASURED_CYCLES` at ``clock_hz``: the same cycles per operation on another core's clock."""
+    return CostModel(**MEASURED_CYCLES, clock_hz=clock_hz, name=name)
+
+
+def zen4_7950x() -> CostModel:
+    """The measured cycles on an AMD Ryzen 9 7950X's 5.7 GHz clock (:mod:`coherence.platforms`)."""
+    return measured("zen4-7950x", 5.7e9)
+
+
+def xeon_8480() -> CostModel:
+    """The measured cycles on an Intel Xeon Platinum 8480's 3.8 GHz clock (:mod:`coherence.platforms`)."""
+    return measured("xeon-8480", 3.8e9)
+
+
+def apple_m1() -> CostModel:
+    """The measured cycles on an Apple M1 performance core's 3.2 GHz clock (:mod:`coherence.platforms`)."""
+    return measured("apple-m1", 3.2e9)
+
+
+COST_MODELS = {"alpha8400": alpha8400, "modern": modern, "zen4-7950x": zen4_7950x, "xeon-8480": xeon_8480,
+               "apple-m1": apple_m1}
 
 
 def get_cost_model(name_or_model) -> CostModel:
-    """A preset by name (``alpha8400``, ``modern``) or a CostModel."""
+    """A preset by name (:data:`COST_MODELS`) or a CostModel."""
     if isinstance(name_or_model, CostModel):
         return name_or_model
     try:

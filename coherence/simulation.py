@@ -336,6 +336,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     if counter_names is None:
         from tracer.trace.access import COUNTER_NAMES as counter_names
     n_pixels = trace.width * trace.height
+    if hierarchy.prefetches:
+        raise InputError(f"hierarchy {hierarchy.name!r} has prefetchers, which the schedule simulation does not "
+                         "model; cachesim.simulate runs them on an address stream")
     if (distribution.width, distribution.height) != (trace.width, trace.height):
         raise InputError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")

@@ -47,7 +47,7 @@ def _close(text: str, value: float, scale: float = 1.0) -> bool:
 def test_every_figure_of_the_section_is_the_summarys(summary):
     """Parse the Markdown of a real 16x16 tetra study (2 trajectories) and check each figure against the JSON:
     command, seed, commit, size, trajectories, per scene P(load balance), evaluations, the 5/50/95th
-    percentiles of B - S, DB - S (in %) and the margin, the top three unknowns with mu* and flip regions,
+    percentiles of B - S, DB - S (in %), the margin and every mapping's losses, the top three unknowns with mu* and flip regions,
     and every mechanism's share recomputed here from mu*. Fails if faithfulness_markdown swaps two
     percentiles (for example ``(50, 5, 95)`` in the DB - S row)."""
     text = faithfulness_markdown(summary)
@@ -73,6 +73,11 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
                                   ("verdict's margin", "margin", 1.0)):
             for cell, q in zip(rows[label], (5, 50, 95)):
                 assert _close(cell, s[key][f"p{q}"], scale), (label, q, cell)
+        losses = {row[0]: row[1:] for row in _table(section, "| mapping |")}
+        assert list(losses) == list(s["losses"])
+        for mapping, cells in losses.items():
+            expected = [s["losses"][mapping][kind][f"p{q}"] for kind in ("coherence", "imbalance") for q in (5, 50, 95)]
+            assert all(_close(cell, value) for cell, value in zip(cells, expected)), (mapping, cells, expected)
         top = _table(section, "| rank |")
         assert [row[1] for row in top] == s["top"] and [int(row[0]) for row in top] == [1, 2, 3]
         for rank, factor, mechanism, mu_star, flip in top:
@@ -139,3 +144,14 @@ def test_regenerates_from_a_stored_summary_and_refuses_bad_input(summary, tmp_pa
         error = capsys.readouterr().err.strip()
         assert says in error and "\n" not in error, error
         assert not target.exists()
+
+
+def test_the_docs_page_is_generated_from_its_json():
+    """docs/results/faithfulness.md is exactly the section generated from the study's summary stored beside it,
+    docs/results/faithfulness.json (robustness.json of the run the page names). Fails if a figure of the page
+    is edited by hand (for example one digit of a percentile)."""
+    from pathlib import Path
+
+    results = Path(__file__).resolve().parent.parent / "docs" / "results"
+    summary = json.loads((results / "faithfulness.json").read_text(encoding="utf-8"))
+    assert (results / "faithfulness.md").read_text(encoding="utf-8") == faithfulness_markdown(summary)

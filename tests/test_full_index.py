@@ -115,3 +115,87 @@ def test_uses_index_weighs_the_ways_against_the_stream():
     assert uses_index(geometry, 4096) and not uses_index(geometry, 4095)
     small = CacheState(Hierarchy((CacheLevel("FA", 64 * 64, 64, "full"),))).geometry
     assert not uses_index(small, 10**6)
+
+
+def test_only_the_whole_stream_kernels_take_the_indexed_walk(monkeypatch):
+    """Fails if ``simulate_into`` or ``simulate_writes_into`` in cachesim/kernels.py dispatch to
+    ``_simulate_indexed`` (put back their ``uses_index`` branch): every caller compiled around them,
+    the schedule's event loop among them, would compile the indexed walk too. ``simulate_writes``
+    (one whole stream) must still take it. The kernels' Python bodies run with the indexed walk
+    replaced by a spy; the callees they reach stay compiled."""
+    from cachesim import kernels as K
+
+    calls = []
+
+    def spy(*args):
+        calls.append(args[0].size)
+        return _simulate_indexed(*args)
+
+    monkeypatch.setattr(K, "_simulate_indexed", spy)
+    hierarchy = Hierarchy((CacheLevel("L1", 256, 32, 1), CacheLevel("FA", INDEXED_MIN_WAYS * 64, 64, "full")),
+                          inclusion="inclusive")
+    addresses = (np.arange(64, dtype=np.uint64) * 96) % 8192
+    flags = np.arange(64) % 5 == 0
+    served = np.zeros(0, dtype=np.uint8)
+    results = []
+    for kernel, extra in ((K.simulate_into, ()), (K.simulate_writes_into, (flags,)), (K.simulate_writes, (flags,))):
+        state = CacheState(hierarchy)
+        assert uses_index(state.geometry, addresses.size)
+        work = (chunk_buffers(),) if kernel is not K.simulate_writes else ()
+        body = getattr(kernel, "py_func", kernel)
+        if extra:
+            body(addresses, *extra, state.geometry, state.arrays, 0, served, False, *work)
+        else:
+            body(addresses, state.geometry, state.arrays, 0, served, False, *work)
+        results.append(state.counts)
+    assert calls == [addresses.size]
+    assert np.array_equal(results[1], results[2])
+
+
+INDEX_HELPERS = {"_hash_find", "_hash_add", "_hash_remove", "_unlink", "_append", "_heap_push", "_heap_pop"}
+
+
+def inlined_callees(operations, index):
+    """Names of the functions numba copies (``inline="always"``) into a fresh kernel that walks one
+    access's levels with ``operations`` (cachesim.full.SCANNING or INDEXED) and ``index``."""
+    from numba import njit
+    from numba.core import inline_closurecall
+
+    names = []
+    original = inline_closurecall.InlineWorker.inline_function
+
+    def spy(self, caller_ir, block, i, function, *args, **kwargs):
+        names.append(function.__name__)
+        return original(self, caller_ir, block, i, function, *args, **kwargs)
+
+    serving_level, fill_levels = operations.serving_level, operations.fill_levels
+
+    @njit
+    def one_access(line, geometry, state, index, work):
+        served = serving_level(line, 0, geometry, state, index, 1, False, work)
+        fill_levels(served, 0, geometry, state, index, 1, False, work)
+        return served
+
+    state = CacheState(Hierarchy((CacheLevel("L1", 256, 32, 2), CacheLevel("FA", INDEXED_MIN_WAYS * 64, 64, "full")),
+                                 inclusion="inclusive"))
+    inline_closurecall.InlineWorker.inline_function = spy
+    try:
+        one_access(7, state.geometry, state.arrays, index(state), chunk_buffers())
+    finally:
+        inline_closurecall.InlineWorker.inline_function = original
+    return set(names)
+
+
+@pytest.mark.jit_only
+def test_the_scanning_operations_compile_none_of_the_index():
+    """Fails if a scanning operation of cachesim/full.py tests the index against None instead of its
+    form's constant (``indexed and index.indexed[level]`` in ``lookup`` made ``index is not None
+    and ...``): numba would then copy the index's helpers into every kernel without an index (the
+    direct-mapped path, the scanning walk, the schedule's event loop) before dropping them, which
+    took several times as long to compile. The indexed form must copy them in."""
+    from cachesim.full import INDEXED, SCANNING, build_index
+
+    scanning = inlined_callees(SCANNING, lambda state: None)
+    indexed = inlined_callees(INDEXED, lambda state: build_index(state.geometry, state.arrays, 0)[0])
+    assert "_find" in scanning and not scanning & INDEX_HELPERS
+    assert INDEX_HELPERS <= indexed

@@ -11,7 +11,7 @@ import tracer.rendering.render as render_module
 from tracer.rendering.camera import camera_rays
 from tracer.kd.closest import closest_hit
 from tracer.rendering.render import RenderOptions, render, save_png
-from tracer.trace.records import FORMAT_VERSION, INDEX_MASK
+from tracer.trace.records import INDEX_MASK, PLAIN_FORMAT_VERSION
 from tracer.trace.access import COUNTER_NAMES, COUNTER_OF_KIND, AccessTrace, RecordKind, TraceWriter, pack, unpack
 
 
@@ -142,7 +142,7 @@ def test_trace_save_load_round_trip(tmp_path, mixed):
     meta = back.metadata
     assert meta["scene"] == scene.name and meta["note"] == "round trip"
     assert meta["kd_config"]["builder"] == "sah" and "numba" in meta["versions"]
-    assert json.loads((path / "meta.json").read_text())["format_version"] == FORMAT_VERSION
+    assert json.loads((path / "meta.json").read_text())["format_version"] == PLAIN_FORMAT_VERSION
     # saving again over the same path replaces it and leaves no temporaries
     res.trace.save(path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t"]

@@ -15,6 +15,10 @@ RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 STAMP = re.compile(r"^\*\*Produced by\*\* `(?:coherence|python) [^`]+` at commit `[0-9a-f]{7,40}(\+dirty)?`")
 
 
+#: A page that is one run's section names the run once at its top (the faithfulness page).
+PAGE_STAMP = re.compile(r"\A# [^\n]+\n(?:[^\n]*\n){0,4}- Command: `coherence [^`]+`\n(?:- [^\n]*\n)?- Commit: `[0-9a-f]{7,40}`")
+
+
 def unstamped(text: str) -> tuple[int, list[int]]:
     """The number of tables and figures in a page, and the lines of those without a stamp.
 
@@ -60,9 +64,19 @@ def test_results_page_stamped(page):
     (or drop ``stamp_line`` from ``_Page.table`` in docs/results/pages.py and
     regenerate): this test fails naming the line.
     """
-    items, missing = unstamped(page.read_text(encoding="utf-8"))
+    text = page.read_text(encoding="utf-8")
+    if PAGE_STAMP.search(text):  # one run's section (analyses.faithfulness): command and commit head it
+        return
+    items, missing = unstamped(text)
     assert items, f"{page.name} has no table or figure"
     assert not missing, f"{page.name}: tables or figures without a command-and-commit stamp at lines {missing}"
+
+
+def test_page_stamp_needs_command_and_commit():
+    """A page-level stamp counts only with both lines (fails if PAGE_STAMP accepted a command alone)."""
+    head = "# F\n\nintro\n\n- Command: `coherence robustness --size 64`\n- Seed: 0\n"
+    assert PAGE_STAMP.search(head + "- Commit: `26d58b5`\n")
+    assert not PAGE_STAMP.search(head + "\n| a |\n")
 
 
 def test_results_pages_exist():

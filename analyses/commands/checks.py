@@ -162,6 +162,13 @@ def check_range(option: str, value, minimum=None, maximum=None) -> None:
             raise InputError(f"{option} must be {wanted}, got {item}")
 
 
+def check_max_depth(value) -> None:
+    """Raise InputError naming ``--max-depth`` unless ``value`` (None: the scene's) is a depth the renderer takes."""
+    from tracer.scenes.model import MAX_DEPTH
+
+    check_range("--max-depth", value, 1, MAX_DEPTH)
+
+
 def require_distributed() -> None:
     """Raise InputError naming the pip command of the ``cluster`` extra when Dask's ``distributed`` is missing."""
     try:

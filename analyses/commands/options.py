@@ -25,7 +25,7 @@ __all__ = ["RegistryNames", "HelpFormatter", "check_at_least", "scene_options", 
            "tree_options", "size_options", "cache_options", "mappings_options",
            "machine_options", "dask_options", "SCENES", "MAPPINGS", "DEFAULT_MAPPINGS", "HIERARCHIES", "LAYOUTS", "COST_MODELS", "KD_BUILDERS", "PLACEMENTS", "SCHEDULERS", "PAGE_PLACEMENTS",
            "WORKLOADS", "TREE_VARIANTS", "workload_options", "workload_from_args", "EXPERIMENT_OPTIONS",
-           "experiment_from_args"]
+           "experiment_from_args", "PLATFORMS", "platform_options", "ExplicitStore", "given", "check_platform_options"]
 
 
 class RegistryNames(Sequence):
@@ -83,6 +83,7 @@ TREE_VARIANTS = RegistryNames("tracer.rendering.tree_variants", "TREE_VARIANTS")
 PLACEMENTS = RegistryNames("coherence.simulation", "PLACEMENTS")
 SCHEDULERS = RegistryNames("coherence.simulation", "SCHEDULERS")
 PAGE_PLACEMENTS = RegistryNames("coherence.page_placement", "PAGE_PLACEMENTS")
+PLATFORMS = RegistryNames("coherence.platforms", "PLATFORMS")
 PAPER_PROCESSES = RegistryNames("analyses.paper_study", "DEFAULT_PROCESSES")
 
 
@@ -144,6 +145,34 @@ def check_at_least(args: argparse.Namespace, **minimum: int) -> None:
                 raise InputError(f"--{name.replace('_', '-')} must be >= {low}, got {item}")
 
 
+class ExplicitStore(argparse.Action):
+    """Stores the value like ``store`` and records that the option was given (see :func:`given`)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        explicit = set(getattr(namespace, "explicit_options", ()))
+        setattr(namespace, "explicit_options", explicit | {self.dest})
+
+
+def given(args: argparse.Namespace, dest: str) -> bool:
+    """Whether the option stored in ``dest`` was given on the command line (an :class:`ExplicitStore` option)."""
+    return dest in getattr(args, "explicit_options", ())
+
+
+#: Options a platform sets, by ``args`` attribute: combining one with ``--platform`` is an error.
+PLATFORM_SETS = {"hierarchy": "--hierarchy", "cost": "--cost", "cpus": "--cpus"}
+
+
+def check_platform_options(args: argparse.Namespace) -> None:
+    """Raise :class:`rtcommon.validate.InputError` when ``--platform`` is combined with an option it sets."""
+    platform = getattr(args, "platform", None)
+    if platform is None:
+        return
+    for dest, option in PLATFORM_SETS.items():
+        if given(args, dest):
+            raise InputError(f"--platform {platform} sets the hierarchy, the cost model and the CPUs; drop {option}")
+
+
 def _parent() -> argparse.ArgumentParser:
     return argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter)
 
@@ -161,7 +190,7 @@ def scene_options(default: str | None = None) -> argparse.ArgumentParser:
 def hierarchy_options() -> argparse.ArgumentParser:
     """``--hierarchy NAME|FILE``: a cachesim preset or a .toml/.json file."""
     parent = _parent()
-    parent.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE",
+    parent.add_argument("--hierarchy", default="alpha21164", metavar="NAME|FILE", action=ExplicitStore,
                         help="cache hierarchy: a preset (%(hierarchies)s) or a .toml/.json file "
                              "(default %(default)s)")
     return parent
@@ -177,8 +206,21 @@ def model_options() -> argparse.ArgumentParser:
     parent = argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter, parents=[hierarchy_options()])
     parent.add_argument("--layout", default="compact", choices=LAYOUTS, metavar="NAME",
                         help="memory layout of scene records: %(choices)s (default %(default)s)")
-    parent.add_argument("--cost", default="alpha8400", choices=COST_MODELS, metavar="NAME",
+    parent.add_argument("--cost", default="alpha8400", choices=COST_MODELS, metavar="NAME", action=ExplicitStore,
                         help="cycles per operation and clock rate: %(choices)s (default %(default)s)")
+    return argparse.ArgumentParser(add_help=False, formatter_class=HelpFormatter, parents=[parent, platform_options()])
+
+
+def platform_options(processes: str = "process counts default to 1..2 x hardware threads, at most 32"
+                     ) -> argparse.ArgumentParser:
+    """``--platform NAME``: a machine of today (:data:`coherence.platforms.PLATFORMS`); ``processes`` says
+    what it does to the subcommand's process counts."""
+    parent = _parent()
+    parent.add_argument("--platform", choices=PLATFORMS, metavar="NAME",
+                        help="a machine of today: %(choices)s (docs/platforms.md). It sets the hierarchy, the cost "
+                             "model and the CPUs (one per hardware thread), so it is not combined with --hierarchy, "
+                             f"--cost or --cpus; {processes}. Shared levels are not yet interleaved: each hardware "
+                             "thread is simulated with its share of every level (default: the study's machine)")
     return parent
 
 
@@ -316,7 +358,7 @@ EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", 
                       "mappings": "mappings", "processes": "n_processes", "hierarchy": "hierarchy", "layout": "layout",
                       "cost": "cost", "cpus": "n_cpus", "background": "background",
                       "background_footprint": "background_footprint", "page_placement": "page_placement",
-                      "page_seed": "page_seed", "cache": "cache_dir", "dask": "dask"}
+                      "page_seed": "page_seed", "cache": "cache_dir", "dask": "dask", "platform": "platform"}
 
 
 def experiment_from_args(args: argparse.Namespace, base=None, **fields):
@@ -330,12 +372,15 @@ def experiment_from_args(args: argparse.Namespace, base=None, **fields):
     Raises
     ------
     InputError
-        Naming the field or option that is out of range.
+        Naming the field or option that is out of range, or ``--platform``
+        beside an option it sets.
     """
     import sys
     from dataclasses import replace
 
     from analyses.experiment import Experiment
+
+    check_platform_options(args)
 
     choices = {field: getattr(args, option) for option, field in EXPERIMENT_OPTIONS.items()
                if getattr(args, option, None) is not None}
@@ -377,9 +422,10 @@ def machine_options(*, processes, processes_help: str, background: int, backgrou
         Whether ``--cpus`` is offered (the paper fixes the study's 8).
     """
     parent = _parent()
-    parent.add_argument("--processes", type=int, nargs="+", default=processes, metavar="N", help=processes_help)
+    parent.add_argument("--processes", type=int, nargs="+", default=processes, metavar="N", help=processes_help,
+                        action=ExplicitStore)
     if cpus:
-        parent.add_argument("--cpus", type=int, default=8, metavar="C",
+        parent.add_argument("--cpus", type=int, default=8, metavar="C", action=ExplicitStore,
                             help="CPUs of the simulated machine (default 8, the study's AlphaServer 8400)")
     parent.add_argument("--background", type=int, default=background, metavar="B",
                         help="always-runnable processes of other users, for real time "

@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
 
     # every user error surfaces here, before the scene is built or a ray is traced
     check_at_least(args, size=1)
-    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    checks.check_max_depth(args.max_depth)
     if args.no_log and args.trace:
         raise InputError("--trace needs logging; drop --no-log")
     if not args.memory_budget > 0 or args.memory_budget != args.memory_budget:

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, check_at_least, dask_options,
-                                       experiment_from_args, machine_options, mappings_options,
+from analyses.commands.options import (ExplicitStore, HelpFormatter, cache_options, check_at_least, dask_options,
+                                       experiment_from_args, given, machine_options, mappings_options,
                                        memory_budget_options, model_options, scene_options, size_options,
                                        tree_options, workload_options)
 
@@ -65,8 +65,9 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("report", help=HELP, description=HELP[0].upper() + HELP[1:], epilog=EPILOG,
                                    formatter_class=HelpFormatter, parents=parents)
     parser.add_argument("--out", metavar="DIR", help="output folder (default report-SCENE)")
-    parser.add_argument("--max-processes", type=int, default=16, metavar="N",
-                        help="simulate 1..N processes (default 16)")
+    parser.add_argument("--max-processes", type=int, default=16, metavar="N", action=ExplicitStore,
+                        help="simulate 1..N processes (default 16; under --platform 2 x its hardware threads, at "
+                             "most 32)")
     parser.add_argument("--miss-map", metavar="MAPPING:N",
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     # every user error surfaces here or in build_report, before rendering
     check_at_least(args, size=1, max_processes=1, cpus=1, background=0, background_footprint=0, page_seed=0,
                    processes=1)
-    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    checks.check_max_depth(args.max_depth)
     checks.check_scene_argument(args.scene)
     checks.check_memory("--size", args.size)
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
@@ -95,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
         checks.require_distributed()
     out = args.out if args.out is not None else f"report-{Path(args.scene).stem.lower()}"
     counts = args.processes if args.processes else range(1, args.max_processes + 1)
+    if args.platform is not None and not given(args, "processes") and not given(args, "max_processes"):
+        from coherence.platforms import get_platform
+
+        counts = get_platform(args.platform).default_processes()
     experiment = experiment_from_args(args, n_processes=tuple(counts))
     report = build_report(experiment, out=out, miss_map=miss_map)
     path = write_report(report, out)

@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from tracer.scenes.catalog import load
 
     # every user error surfaces here, before the scene is built
-    checks.check_range("--max-depth", args.max_depth, 1, 64)
+    checks.check_max_depth(args.max_depth)
     if args.nff_out is not None:
         checks.check_output_file("--nff-out", args.nff_out)
     checks.check_scene_argument(args.scene)

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import PLACEMENTS, SCHEDULERS, HelpFormatter, machine_options, model_options
+from analyses.commands.options import (PLACEMENTS, SCHEDULERS, HelpFormatter, check_platform_options, given,
+                                       machine_options, model_options)
 from rtcommon.validate import InputError
 
 HELP = "simulate work distributions of a saved trace: speed-ups, balance and coherence"
@@ -28,6 +29,7 @@ examples:
   coherence simulate balls128 --processes 16 --scheduler static --placement neighbours
   coherence simulate balls128 --background 4 --background-footprint 262144 --hierarchy alpha21164-dtb
   coherence simulate balls128 --layout alpha1997 --page-placement random --page-seed 3
+  coherence simulate balls128 --platform zen4-7950x --mapping S --mapping P --processes 8 16 32
 """
 
 
@@ -63,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from analyses.commands import checks
+    from analyses.experiment import platform_parameters
     from cachesim import get_hierarchy
+    from coherence.platforms import SHARED_LEVELS_NOTE, get_platform
     from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
     from coherence.page_placement import PagePlacement
     from coherence.metrics import EFFICIENCY_FACTORS
@@ -79,12 +83,19 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--quantum", args.quantum, 0, float("inf"))
     checks.check_range("--background-footprint", args.background_footprint, 0)
     checks.check_range("--page-seed", args.page_seed, 0)
+    check_platform_options(args)
     if args.placement != "round-robin" and args.scheduler != "static":
         raise InputError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
                          "scheduler moves processes between CPUs)")
     if Path(args.hierarchy).suffix.lower() in (".toml", ".json"):
         checks.check_input_file("--hierarchy", args.hierarchy)
-    hierarchy = get_hierarchy(args.hierarchy)
+    platform = None if args.platform is None else get_platform(args.platform)
+    if platform is not None:
+        # the platform's machine: one CPU a hardware thread, each with its share of every level
+        args.cpus, args.cost = platform.n_threads, platform.cost.name
+        if not given(args, "processes"):
+            args.processes = list(platform.default_processes())
+    hierarchy = get_hierarchy(args.hierarchy) if platform is None else platform.thread_view()
     mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
     footprint = {} if args.background_footprint is None else {"background_footprint": args.background_footprint}
     machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, scheduler=args.scheduler,
@@ -103,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
     trace = AccessTrace.load(args.trace)
     result = study(trace, mappings, args.processes, hierarchy=hierarchy, layout=args.layout, cost=args.cost,
                    machine=machine, progress=sys.stderr.isatty())
-    meta = provenance(trace=str(args.trace), scene=trace.metadata.get("scene"), **result.parameters)
+    extra = {} if platform is None else {"platform": platform_parameters(platform)}
+    meta = provenance(trace=str(args.trace), scene=trace.metadata.get("scene"), **result.parameters, **extra)
     if args.csv:
         write_csv_atomic(result.runs, args.csv, meta)
     if args.processes_csv:
@@ -118,5 +130,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.trace}: {trace.width}x{trace.height} pixels, {trace.n_records:,} records; "
           f"{hierarchy.name or 'hierarchy'} caches, {args.layout} layout, {args.cost} costs, "
           f"{machine.n_cpus} CPUs")
+    if platform is not None:
+        print(f"platform {platform.name}: {platform.n_threads} hardware threads; {SHARED_LEVELS_NOTE}")
     print(result.runs[columns].to_string(index=False, float_format=lambda value: f"{value:.3f}"))
     return 0

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from analyses.commands.options import (HelpFormatter, cache_options, dask_options, mappings_options,
+from analyses.commands.options import (HelpFormatter, cache_options, dask_options, mappings_options, platform_options,
                                        memory_budget_options, size_options, workload_options)
 from rtcommon.validate import InputError
 
@@ -64,7 +64,9 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("whatif", help=HELP, description=HELP[0].upper() + HELP[1:],
                                    epilog=EPILOG, formatter_class=HelpFormatter,
                                    parents=[size, mappings, workload, cache_options(), dask_options("the grid points"),
-                                            memory_budget_options()])
+                                            memory_budget_options(),
+                                            platform_options("the process count stays the study's; a grid may "
+                                                             "not vary hierarchy, cost or n_cpus")])
     parser.add_argument("study", nargs="?", metavar="STUDY", help="a built-in study (see below)")
     parser.add_argument("--grid", action="append", metavar="NAME=V1,V2", help="vary a parameter (repeatable)")
     parser.add_argument("--file", metavar="TOML", help="a study file with a [grid] table")

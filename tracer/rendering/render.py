@@ -32,7 +32,7 @@ from tracer.rendering.geometry import prepare_geometry
 from tracer.kd.tree import KdTree, KdTreeConfig
 from tracer.trace.records import COUNTER_NAMES, N_COUNTERS
 from tracer.rendering.types import RenderParams, SampleOutputs, WorkItems
-from tracer.scenes.model import Scene
+from tracer.scenes.model import MAX_DEPTH, Scene
 from tracer.rendering.shading import shading_of
 from tracer.rendering.texture import MipChains, TextureFilter
 from tracer.trace.access import AccessTrace, TraceWriter, column_sums
@@ -200,7 +200,7 @@ class RenderOptions:
     kd_config : KdTreeConfig, optional
         The tree rule; default the workload's.
     max_depth : int, optional
-        Ray-tree depth in 1..64 (primary = 1); default ``scene.max_depth``.
+        Ray-tree depth in 1..``MAX_DEPTH`` (64; primary = 1); default ``scene.max_depth``.
     memory_budget : int
         Bytes of records held in memory at once (>= 4): a trace kept in
         memory may not exceed it, and a logging batch's buffer stays
@@ -245,7 +245,7 @@ class RenderOptions:
         if self.kd_config is not None and not isinstance(self.kd_config, KdTreeConfig):
             raise InputError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
         if self.max_depth is not None:
-            object.__setattr__(self, "max_depth", require_int("RenderOptions.max_depth", self.max_depth, 1, 64))
+            object.__setattr__(self, "max_depth", require_int("RenderOptions.max_depth", self.max_depth, 1, MAX_DEPTH))
         object.__setattr__(self, "memory_budget", require_int("RenderOptions.memory_budget", self.memory_budget, 4))
         if self.epsilon is not None:
             epsilon = require_number("RenderOptions.epsilon", self.epsilon, 0, "a distance")
@@ -293,8 +293,8 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
         raise InputError(f"options must be RenderOptions, got {type(options).__name__}")
     width, height = scene.camera.resolution if options.size is None else options.size
     depth = scene.max_depth if options.max_depth is None else options.max_depth
-    if isinstance(depth, (bool, np.bool_)) or int(depth) != depth or not 1 <= depth <= 64:
-        raise InputError(f"max_depth must be an int in 1..64, got {depth!r} (the scene's {scene.name!r})")
+    if isinstance(depth, (bool, np.bool_)) or int(depth) != depth or not 1 <= depth <= MAX_DEPTH:
+        raise InputError(f"max_depth must be an int in 1..{MAX_DEPTH}, got {depth!r} (the scene's {scene.name!r})")
     depth = int(depth)
     corner_rays, log, memory_budget = options.corner_rays, options.log, options.memory_budget
     epsilon, texture_filter, workload = options.epsilon, options.texture_filter, options.workload

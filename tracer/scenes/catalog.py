@@ -18,7 +18,7 @@ from pathlib import Path
 
 from tracer.scenes import spd, standins, textured
 from rtcommon.validate import InputError, require_int
-from tracer.scenes.model import Scene
+from tracer.scenes.model import MAX_DEPTH, Scene
 from tracer.scenes.study import PAPER_DEPTH, PAPER_ELEMENTS, PAPER_SCENES, canonical_scene_name
 
 __all__ = ["PAPER_SCENES", "NAMED_SCENES", "PAPER_DEPTH", "PAPER_ELEMENTS", "load"]
@@ -48,7 +48,7 @@ def load(name_or_path, max_depth: int | None = None, *, texels: bool = True) -> 
         ``room-textured``: :mod:`tracer.scenes.textured`), or a path ending in
         ``.nff`` or ``.obj``.
     max_depth : int, optional
-        Maximum recursion depth, 1..64; default the paper's for a named scene and
+        Maximum recursion depth, 1..``MAX_DEPTH`` (64); default the paper's for a named scene and
         the file's (see module docstring) for a path.
     texels : bool
         False: a file's textures keep their sizes only, unread (enough for
@@ -69,7 +69,7 @@ def load(name_or_path, max_depth: int | None = None, *, texels: bool = True) -> 
         A path that does not exist.
     """
     if max_depth is not None:
-        max_depth = require_int("max_depth", max_depth, 1, 64)
+        max_depth = require_int("max_depth", max_depth, 1, MAX_DEPTH)
     text = os.fspath(name_or_path)
     key = canonical_scene_name(text)
     if key in _GENERATORS and not isinstance(name_or_path, Path):

@@ -41,6 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from rtcommon.validate import InputError, require_int
 
+#: The deepest ray tree the renderer takes (``Scene.max_depth``, primary rays = 1): a scene file, a
+#: scene or a render option asking for more, or for less than 1, is refused.
+MAX_DEPTH = 64
+
 
 class ElementKind(enum.IntEnum):
     """Primitive kinds; the integer value is stored in ``Scene.element_kind``."""

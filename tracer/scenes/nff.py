@@ -66,7 +66,7 @@ positional reader run to say where (``benchmarks/bench_nff.py`` compares
 
 NFF has no recursion depth. :func:`write_nff` records the scene's depth in a
 comment line ``# max_depth N`` and the reader honours such a line (N in
-1..64, else an error naming file and line, unless ``max_depth`` is given);
+1..``MAX_DEPTH`` (64), else an error naming file and line, unless ``max_depth`` is given);
 without it the depth is the SPD procedure's 5 (the
 :class:`~tracer.scenes.model.Scene` default). :func:`tracer.scenes.catalog.load`
 applies the paper's depth per named scene instead.
@@ -90,15 +90,13 @@ from tracer.scenes.nff_fast import (C_INTEGER, C_NUMBER, CAMERA_FIELDS, DEPTH_PR
                                     MATERIAL_FIELDS, OBJECT_KEYWORDS, PLANARITY_TOLERANCE, TOKEN, VIEW_KEYWORDS,
                                     Fallback, SceneParts, assemble, parse_fast, polygon_measures,
                                     view_direction_problem)
-from tracer.scenes.model import Camera, ElementKind, Scene, unread_texture
+from tracer.scenes.model import MAX_DEPTH, Camera, ElementKind, Scene, unread_texture
 from rtcommon.validate import InputError
 
 __all__ = ["NFFError", "format_nff", "parse_nff", "read_nff", "write_nff"]
 
 #: A UTF-8 byte-order mark (as decoded) at the start of a file: skipped.
 BYTE_ORDER_MARK = "\ufeff"
-#: The largest ``# max_depth N`` the renderer takes.
-MAX_DEPTH = 64
 
 class NFFError(InputError):
     """A malformed NFF file.
@@ -133,7 +131,7 @@ def _normalise_line_breaks(text: str) -> str:
 
 
 def _depth_pragma(text: str, source: str) -> int | None:
-    """The depth of the file's last ``# max_depth N`` line (None without one); refused outside 1..64."""
+    """The depth of the file's last ``# max_depth N`` line (None without one); refused outside 1..``MAX_DEPTH``."""
     found = None
     for found in DEPTH_PRAGMA.finditer(text):
         pass

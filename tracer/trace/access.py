@@ -33,12 +33,13 @@ from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.jsonio import json_default
 from tracer.trace.records import (  # noqa: F401  (re-exported: the format's names)
-    COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_COUNTERS, N_KINDS,
+    COUNTER_NAMES, COUNTER_OF_KIND, FORMAT_VERSION, INDEX_MASK, PLAIN_FORMAT_VERSION, KIND_SHIFT, N_COUNTERS, N_KINDS,
     Counter, RecordKind, pack, record_id, record_kind, unpack,
 )
 from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityError, array_checksum)
-    ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_CHECKSUM as _META_CHECKSUM, META_FILE,
+    ARRAY_FILES, CHECKSUM_ALGORITHM, CHUNK as _CHUNK, DTYPES, META_FILE,
     TraceIntegrityError, array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
+    write_with_checksum,
 )
 from rtcommon.validate import InputError
 
@@ -275,14 +276,13 @@ def _temp_sibling(directory: Path) -> Path:
 
 
 def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: dict, checksums: dict) -> None:
-    meta = {"format_version": FORMAT_VERSION, "width": int(width), "height": int(height),
+    # version 4 only where its additions are used: a trace without segments stays version 3
+    meta = {"format_version": PLAIN_FORMAT_VERSION, "width": int(width), "height": int(height),
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
             "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums, "headers": header_checksums(tmp)}}
     data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
-    (tmp / META_FILE).write_bytes(data)
-    # beside it rather than inside, so meta.json stays a plain, comparable record of the render
-    (tmp / _META_CHECKSUM).write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
+    write_with_checksum(tmp / META_FILE, data)
 
 
 def _publish(tmp: Path, directory: Path) -> None:

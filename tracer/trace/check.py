@@ -29,7 +29,7 @@ from numba import njit
 from rtcommon.files import read_npy_header
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.validate import InputError, require_int
-from tracer.trace.records import (COUNTER_NAMES, FORMAT_VERSION, INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind,
+from tracer.trace.records import (COUNTER_NAMES, INDEX_MASK, READABLE_VERSIONS, KIND_SHIFT, N_KINDS, RecordKind,
                                   record_id, record_kind)
 
 #: The hash recorded for each array and header in ``meta.json`` (xxHash's XXH3, 64 bits).
@@ -59,6 +59,29 @@ class TraceIntegrityError(InputError):
 
 def _refuse(where: str, detail: str, hint: str = "") -> TraceIntegrityError:
     return TraceIntegrityError(f"{where}: {detail}{hint}", detail)
+
+
+def write_with_checksum(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path``, and its XXH3-64 (16 hex digits and a newline) to ``<path>.xxh3`` beside it.
+
+    Beside the file rather than inside it, so that the file stays a plain,
+    comparable record (a trace's ``meta.json``, a trace cache entry's
+    ``render.json``).
+    """
+    path.write_bytes(data)
+    path.with_name(path.name + ".xxh3").write_text(xxhash.xxh3_64_hexdigest(data) + "\n", encoding="ascii")
+
+
+def matches_checksum(path: Path, data: bytes) -> bool | None:
+    """Whether ``data``, the bytes read from ``path``, match the checksum in ``<path>.xxh3``.
+
+    None when there is no such file (missing, or a folder in its place).
+    """
+    try:
+        recorded = path.with_name(path.name + ".xxh3").read_text(encoding="ascii", errors="replace")
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError):
+        return None
+    return recorded.strip() == xxhash.xxh3_64_hexdigest(data)
 
 
 def array_checksum(array: np.ndarray) -> str:
@@ -289,18 +312,19 @@ def read_meta(directory: Path) -> dict:
         meta = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         meta = error
-    if not (directory / META_CHECKSUM).is_file():
+    matches = matches_checksum(directory / META_FILE, data)
+    if matches is None:
         raise _refuse(where, f"{META_CHECKSUM} (the checksum of meta.json) is missing, so the trace cannot be "
                              "verified", rerender_hint(directory, meta))
-    if (directory / META_CHECKSUM).read_text(encoding="ascii", errors="replace").strip() != \
-            xxhash.xxh3_64_hexdigest(data):
+    if not matches:
         raise _refuse(where, "meta.json does not match its checksum (file damaged)")
     if isinstance(meta, Exception):
         raise _refuse(where, f"meta.json is damaged ({meta})")
     if not isinstance(meta, dict):
         raise _refuse(where, "meta.json is damaged (not an object)")
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise _refuse(where, f"unsupported format_version {meta.get('format_version')!r}")
+    if meta.get("format_version") not in READABLE_VERSIONS:
+        raise _refuse(where, f"unsupported format_version {meta.get('format_version')!r} (this code reads "
+                             f"{', '.join(map(str, READABLE_VERSIONS))})")
     checksums = meta.get("checksums") if isinstance(meta.get("checksums"), dict) else {}
     headers = checksums.get("headers") if isinstance(checksums.get("headers"), dict) else {}
     missing = [ARRAY_FILES[name] for name in DTYPES if not isinstance(checksums.get(name), str)]

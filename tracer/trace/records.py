@@ -26,7 +26,15 @@ KIND_SHIFT = 28
 WRITE_SHIFT = 27
 WRITE_FLAG = 1 << WRITE_SHIFT
 INDEX_MASK = WRITE_FLAG - 1
-FORMAT_VERSION = 3  # 2: counter ROOT_TESTS added; 3: texture kinds and counters
+#: The version this code writes: 2 added the counter ROOT_TESTS; 3 the texture kinds and counters;
+#: 4 the auxiliary kind's plan (below) and the per-ray segments of path-traced traces
+#: (``segments.npz``, :mod:`tracer.trace.segments`). A trace without segments is still written as
+#: version 3, byte for byte as before, so every Whitted trace and its digest are unchanged.
+FORMAT_VERSION = 4
+#: The format versions a loader reads.
+READABLE_VERSIONS = (3, 4)
+#: The version written for a trace that has no per-ray segments.
+PLAIN_FORMAT_VERSION = 3
 
 # The budget of the 16 record kinds (4 bits), planned once for every workload:
 #   0-8   in use: kd node, index entry, five primitive kinds, material, light;
@@ -34,7 +42,11 @@ FORMAT_VERSION = 3  # 2: counter ROOT_TESTS added; 3: texture kinds and counters
 #         record, shading temporaries, frame-buffer pixel;
 #   13-14 in use: textures (tracer.rendering.texture): texel (a global texel number across every
 #         texture and mip level, 27 bits = 128 M texels) and texture header;
-#   15    spare.
+#   15    planned (format version 4): the auxiliary kind, AUXILIARY_KIND, shared by the records
+#         that are not scene data and need few indices: its 27-bit index holds a 3-bit sub-kind
+#         (AuxKind: a task counter, a ray state, a queue entry, four spare) and a 24-bit index
+#         (AUX_INDEX_MASK; 16 M slots per sub-kind). Built and read with make_aux_record,
+#         aux_kind and aux_index.
 # A kind is added to RecordKind when its writer lands, with its counter.
 
 
@@ -63,6 +75,20 @@ class RecordKind(enum.IntEnum):
 
 
 N_KINDS = len(RecordKind)
+
+#: The record kind whose index holds a sub-kind (:class:`AuxKind`) and a 24-bit index.
+AUXILIARY_KIND = 15
+AUX_KIND_SHIFT = 24
+AUX_INDEX_MASK = (1 << AUX_KIND_SHIFT) - 1
+N_AUX_KINDS = 1 << (WRITE_SHIFT - AUX_KIND_SHIFT)  # 8: three planned, five spare
+
+
+class AuxKind(enum.IntEnum):
+    """Sub-kinds of :data:`AUXILIARY_KIND` (3 bits of its index); 3-7 are spare."""
+
+    TASK_COUNTER = 0  #: a dynamic mapping's shared task counter (index: the counter)
+    RAY_STATE = 1     #: a ray's saved state in a ray order's buffer (index: the buffer slot)
+    QUEUE_ENTRY = 2   #: an entry of a ray order's queue (index: the queue slot)
 
 
 class Counter(enum.IntEnum):
@@ -149,6 +175,59 @@ def make_write_record(kind, index):
 def record_id(record):
     """The index part of a packed record, as an int64."""
     return np.int64(record & INDEX_MASK)
+
+
+@njit(cache=True, inline="always")
+def make_aux_record(aux_kind, index, write):
+    """The packed uint32 record of ``index`` (< 2**24) of the :class:`AuxKind` ``aux_kind``."""
+    flag = WRITE_FLAG if write else 0
+    return np.uint32((np.int64(AUXILIARY_KIND) << KIND_SHIFT) | flag
+                     | (np.int64(aux_kind) << AUX_KIND_SHIFT) | np.int64(index))
+
+
+@njit(cache=True, inline="always")
+def aux_kind(record):
+    """The :class:`AuxKind` value of a record of :data:`AUXILIARY_KIND`, as an int64."""
+    return (np.int64(record) & INDEX_MASK) >> AUX_KIND_SHIFT
+
+
+@njit(cache=True, inline="always")
+def aux_index(record):
+    """The 24-bit index of a record of :data:`AUXILIARY_KIND`, as an int64."""
+    return np.int64(record) & AUX_INDEX_MASK
+
+
+def pack_aux(aux_kind, index, write=False) -> np.ndarray:
+    """Pack auxiliary records (scalars or arrays) into uint32 records of :data:`AUXILIARY_KIND`.
+
+    Raises
+    ------
+    ValueError
+        If a sub-kind is outside ``0 .. 7`` or an index outside ``0 .. 2**24 - 1``.
+    """
+    sub = np.asarray(aux_kind, dtype=np.int64)
+    index = np.asarray(index, dtype=np.int64)
+    if np.any((sub < 0) | (sub >= N_AUX_KINDS)):
+        raise InputError(f"pack_aux: aux_kind must be in 0..{N_AUX_KINDS - 1}")
+    if np.any((index < 0) | (index > AUX_INDEX_MASK)):
+        raise InputError(f"pack_aux: index must be in 0..{AUX_INDEX_MASK}")
+    flag = np.where(np.asarray(write, dtype=bool), WRITE_FLAG, 0)
+    return ((AUXILIARY_KIND << KIND_SHIFT) | flag | (sub << AUX_KIND_SHIFT) | index).astype(np.uint32)
+
+
+def unpack_aux(records) -> tuple[np.ndarray, np.ndarray]:
+    """Split auxiliary records into ``(aux_kind, index)`` arrays (uint8, uint32), dropping the write flag.
+
+    Raises
+    ------
+    ValueError
+        If a record is not of :data:`AUXILIARY_KIND`.
+    """
+    records = np.asarray(records, dtype=np.uint32)
+    if np.any((records >> KIND_SHIFT) != AUXILIARY_KIND):
+        raise InputError(f"unpack_aux: every record must be of the auxiliary kind {AUXILIARY_KIND}")
+    index = records & np.uint32(INDEX_MASK)
+    return (index >> AUX_KIND_SHIFT).astype(np.uint8), index & np.uint32(AUX_INDEX_MASK)
 
 
 def pack(kind, index, write=False) -> np.ndarray:

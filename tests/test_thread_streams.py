@@ -1,0 +1,132 @@
+"""coherence.thread_streams: a static mapping's interleaved stream of hardware threads, and its false sharing."""
+import numpy as np
+import pytest
+
+from cachesim import CacheLevel, Hierarchy
+from cachesim.multicore import FALSE_SHARING_MISSES, simulate_threads
+from cachesim.sharing import SharedHierarchy
+from coherence.layout import get_layout
+from coherence.mappings import get_mapping
+from coherence.studies import place_layout
+from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces, thread_stream
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
+
+SCENE_KINDS = [RecordKind.KD_NODE, RecordKind.INDEX_ENTRY, RecordKind.SPHERE, RecordKind.MATERIAL]
+
+
+def synthetic_trace(width, height, seed=0, reads=6):
+    """Each pixel reads ``reads`` random scene records, writes and reads its ray stack, hit record and
+    shading temporaries (index 0), and writes its own frame-buffer pixel."""
+    rng = np.random.default_rng(seed)
+    records, lengths = [], []
+    for pixel in range(width * height):
+        kinds = list(rng.choice(SCENE_KINDS, reads)) + list(PRIVATE_KINDS) * 2 + [RecordKind.FRAME_BUFFER]
+        indices = list(rng.integers(0, 50, reads)) + [0] * (2 * len(PRIVATE_KINDS)) + [pixel]
+        flags = [False] * reads + [True] * len(PRIVATE_KINDS) + [False] * len(PRIVATE_KINDS) + [True]
+        records.append(pack(np.array(kinds), np.array(indices), np.array(flags)))
+        lengths.append(len(kinds))
+    offsets = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
+    counters = np.zeros((width * height, len(COUNTER_NAMES)), dtype=np.int64)
+    return AccessTrace(offsets, np.concatenate(records), counters, width, height, {})
+
+
+def slow_stream(trace, placed, mapping, n_threads, line_size, turn):
+    """The stream built by hand: threads take turns of ``turn`` pixels; each record byte by byte."""
+    distribution = get_mapping(mapping).build(trace.width, trace.height, n_threads)
+    queues = [list(distribution.process_pixels(p)) for p in range(n_threads)]
+    span = private_span(placed)
+    accesses = []
+    while any(queues):
+        for thread, queue in enumerate(queues):
+            for pixel in queue[:turn]:
+                for record in trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]:
+                    kind, index, write = int(record) >> 28, int(record) & ((1 << 27) - 1), bool(int(record) >> 27 & 1)
+                    row = placed.kind_first[kind] + index
+                    start = int(placed.record_start[row]) + (span * (thread + 1) if kind in PRIVATE_KINDS else 0)
+                    byte_lines = [(start + b) // line_size for b in range(int(placed.record_size[row]))]
+                    for line in sorted(set(byte_lines)):
+                        first = start + byte_lines.index(line)
+                        accesses.append((first, thread, write, byte_lines.count(line), kind))
+            del queue[:turn]
+    return accesses
+
+
+@pytest.mark.parametrize("mapping, n_threads, turn, layout", [("P", 3, 1, "alpha1997"), ("S", 4, 2, "alpha1997"),
+                                                               ("B", 2, 5, "compact")])
+def test_stream_matches_a_slow_build(mapping, n_threads, turn, layout):
+    """Every access (first byte, thread, write flag, size, kind) equals the hand-built stream's.
+    Mutation: ``threads + 1`` -> ``threads`` in record_pieces' private offset."""
+    trace = synthetic_trace(6, 5, seed=n_threads)
+    placed = place_layout(get_layout(layout), trace)
+    stream = thread_stream(trace, placed, mapping, n_threads, line_size=32, pixels_per_turn=turn)
+    built = list(zip(stream.addresses.tolist(), stream.threads.tolist(), stream.writes.tolist(),
+                     stream.sizes.tolist(), stream.kinds.tolist()))
+    assert built == slow_stream(trace, placed, mapping, n_threads, 32, turn)
+
+
+def test_a_record_across_lines_is_split_at_the_line():
+    """A 104-byte alpha1997 sphere from byte 40 of a 64-byte line touches 24 + 64 + 16 bytes of three
+    lines (hand-checked). Mutation: ``end = ends[record]`` (no clip at the line's end)."""
+    trace = synthetic_trace(2, 1)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    sphere = placed.kind_first[RecordKind.SPHERE]
+    start = int(placed.record_start[sphere])
+    pieces = record_pieces(pack(RecordKind.SPHERE, 0)[None], np.zeros(1, dtype=np.int64), placed, 64)
+    first_line = start - start % 64
+    expected_sizes = [first_line + 64 - start]
+    rest = 104 - expected_sizes[0]
+    while rest > 0:
+        expected_sizes.append(min(64, rest))
+        rest -= 64
+    assert pieces.sizes.tolist() == expected_sizes
+    assert pieces.addresses.tolist() == [start] + [first_line + 64 * k for k in range(1, len(expected_sizes))]
+
+
+def test_dynamic_mappings_and_page_placement_are_refused():
+    """Mutation: drop the ``distribution.dynamic`` check in thread_stream."""
+    trace = synthetic_trace(4, 4)
+    placed = place_layout(get_layout("compact"), trace)
+    with pytest.raises(ValueError, match="hands out work at run time"):
+        thread_stream(trace, placed, "DB", 2)
+    with pytest.raises(ValueError, match="pixels_per_turn must be"):
+        thread_stream(trace, placed, "P", 2, pixels_per_turn=0)
+
+
+def test_p_shares_3_byte_pixels_falsely_more_than_s_at_8_threads():
+    """8 threads, 3-byte frame-buffer pixels (alpha1997), private L1 and L2 under a shared L3: P puts
+    neighbouring pixels of one line on different threads, S only at the strips' borders, so P's
+    false-sharing misses are > 0 and more than S's; per-ray data is private, so no coherence miss
+    falls on it. Mutation: give every thread the same private copy (``(threads + 1) * 0``)."""
+    trace = synthetic_trace(32, 16, reads=4)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    hierarchy = Hierarchy((CacheLevel("L1", 4096, 64, 4), CacheLevel("L2", 16384, 64, 8),
+                           CacheLevel("L3", 65536, 64, 8)))
+    machine = SharedHierarchy(hierarchy, n_cores=8, shared_by=("thread", "thread", "machine"))
+    false_sharing = {}
+    for mapping in ("P", "S"):
+        stream = thread_stream(trace, placed, mapping, 8)
+        result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes,
+                                  sizes=stream.sizes, kinds=stream.kinds)
+        frame = result.to_frame()
+        false_sharing[mapping] = int(frame.false_sharing_misses.sum())
+        assert frame[frame.kind.isin([int(kind) for kind in PRIVATE_KINDS])].coherence_misses.sum() == 0
+    assert false_sharing["P"] > 0 and false_sharing["P"] > false_sharing["S"]
+
+
+def test_tetra_p_has_false_sharing_and_s_less(tmp_path):
+    """Tetra at 16x16 by the study-era workload (alpha1997 layout: 3-byte pixels), 8 threads on the
+    modern levels with L1 and L2 private and L3 shared: P's false-sharing misses are > 0 and more
+    than S's. Mutation: ``if False:`` for the disjointness test in cachesim.multicore._replay."""
+    from analyses.traces import cached_trace
+    from cachesim import modern
+
+    scene, trace, _ = cached_trace("tetra", 16, cache_dir=tmp_path, progress=False, workload="study1997")
+    placed = place_layout(get_layout("alpha1997"), trace, scene)
+    machine = SharedHierarchy(modern(), n_cores=8, shared_by=("thread", "thread", "machine"))
+    false_sharing = {}
+    for mapping in ("P", "S"):
+        stream = thread_stream(trace, placed, mapping, 8)
+        result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes,
+                                  sizes=stream.sizes, kinds=stream.kinds)
+        false_sharing[mapping] = int(result.level_counts()[:, FALSE_SHARING_MISSES].sum())
+    assert false_sharing["P"] > 0 and false_sharing["P"] > false_sharing["S"]
