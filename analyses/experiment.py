@@ -62,7 +62,13 @@ class Experiment:
         workload's.
     max_depth : int, optional
         Ray-tree depth, primary = 1, in [1, :data:`tracer.scenes.model.MAX_DEPTH`]; None:
-        the scene's.
+        the scene's. For the ``pathtrace`` workload, the most rays a path
+        has besides its shadow rays.
+    spp : int
+        Samples per pixel of the ``pathtrace`` workload, in [1,
+        :data:`tracer.rendering.render.MAX_SPP`]; 1 for the others.
+    seed : int
+        Key of the ``pathtrace`` workload's random numbers, >= 0.
     mappings : tuple of str or coherence.mappings.Mapping
         Mappings compared, distinct, at least one.
     n_processes : tuple of int
@@ -119,6 +125,8 @@ class Experiment:
     tree_variant: str = STUDY_TREE_VARIANT
     kd: str | None = None
     max_depth: int | None = None
+    spp: int = 1
+    seed: int = 0
     mappings: tuple = tuple(DEFAULT_MAPPINGS)
     n_processes: tuple = REPORT_PROCESSES
     hierarchy: object = DEFAULT_HIERARCHY
@@ -158,6 +166,13 @@ class Experiment:
                              f"got {self.kd!r}")
         if self.max_depth is not None:
             require_int("Experiment.max_depth", self.max_depth, 1, MAX_DEPTH)
+        from tracer.rendering.render import MAX_SPP
+
+        require_int("Experiment.spp", self.spp, 1, MAX_SPP)
+        require_int("Experiment.seed", self.seed, 0, 2**63 - 1)
+        if self.spp != 1 and WORKLOADS[self.workload].renderer != "pathtrace":
+            raise InputError(f"Experiment.spp must be 1 for the {self.workload!r} workload (one sample a pixel), "
+                             f"got {self.spp}")
         mappings = (self.mappings,) if isinstance(self.mappings, str) else tuple(self.mappings)
         names = []
         for mapping in mappings:
@@ -261,7 +276,8 @@ class Experiment:
         or a custom object is recorded too), ``layout`` (its name),
         ``n_cpus``, ``background_load``, ``background_footprint``,
         ``page_placement``, ``page_seed`` and ``tree_variant``
-        (:meth:`tree_variant_used`: None where no variant is built).
+        (:meth:`tree_variant_used`: None where no variant is built); for a
+        path-traced workload also ``spp`` and ``seed``.
         ``cache_dir``, ``dask``, ``memory_budget`` and ``progress`` are
         left out: no result depends on them. Under a platform, ``platform``
         too (:func:`platform_parameters`); without one there is no such key.
@@ -274,7 +290,16 @@ class Experiment:
                 "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
                 "n_cpus": self.cpus(), "background_load": int(self.background),
                 "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,
-                "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used(), **extra}
+                "page_seed": int(self.page_seed), "tree_variant": self.tree_variant_used(), **extra,
+                **self.path_sampling()}
+
+    def path_sampling(self) -> dict:
+        """``{"spp": ..., "seed": ...}`` for a path-traced workload, else empty."""
+        from tracer.rendering.workload import WORKLOADS
+
+        if WORKLOADS[self.workload].renderer != "pathtrace":
+            return {}
+        return {"spp": int(self.spp), "seed": int(self.seed)}
 
 
 def platform_parameters(platform) -> dict:

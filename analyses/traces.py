@@ -163,6 +163,7 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
 
 
 def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workload: str = "modern",
+              path_samples: tuple = (1, 0),
               tree_variant: str | None = None) -> str:
     """Folder name of a cache entry: readable prefix plus a hash of every ingredient.
 
@@ -181,6 +182,9 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
         A :data:`tracer.rendering.tree_variants.TREE_VARIANTS` name: the
         workload's tree is that rule's (hashed with the workload); None or
         the default leaves the key as it was.
+    path_samples : (int, int)
+        Samples per pixel and seed of a path-traced workload (hashed for it
+        only).
     """
     from coherence import __version__
     from tracer.trace.access import FORMAT_VERSION
@@ -191,6 +195,8 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
     ingredients = {"scene": identity, "size": int(size), "kd": kd, "max_depth": int(max_depth),
                    "workload": preset.to_dict(),
                    "version": __version__, "format_version": FORMAT_VERSION, "tracer_source": _source_digest()}
+    if preset.renderer == "pathtrace":
+        ingredients["path_samples"] = [int(path_samples[0]), int(path_samples[1])]
     digest = hashlib.sha256(json.dumps(ingredients, sort_keys=True).encode()).hexdigest()[:16]
     named = "" if preset.name == "modern" else f"-{preset.name}"
     if tree_variant not in (None, STUDY_TREE_VARIANT):
@@ -200,7 +206,7 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
 
 def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | None = None,
                  max_depth: int | None = None, progress: bool = True, workload: str = "modern",
-                 memory_budget: int | None = None, tree_variant: str | None = None):
+                 memory_budget: int | None = None, tree_variant: str | None = None, path_samples: tuple = (1, 0)):
     """The scene and its access trace at ``size`` x ``size``, rendered once and then loaded.
 
     Parameters
@@ -228,6 +234,10 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
         The workload's tree rule by name
         (:data:`tracer.rendering.tree_variants.TREE_VARIANTS`); default the
         workload's own.
+    path_samples : (int, int)
+        Samples per pixel and seed of the ``pathtrace`` workload
+        (:class:`tracer.rendering.render.RenderOptions` ``spp`` and ``seed``);
+        the other workloads take ``(1, 0)``.
 
     Returns
     -------
@@ -251,6 +261,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     """
     from tracer.scenes.catalog import load
     from tracer.trace.access import AccessTrace
+    from tracer.kd.tree import KdTreeConfig
     from tracer.rendering.tree_variants import workload_with_tree
     from tracer.rendering.workload import WORKLOADS
 
@@ -270,7 +281,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload,
-                    tree_variant=tree_variant)
+                    tree_variant=tree_variant, path_samples=path_samples)
     entry = root / "traces" / key
     remove_stale_temporaries(entry.parent)  # on a hit too: a killed run's leftovers go at the next run
     try:
@@ -291,7 +302,9 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
             warnings.warn(f"damaged trace cache entry {key}: a file, not a folder; "
                           "evicting it and rendering again", stacklevel=2)
             _remove(entry)
-        _render_entry(scene, size, kd, explicit_kd, preset, key, entry, progress, memory_budget, tree_variant)
+        overrides = {"kd_config": KdTreeConfig(builder=explicit_kd) if explicit_kd else None,
+                     "spp": int(path_samples[0]), "seed": int(path_samples[1])}
+        _render_entry(scene, size, kd, overrides, preset, key, entry, progress, memory_budget, tree_variant)
         info = _read_entry(entry)
         if info is None:
             raise RuntimeError(f"trace cache entry {entry} was not written completely")
@@ -378,22 +391,21 @@ def _complete(entry: Path) -> bool:
         return False
 
 
-def _render_entry(scene, size: int, kd: str, explicit_kd, workload, key: str, entry: Path,
+def _render_entry(scene, size: int, kd: str, overrides: dict, workload, key: str, entry: Path,
                   progress: bool, memory_budget: int | None, tree_variant: str | None) -> None:
-    # explicit_kd: a builder other than the workload's, with its defaults; workload: the Workload object,
-    # its tree the variant's; tree_variant: the name asked for, recorded as asked
+    # overrides: RenderOptions fields: kd_config (a builder other than the workload's, with its defaults, or
+    # None), spp and seed; workload: the Workload object, its tree the variant's; tree_variant: the name
+    # asked for, recorded as asked
     from tqdm.auto import tqdm
 
-    from tracer.kd.tree import KdTreeConfig
     from tracer.rendering.render import DEFAULT_MEMORY_BUDGET, RenderOptions, render, save_png
 
-    kd_config = KdTreeConfig(builder=explicit_kd) if explicit_kd else None
     tree = None
     if size > _PILOT_SIZE:  # the trace streams to disk: see first that it will fit
         from analyses.output import check_free_space
 
-        pilot = render(scene, options=RenderOptions(size=_PILOT_SIZE, keep_records=False, kd_config=kd_config,
-                                                    workload=workload))
+        pilot = render(scene, options=RenderOptions(size=_PILOT_SIZE, keep_records=False, workload=workload,
+                                                    **overrides))
         bytes_per_pixel = 4 * pilot.n_records / (pilot.width * pilot.height)
         check_free_space(f"the trace of {scene.name} at {size}x{size}", entry.parent,
                          int(1.25 * bytes_per_pixel * size * size))
@@ -405,8 +417,8 @@ def _render_entry(scene, size: int, kd: str, explicit_kd, workload, key: str, en
                    disable=not progress, leave=False, file=sys.stderr)
         start = time.perf_counter()
         budget = DEFAULT_MEMORY_BUDGET if memory_budget is None else memory_budget
-        result = render(scene, tree, RenderOptions(size=size, kd_config=kd_config, workload=workload,
-                                                   memory_budget=budget),
+        result = render(scene, tree, RenderOptions(size=size, workload=workload, memory_budget=budget,
+                                                   **overrides),
                         trace_path=tmp / "trace", metadata={"cache_key": key})
         seconds = time.perf_counter() - start
         bar.update(1)

@@ -251,12 +251,18 @@ def workload_options(default: str = "modern", why: str = "") -> argparse.Argumen
     parent.add_argument("--workload", default=default, choices=WORKLOADS, metavar="NAME",
                         help="tracer imitated: %(choices)s; modern = today's SAH tracer, study1997 = the "
                              "study's mid-1990s BSP tracer (one median-tree rule for every scene, shadow rays "
-                             "that find the nearest hit, its own per-ray data logged) (default %(default)s"
+                             "that find the nearest hit, its own per-ray data logged), pathtrace = a path "
+                             "tracer on today's tree (--spp, --seed) (default %(default)s"
                              + (f": {why})" if why else ")"))
     parent.add_argument("--tree-variant", choices=TREE_VARIANTS, metavar="NAME",
                         help="tree rule of the study1997 workload, named d<depth limit>-l<leaf size>-box-<axis "
                              "rule>-todepth-nearest: %(choices)s (default: the study's own rule, the first; "
                              "see docs/unknowns.md, tree_variant)")
+    parent.add_argument("--spp", type=int, metavar="N", default=None,
+                        help="samples per pixel of the pathtrace workload (default 1); its bounce limit is "
+                             "--max-depth")
+    parent.add_argument("--seed", type=int, metavar="N", default=None,
+                        help="seed of the pathtrace workload's counter-based random numbers (default 0)")
     return parent
 
 
@@ -354,7 +360,7 @@ def memory_budget_bytes(args: argparse.Namespace) -> int:
 
 #: Option (``args`` attribute) -> :class:`analyses.experiment.Experiment` field it sets.
 EXPERIMENT_OPTIONS = {"scene": "scene", "size": "size", "workload": "workload", "tree_variant": "tree_variant",
-                      "kd": "kd", "max_depth": "max_depth",
+                      "kd": "kd", "max_depth": "max_depth", "spp": "spp", "seed": "seed",
                       "mappings": "mappings", "processes": "n_processes", "hierarchy": "hierarchy", "layout": "layout",
                       "cost": "cost", "cpus": "n_cpus", "background": "background",
                       "background_footprint": "background_footprint", "page_placement": "page_placement",

@@ -32,6 +32,7 @@ examples:
   coherence render balls --trace traces/balls-512
   coherence render shell --kd median --json
   coherence render balls --workload study1997 --no-log
+  coherence render balls --workload pathtrace --spp 4 --max-depth 4 --size 64 --trace traces/balls-pt
   coherence render /work/shared/reference/spd/balls.nff --corner-rays --max-depth 5 --epsilon spd
 
 The last example counts rays the way SPD's published figures do (Havran 1999:
@@ -188,7 +189,8 @@ def run(args: argparse.Namespace) -> int:
     kd_config = KdTreeConfig(builder=args.kd) if args.kd else None
     options = RenderOptions(size=args.size, corner_rays=args.corner_rays, log=not args.no_log,
                             keep_records=args.trace is not None, kd_config=kd_config, memory_budget=budget,
-                            epsilon=args.epsilon, workload=workload, texture_filter=args.texture_filter)
+                            epsilon=args.epsilon, workload=workload, texture_filter=args.texture_filter,
+                            spp=1 if args.spp is None else args.spp, seed=0 if args.seed is None else args.seed)
     tree = None
     if args.trace:
         pilot = render(scene, options=replace(options, size=checks.PILOT_SIZE, corner_rays=False,

@@ -48,6 +48,8 @@ DEFAULT_MEMORY_BUDGET = 1 << 30  # bytes of records held in RAM at once
 #: (radius 0.0062) and bounce inside them, which is why its reflection rays
 #: hit more often (0.747 of them) than with a tight tolerance (0.720).
 SPD_EPSILON = 0.01
+#: Most samples per pixel :class:`RenderOptions` accepts.
+MAX_SPP = 4096
 BATCH_CHUNKS = 128  # work items per kernel call when logging
 SLOT_BUFFER_BYTES = 256 << 20  # most a logging batch's slots take
 
@@ -78,6 +80,9 @@ class RenderResult:
         How textured surfaces were filtered.
     n_records : int or None
         Records logged (kept or only counted); None without logging.
+    sample_radiance : ndarray, shape (H * W * spp, 3) float64, or None
+        The path tracer's radiance of each sample (pixel-major); None for
+        Whitted renders.
     """
 
     image: np.ndarray
@@ -91,6 +96,7 @@ class RenderResult:
     workload: dict = field(default_factory=dict)
     texture_filter: str = "trilinear"
     n_records: int | None = None
+    sample_radiance: np.ndarray | None = None
 
     def totals(self) -> dict:
         """Counter sums over all pixels (plus ``records`` when logged, ``rays``)."""
@@ -219,6 +225,14 @@ class RenderOptions:
         How textured surfaces filter their texels
         (:mod:`tracer.rendering.texture`); the level of detail comes from
         ray cones. Recorded in the metadata.
+    spp : int
+        Samples per pixel of the path tracer (a workload whose renderer is
+        ``"pathtrace"``), 1..4096; the Whitted renderer takes one.
+    seed : int
+        Key of the path tracer's counter-based random numbers, 0..2**63 - 1.
+    jitter : bool
+        The path tracer's camera rays pass through a random point of their
+        pixel (else through its centre, as Whitted's do).
 
     Raises
     ------
@@ -236,11 +250,16 @@ class RenderOptions:
     epsilon: float | None = None
     workload: str | Workload | None = None
     texture_filter: str = "trilinear"
+    spp: int = 1
+    seed: int = 0
+    jitter: bool = True
 
     def __post_init__(self):
         if self.size is not None:
             object.__setattr__(self, "size", checked_size(self.size, "RenderOptions.size"))
-        for name in ("corner_rays", "log", "keep_records"):
+        object.__setattr__(self, "spp", require_int("RenderOptions.spp", self.spp, 1, MAX_SPP))
+        object.__setattr__(self, "seed", require_int("RenderOptions.seed", self.seed, 0, 2**63 - 1))
+        for name in ("corner_rays", "log", "keep_records", "jitter"):
             object.__setattr__(self, name, require_bool(f"RenderOptions.{name}", getattr(self, name)))
         if self.kd_config is not None and not isinstance(self.kd_config, KdTreeConfig):
             raise InputError(f"RenderOptions.kd_config must be a KdTreeConfig or None, got {self.kd_config!r}")
@@ -257,6 +276,9 @@ class RenderOptions:
         except ValueError as error:
             raise InputError(f"RenderOptions.workload: {error}") from None
         object.__setattr__(self, "workload", workload)
+        if self.spp != 1 and self.workload.renderer != "pathtrace":
+            raise InputError(f"RenderOptions.spp must be 1 for the {self.workload.name!r} workload (Whitted's "
+                             f"rules trace one sample per pixel), got {self.spp}")
         if self.texture_filter not in TEXTURE_FILTERS:
             raise InputError(f"RenderOptions.texture_filter must be one of {', '.join(TEXTURE_FILTERS)}, "
                              f"got {self.texture_filter!r}")
@@ -291,6 +313,10 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
     options = RenderOptions() if options is None else options
     if not isinstance(options, RenderOptions):
         raise InputError(f"options must be RenderOptions, got {type(options).__name__}")
+    if options.workload.renderer == "pathtrace":
+        from tracer.rendering.pathtrace import path_trace
+
+        return path_trace(scene, tree, options, trace_path=trace_path, metadata=metadata)
     width, height = scene.camera.resolution if options.size is None else options.size
     depth = scene.max_depth if options.max_depth is None else options.max_depth
     if isinstance(depth, (bool, np.bool_)) or int(depth) != depth or not 1 <= depth <= MAX_DEPTH:
@@ -308,11 +334,7 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
     timings["build"] = time.perf_counter() - t_start
     shading = shading_of(scene, filters[texture_filter])
     geo = prepare_geometry(scene)
-    diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
-    if epsilon is not None:
-        eps = float(epsilon)
-    else:
-        eps = 1e-8 * max(diag, 1e-300) if diag > 0 else 1e-12
+    eps = self_intersection_tolerance(tree, epsilon)
     hither = float(scene.camera.hither)
     cam = camera_frame(scene, width, height, corner_rays)
     sx = width + 1 if corner_rays else width
@@ -337,34 +359,9 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
                            np.empty(0, np.uint32), *kernel_inputs, out)
         timings["render"] = time.perf_counter() - t0
     else:
-        meta = {
-            "scene": scene.name, "width": sx, "height": sy, "image_size": [width, height],
-            "corner_rays": bool(corner_rays), "max_depth": depth, "hither": hither, "epsilon": eps,
-            "kd_config": tree.config.to_dict(), "kd_stats": tree.stats, "workload": workload.to_dict(),
-            "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
-            "versions": package_versions(),
-            "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
-            # How many records of each kind exist, read or not, so that a
-            # memory layout can place them all (coherence.layout).
-            "record_counts": {
-                "kd_node": int(tree.nodes.shape[0]), "index_entry": int(tree.primitive_indices.size),
-                "sphere": int(scene.sphere_radius.size), "triangle": int(scene.triangle_vertices.shape[0]),
-                "polygon": int(scene.polygon_offsets.size - 1), "patch": int(scene.patch_offsets.size - 1),
-                "cone": int(scene.cone_base_radius.size), "material": int(scene.material_kd.size),
-                "light": int(scene.light_position.shape[0]),
-            },
-        }
-        # the tracer's own data exists only where it is logged
-        own = workload.log_ray_data
-        meta["record_counts"].update({"ray_stack": (2 * depth + 2) * own, "hit_record": depth * own,
-                                      "shading_temp": depth * own, "frame_buffer": n_pix * own})
-        meta["record_counts"].update({"texel": int(shading.level_first[-1]), "texture": scene.n_textures})
-        if scene.n_textures:
-            # each texture's mip levels, (width, height) finest first: a
-            # memory layout needs them to place the texels
-            meta["textures"] = MipChains(shading.texels, shading.level_first, shading.level_width,
-                                         shading.level_height, shading.texture_level).levels()
-            meta["texture_filter"] = texture_filter
+        meta = trace_metadata(scene, tree, shading, {"width": sx, "height": sy, "image_size": [width, height],
+                                                     "corner_rays": bool(corner_rays), "max_depth": depth,
+                                                     "hither": hither, "epsilon": eps}, workload, texture_filter)
         meta.update(metadata or {})
         if trace_path is None and not options.keep_records:
             _log_samples(kernel_inputs, out, memory_budget, lambda pieces: None)  # counts are all that is kept
@@ -391,6 +388,68 @@ def render(scene: Scene, tree: KdTree | None = None, options: RenderOptions | No
     return RenderResult(image=image.reshape(sy, sx, 3), counters=counters, trace=trace, tree=tree,
                         timings=timings, width=sx, height=sy, epsilon=eps, workload=workload.to_dict(),
                         texture_filter=texture_filter, n_records=int(counts.sum()) if log else None)
+
+
+def self_intersection_tolerance(tree: KdTree, epsilon: float | None) -> float:
+    """``epsilon`` as given, else 1e-8 of the diagonal of ``tree``'s box (1e-12 for an empty box)."""
+    if epsilon is not None:
+        return float(epsilon)
+    diag = float(np.linalg.norm(tree.bounds[1] - tree.bounds[0]))
+    return 1e-8 * max(diag, 1e-300) if diag > 0 else 1e-12
+
+
+def trace_metadata(scene: Scene, tree: KdTree, shading, render_record: dict, workload: Workload,
+                   texture_filter: str) -> dict:
+    """The metadata a logged render stores with its trace.
+
+    Parameters
+    ----------
+    scene : Scene
+    tree : KdTree
+    shading : tracer.rendering.types.Shading
+        What the render's shading read (its textures' sizes are recorded).
+    render_record : dict
+        The render's own values, in the order stored: ``width`` and ``height``
+        (samples per row and rows), ``image_size``, ``corner_rays``,
+        ``max_depth``, ``hither``, ``epsilon``.
+    workload : Workload
+    texture_filter : str
+
+    Returns
+    -------
+    dict
+        JSON-serialisable; ``record_counts`` holds how many records of each
+        kind exist, read or not, so that a memory layout can place them all
+        (``coherence.layout``).
+    """
+    depth = render_record["max_depth"]
+    n_pix = render_record["width"] * render_record["height"]
+    meta = {
+        "scene": scene.name, **render_record,
+        "kd_config": tree.config.to_dict(), "kd_stats": tree.stats, "workload": workload.to_dict(),
+        "scene_summary": scene.summary() if hasattr(scene, "summary") else {"name": scene.name},
+        "versions": package_versions(),
+        "record_index_note": "primitive records use the row in that kind's arrays (Scene.element_index)",
+        "record_counts": {
+            "kd_node": int(tree.nodes.shape[0]), "index_entry": int(tree.primitive_indices.size),
+            "sphere": int(scene.sphere_radius.size), "triangle": int(scene.triangle_vertices.shape[0]),
+            "polygon": int(scene.polygon_offsets.size - 1), "patch": int(scene.patch_offsets.size - 1),
+            "cone": int(scene.cone_base_radius.size), "material": int(scene.material_kd.size),
+            "light": int(scene.light_position.shape[0]),
+        },
+    }
+    # the tracer's own data exists only where it is logged
+    own = workload.log_ray_data
+    meta["record_counts"].update({"ray_stack": (2 * depth + 2) * own, "hit_record": depth * own,
+                                  "shading_temp": depth * own, "frame_buffer": n_pix * own})
+    meta["record_counts"].update({"texel": int(shading.level_first[-1]), "texture": scene.n_textures})
+    if scene.n_textures:
+        # each texture's mip levels, (width, height) finest first: a
+        # memory layout needs them to place the texels
+        meta["textures"] = MipChains(shading.texels, shading.level_first, shading.level_width,
+                                     shading.level_height, shading.texture_level).levels()
+        meta["texture_filter"] = texture_filter
+    return meta
 
 
 def save_png(image, path) -> Path:

@@ -1,7 +1,7 @@
 """Workload presets: which tracer the renderer imitates, today's or the study's.
 
 A :class:`Workload` bundles the kd-tree rule and the behaviour levers of the
-tracer that :func:`tracer.rendering.render.render` imitates. Two presets
+tracer that :func:`tracer.rendering.render.render` imitates. Three presets
 (:data:`WORKLOADS`):
 
 * ``"modern"``: today's tracer, the default: SAH kd-tree, shadow rays stop
@@ -14,6 +14,10 @@ tracer that :func:`tracer.rendering.render.render` imitates. Two presets
   bounding boxes (not clipped); shadow rays that look for the nearest hit;
   and the tracer's own per-ray data logged (ray stack, hit records, shading
   temporaries, frame-buffer writes; :mod:`tracer.trace.records`).
+* ``"pathtrace"``: today's tree and first-hit shadow rays under the path
+  tracer (:mod:`tracer.rendering.pathtrace`) instead of Whitted's rules:
+  ``RenderOptions.spp`` samples per pixel, incoherent bounces, and per-ray
+  segments saved with the trace.
 
 What a "test" is (decided before any fitting, and kept)
 -------------------------------------------------------
@@ -45,7 +49,10 @@ from dataclasses import asdict, dataclass
 from rtcommon.validate import InputError, require_bool
 from tracer.kd.tree import KdTreeConfig
 
-__all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "get_workload"]
+__all__ = ["Workload", "WORKLOADS", "STUDY_TREE", "RENDERERS", "get_workload"]
+
+#: The renderers a workload may use.
+RENDERERS = ("whitted", "pathtrace")
 
 
 @dataclass(frozen=True)
@@ -67,12 +74,18 @@ class Workload:
         stack pushes and pops, hit-record writes and reads, shading
         temporaries and one frame-buffer write per pixel
         (:class:`tracer.trace.records.RecordKind` 9-12).
+    renderer : {"whitted", "pathtrace"}
+        The renderer: Whitted's rules (:mod:`tracer.rendering.whitted`) or
+        the path tracer (:mod:`tracer.rendering.pathtrace`). Left out of
+        :meth:`to_dict` when ``"whitted"``, so the Whitted presets' records are
+        those of before the path tracer existed.
     """
 
     name: str
     kd_config: KdTreeConfig
     shadow_nearest: bool = False
     log_ray_data: bool = False
+    renderer: str = "whitted"
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -81,11 +94,15 @@ class Workload:
             raise InputError(f"Workload.kd_config must be a KdTreeConfig, got {type(self.kd_config).__name__}")
         for lever in ("shadow_nearest", "log_ray_data"):
             object.__setattr__(self, lever, require_bool(f"Workload.{lever}", getattr(self, lever)))
+        if self.renderer not in RENDERERS:
+            raise InputError(f"Workload.renderer must be one of {', '.join(RENDERERS)}, got {self.renderer!r}")
 
     def to_dict(self) -> dict:
         """The workload as plain Python values (for output metadata)."""
         out = asdict(self)
         out["kd_config"] = self.kd_config.to_dict()
+        if self.renderer == "whitted":
+            del out["renderer"]
         return out
 
 
@@ -98,6 +115,7 @@ STUDY_TREE = KdTreeConfig(builder="median", tree_depth=16, leaf_size=32, clip=Fa
 WORKLOADS = {
     "modern": Workload("modern", KdTreeConfig()),
     "study1997": Workload("study1997", STUDY_TREE, shadow_nearest=True, log_ray_data=True),
+    "pathtrace": Workload("pathtrace", KdTreeConfig(), renderer="pathtrace"),
 }
 
 

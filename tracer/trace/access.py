@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import xxhash
 
-from rtcommon.files import make_temp_dir, remove_stale_temporaries, temp_prefix
+from rtcommon.files import make_temp_dir, read_npy_header, remove_stale_temporaries, temp_prefix
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.jsonio import json_default
 from tracer.trace.records import (  # noqa: F401  (re-exported: the format's names)
@@ -41,6 +41,7 @@ from tracer.trace.check import (  # noqa: F401  (re-exported: TraceIntegrityErro
     TraceIntegrityError, array_checksum, check_layout, check_values, dimensions, header_checksums, load_array, read_meta,
     write_with_checksum,
 )
+from tracer.trace.segments import SEGMENT_DTYPES, RaySegments, check_segments
 from rtcommon.validate import InputError
 
 _ARRAYS = tuple(DTYPES)
@@ -75,6 +76,10 @@ class AccessTrace:
     metadata : dict
         JSON-serialisable: scene, resolution, tree config and stats, render
         options, package versions.
+    segments : RaySegments or None
+        The per-ray segments of a path-traced trace (:mod:`tracer.trace.segments`):
+        they must tile the records pixel by pixel. A trace with segments is
+        saved as format version 4, one without as version 3.
     """
 
     pixel_offsets: np.ndarray
@@ -83,10 +88,13 @@ class AccessTrace:
     width: int
     height: int
     metadata: dict = field(default_factory=dict)
+    segments: RaySegments | None = None
 
     def __post_init__(self):
         self._check_layout()
         check_values(self, None, "AccessTrace")
+        if self.segments is not None:
+            check_segments(self.segments, np.asarray(self.pixel_offsets), self.n_records)
 
     @classmethod
     def _checked_by_caller(cls, arrays: dict, width: int, height: int, metadata: dict) -> "AccessTrace":
@@ -94,6 +102,7 @@ class AccessTrace:
         trace = cls.__new__(cls)
         trace.pixel_offsets, trace.records, trace.counters = (arrays[name] for name in _ARRAYS)
         trace.width, trace.height, trace.metadata = width, height, metadata
+        trace.segments = None
         trace._check_layout()
         return trace
 
@@ -175,6 +184,8 @@ class AccessTrace:
             out.flush()
             del out
             checksums["records"] = hasher.hexdigest()
+            if self.segments is not None:
+                _save_segments(tmp, self.segments, checksums)
             _write_meta(tmp, self.width, self.height, self.n_records, self.metadata, checksums)
             _publish(tmp, directory)
         except BaseException:
@@ -225,7 +236,45 @@ class AccessTrace:
         except ValueError as error:
             raise TraceIntegrityError(f"{where}: inconsistent files ({error})", str(error)) from None
         check_values(trace, meta["checksums"], where, files=True)
+        if "n_segments" in meta:
+            trace.segments = _load_segments(directory, meta, where, mmap)
+            try:
+                check_segments(trace.segments, np.asarray(trace.pixel_offsets), trace.n_records)
+            except ValueError as error:
+                raise TraceIntegrityError(f"{where}: inconsistent files ({error})", str(error)) from None
         return trace
+
+
+def _save_segments(folder: Path, segments: RaySegments, checksums: dict) -> None:
+    """Write the segment arrays into ``folder``, adding their checksums (data and header) to ``checksums``."""
+    headers = checksums.setdefault("segment_headers", {})
+    for name, array in segments.arrays().items():
+        array = np.ascontiguousarray(array, dtype=SEGMENT_DTYPES[name])
+        np.save(folder / f"{name}.npy", array)
+        checksums[name] = array_checksum(array)
+        headers[name] = xxhash.xxh3_64_hexdigest(read_npy_header(folder / f"{name}.npy").raw)
+
+
+def _load_segments(directory: Path, meta: dict, where: str, mmap: bool) -> RaySegments:
+    """The segment arrays of a version-4 trace, each checked against its checksums in ``meta.json``."""
+    n = meta["n_segments"]
+    checksums = meta["checksums"]
+    headers = checksums.get("segment_headers")
+    if meta.get("format_version") != FORMAT_VERSION or not isinstance(n, int) or isinstance(n, bool) or n < 0 \
+            or not isinstance(headers, dict) \
+            or not all(isinstance(checksums.get(k), str) and isinstance(headers.get(k), str) for k in SEGMENT_DTYPES):
+        raise TraceIntegrityError(f"{where}: meta.json's segments need format_version {FORMAT_VERSION}, an "
+                                  "integer n_segments >= 0 and a checksum of each segment file and header")
+    arrays = {}
+    widths = {"segment_ints": 6, "segment_rays": 9}
+    for name in SEGMENT_DTYPES:
+        if not (directory / f"{name}.npy").is_file():
+            raise FileNotFoundError(f"trace {str(directory)!r} lacks {name}.npy")
+        array = load_array(directory, name, (n, widths[name]), {"headers": headers}, mmap=False)
+        if array_checksum(array) != checksums[name]:
+            raise TraceIntegrityError(f"{where}: {name}.npy does not match its checksum (file damaged)")
+        arrays[name] = array
+    return RaySegments(arrays["segment_ints"], arrays["segment_rays"])
 
 
 def column_sums(counters: np.ndarray) -> np.ndarray:
@@ -276,11 +325,15 @@ def _temp_sibling(directory: Path) -> Path:
 
 
 def _write_meta(tmp: Path, width: int, height: int, n_records: int, metadata: dict, checksums: dict) -> None:
-    # version 4 only where its additions are used: a trace without segments stays version 3
-    meta = {"format_version": PLAIN_FORMAT_VERSION, "width": int(width), "height": int(height),
+    # version 4 only where its additions are used: a trace without segments stays version 3, byte for byte
+    segments = "segment_ints" in checksums
+    meta = {"format_version": FORMAT_VERSION if segments else PLAIN_FORMAT_VERSION,
+            "width": int(width), "height": int(height),
             "n_records": int(n_records), "record_kinds": {k.name: int(k) for k in RecordKind},
             "counter_names": list(COUNTER_NAMES), "metadata": metadata,
             "checksums": {"algorithm": CHECKSUM_ALGORITHM, **checksums, "headers": header_checksums(tmp)}}
+    if segments:
+        meta["n_segments"] = int(np.load(tmp / "segment_ints.npy", mmap_mode="r").shape[0])
     data = json.dumps(meta, indent=1, default=json_default).encode("utf-8")
     write_with_checksum(tmp / META_FILE, data)
 

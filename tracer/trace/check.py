@@ -29,6 +29,7 @@ from numba import njit
 from rtcommon.files import read_npy_header
 from rtcommon.resident import drop_pages, mapping_of
 from rtcommon.validate import InputError, require_int
+from tracer.trace.segments import SEGMENT_DTYPES
 from tracer.trace.records import (COUNTER_NAMES, INDEX_MASK, READABLE_VERSIONS, KIND_SHIFT, N_KINDS, RecordKind,
                                   record_id, record_kind)
 
@@ -40,6 +41,8 @@ DTYPES = {"pixel_offsets": np.dtype("<i8"), "records": np.dtype("<u4"), "counter
 META_FILE = "meta.json"
 #: ... each array's file, by array name ...
 ARRAY_FILES = {name: f"{name}.npy" for name in DTYPES}
+#: ... every array a trace may hold, with the per-ray segments of a version-4 trace ...
+ALL_DTYPES = {**DTYPES, **SEGMENT_DTYPES}
 #: ... and the XXH3-64 of the record's bytes, beside it.
 META_CHECKSUM = META_FILE + ".xxh3"
 CHUNK = 1 << 22  # records per step of a streamed pass (16 MB)
@@ -394,17 +397,18 @@ def load_array(directory: Path, name: str, shape: tuple, checksums: dict, mmap: 
         Naming the trace and the file.
     """
     where = f"trace {str(directory)!r}"
-    path = directory / ARRAY_FILES[name]
+    path = directory / f"{name}.npy"
     try:
         header = read_npy_header(path)
     except (ValueError, OSError) as error:
         raise _refuse(where, f"{name}.npy is damaged ({error})") from None
     if xxhash.xxh3_64_hexdigest(header.raw) != checksums["headers"][name]:
         raise _refuse(where, f"{name}.npy's header does not match its checksum (file damaged)")
-    if header.dtype != DTYPES[name] or header.fortran_order or header.shape != shape:
+    dtype = ALL_DTYPES[name]
+    if header.dtype != dtype or header.fortran_order or header.shape != shape:
         found = f"{header.dtype.str}{' Fortran-order' if header.fortran_order else ''} {header.shape}"
-        raise _refuse(where, f"{name}.npy holds {found}, expected {DTYPES[name].str} {shape} from meta.json")
-    size = len(header.raw) + int(np.prod(shape, dtype=np.int64)) * DTYPES[name].itemsize
+        raise _refuse(where, f"{name}.npy holds {found}, expected {dtype.str} {shape} from meta.json")
+    size = len(header.raw) + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if path.stat().st_size != size:
         raise _refuse(where, f"{name}.npy has {path.stat().st_size} bytes, expected {size} (file damaged)")
     try:
