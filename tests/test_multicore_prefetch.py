@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from cachesim import CacheLevel, Hierarchy, Prefetcher, simulate
-from cachesim.multicore import SharedState, simulate_threads
+from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, SharedState, simulate_threads
 from cachesim.sharing import SharedHierarchy, private
 from reference_multicore_prefetch import reference_threads_prefetching
 from test_multicore import random_machine, random_stream
@@ -84,7 +84,7 @@ def test_a_coherence_invalidation_makes_a_prefetch_useless_by_hand():
     result = simulate_threads([0, 64, 64], [0, 1, 0], machine, writes=[False, True, False])
     assert result.prefetch_counts[0, 0].tolist() == [2, 0, 1]  # line 1, then line 2 on the miss on line 1
     assert result.prefetch_pending[0, 0] == 1
-    assert result.counts[0, 0, 0, 9] == 1  # coherence miss of thread 0 on line 1
+    assert result.counts[0, 0, 0, COHERENCE_MISSES] == 1  # coherence miss of thread 0 on line 1
 
 
 def test_one_thread_of_private_levels_equals_simulate_with_prefetchers():
@@ -101,5 +101,5 @@ def test_one_thread_of_private_levels_equals_simulate_with_prefetchers():
     kinds = np.repeat(np.arange(300) % 5, 6)
     alone = simulate(addresses, hierarchy, pcs=kinds)
     shared = simulate_threads(addresses, np.zeros(addresses.size, dtype=np.int64), machine, kinds=kinds)
-    np.testing.assert_array_equal(shared.level_counts()[:, :8], alone.counts)
+    np.testing.assert_array_equal(shared.level_counts()[:, :COHERENCE_INVALIDATIONS], alone.counts)
     np.testing.assert_array_equal(shared.prefetch_counts[:, 0], alone.prefetch_counts)

@@ -277,7 +277,7 @@ def test_broken_pipe_exits_quietly(tmp_path):
     assert process.returncode == 141 and err == ""
 
 
-# A process without work once crashed the simulation kernel (issue 13 item 1); these cases run
+# A process without work once crashed the simulation kernel; these cases run
 # apart so that a segfault there would not hide the others.
 NO_WORK_CASES = [
     (["report", "tetra", "--size", "15", "--mappings", "S", "--max-processes", "16", "--out", "small"], 0, ""),
