@@ -472,7 +472,7 @@ def test_the_documented_nff_example_reads_as_it_says(tmp_path):
     import re
 
     readme = (Path(__file__).resolve().parent.parent / "docs" / "scene_files.md").read_text(encoding="utf-8")
-    (example,) = re.findall(r"```nff\n(.*?)```", readme, re.S)
+    (example,) = re.findall(r"```text\n(.*?)```", readme, re.S)
     write_png(procedural_texture(16, 8, seed=0), tmp_path / "wood.png")
     scene = parse_nff(VIEW + example, folder=tmp_path)
     np.testing.assert_array_equal(scene.texture_size, [[16, 8], [256, 256]])
