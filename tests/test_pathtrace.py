@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import tracer.rendering.pathtrace as pathtrace_module
+import tracer.rendering.render as render_module
 from reference_pathtrace import SphereScene, key_of, rand, radiance, JITTER_X, JITTER_Y
 from tracer.kd.tree import build_kdtree
 from tracer.rendering.camera import camera_frame
@@ -168,6 +169,27 @@ def test_same_seed_gives_byte_identical_traces(tmp_path, monkeypatch):
     (tmp_path / "a" / "segment_rays.npy").write_bytes(bytes(raw))
     with pytest.raises(TraceIntegrityError, match="segment_rays.npy does not match"):
         AccessTrace.load(tmp_path / "a")
+
+
+def test_trace_is_the_same_however_its_buffers_grow(monkeypatch):
+    """Slots that start at one record and one segment per sample (every item of the first batch overflows,
+    later slots grow), batches of two items, and record and segment arrays grown to just what each batch
+    needs give the same records and segments as the defaults. Fails if a grown segment array drops the
+    rows already stored (``self.ints[:row] = ints[:row]`` removed) (checked)."""
+    scene = load("balls")
+    tree = build_kdtree(scene)
+    options = RenderOptions(size=12, workload="pathtrace", spp=2)
+    expected = path_trace(scene, tree, options=options).trace
+    monkeypatch.setattr(pathtrace_module, "FIRST_SLOT_RECORDS", 1)
+    monkeypatch.setattr(pathtrace_module, "FIRST_SLOT_SEGMENTS", 1)
+    monkeypatch.setattr(pathtrace_module, "BATCH_ITEMS", 2)
+    monkeypatch.setattr(render_module._GrowingRecords, "initial_capacity", 5)
+    monkeypatch.setattr(pathtrace_module._Collected, "_expected", lambda self, need, capacity, pixels_done: need)
+    grown = path_trace(scene, tree, options=options).trace
+    np.testing.assert_array_equal(grown.pixel_offsets, expected.pixel_offsets)
+    np.testing.assert_array_equal(grown.records, expected.records)
+    np.testing.assert_array_equal(grown.segments.ints, expected.segments.ints)
+    np.testing.assert_array_equal(grown.segments.rays, expected.segments.rays)
 
 
 def test_bad_options_are_refused():

@@ -71,6 +71,10 @@ from tracer.trace.segments import N_SEGMENT_COLUMNS, N_SEGMENT_RAY_COLUMNS, RayS
 BATCH_ITEMS = 64
 #: Records per segment the segment slots are sized for (an overflowing item is traced again).
 RECORDS_PER_SEGMENT = 8
+#: Records per sample a work item's slot holds in the first logging batch (later batches learn from it).
+FIRST_SLOT_RECORDS = 1024
+#: Segments (rays) per sample a work item's segment slot holds in the first logging batch.
+FIRST_SLOT_SEGMENTS = 16
 
 
 def path_trace(scene: Scene, tree=None, options: RenderOptions | None = None, *, trace_path=None,
@@ -134,7 +138,7 @@ def path_trace(scene: Scene, tree=None, options: RenderOptions | None = None, *,
     t0 = time.perf_counter()
     trace = None
     if not options.log:
-        _trace_batches(inputs, out, 0, lambda records, segments: None)
+        _trace_batches(inputs, out, 0, lambda records, segments, done: None)
         timings["render"] = time.perf_counter() - t0
     else:
         record = {"width": width, "height": height, "image_size": [width, height], "corner_rays": False,
@@ -145,26 +149,14 @@ def path_trace(scene: Scene, tree=None, options: RenderOptions | None = None, *,
                                 "generator": "SplitMix64 chain (tracer.rendering.sampling)"}
         meta.update(metadata or {})
         if not options.keep_records:
-            _trace_batches(inputs, out, options.memory_budget, lambda records, segments: None)
+            _trace_batches(inputs, out, options.memory_budget, lambda records, segments, done: None)
         else:
-            records = _GrowingRecords(options.memory_budget)
-            segments = []
-
-            def sink(pieces, segment_pieces):
-                for (ints, rays), piece_start in zip(segment_pieces, _starts(records.n, pieces)):
-                    ints = ints.copy()
-                    ints[:, SegmentColumn.FIRST] += piece_start
-                    ints[:, SegmentColumn.STOP] += piece_start
-                    segments.append((ints, rays.copy()))
-                records.extend(pieces)
-
-            _trace_batches(inputs, out, options.memory_budget, sink)
+            collected = _Collected(n_pix, options.memory_budget)
+            _trace_batches(inputs, out, options.memory_budget, collected.extend)
             offsets = np.zeros(n_pix + 1, np.int64)
             np.cumsum(out.counts, out=offsets[1:])
-            ray_segments = RaySegments(
-                np.concatenate([s[0] for s in segments]) if segments else np.zeros((0, N_SEGMENT_COLUMNS), np.int64),
-                np.concatenate([s[1] for s in segments]) if segments else np.zeros((0, N_SEGMENT_RAY_COLUMNS)))
-            trace = AccessTrace(offsets, records.finish(), out.counters, width, height, meta, ray_segments)
+            records, ray_segments = collected.finish()
+            trace = AccessTrace(offsets, records, out.counters, width, height, meta, ray_segments)
             if trace_path is not None:
                 trace.save(trace_path)
         timings["trace"] = time.perf_counter() - t0
@@ -185,33 +177,89 @@ def _checked_emission(emission, n_materials: int) -> np.ndarray:
     return np.ascontiguousarray(emission)
 
 
-def _starts(first: int, pieces) -> list:
-    """Where each of ``pieces`` starts when appended after ``first`` records."""
-    starts = []
-    for piece in pieces:
-        starts.append(first)
-        first += len(piece)
-    return starts
+class _Collected:
+    """Every batch's records and segments, copied into arrays sized ahead.
+
+    After each batch the arrays are sized for the whole image from the
+    records (and segments) per pixel so far, so that most renders copy each
+    record once; the segments' record ranges become positions in the whole
+    trace.
+    """
+
+    def __init__(self, n_pixels: int, memory_budget: int):
+        self.n_pixels = n_pixels
+        self.records = _GrowingRecords(memory_budget)
+        self.n_segments = 0
+        self.ints = np.empty((0, N_SEGMENT_COLUMNS), np.int64)
+        self.rays = np.empty((0, N_SEGMENT_RAY_COLUMNS))
+
+    def _expected(self, need: int, capacity: int, pixels_done: int) -> int:
+        # room for the image at the rate so far (with 10% to spare), and never less than 1.5 times the last room
+        return max(need, -(-need * self.n_pixels * 11 // (10 * pixels_done)), capacity + capacity // 2)
+
+    def extend(self, pieces, segment_pieces, pixels_done: int) -> None:
+        """Append one batch: its record ``pieces`` and ``segment_pieces`` (segment ranges relative to each piece)."""
+        records = self.records
+        need = records.n + sum(len(piece) for piece in pieces)
+        if need > len(records.data):
+            records.reserve(self._expected(need, len(records.data), pixels_done))
+        row = self.n_segments
+        need = row + sum(len(ints) for ints, _ in segment_pieces)
+        if need > len(self.ints):
+            ints, rays = self.ints, self.rays
+            rows = self._expected(need, len(ints), pixels_done)
+            self.ints = np.empty((rows, N_SEGMENT_COLUMNS), np.int64)
+            self.rays = np.empty((rows, N_SEGMENT_RAY_COLUMNS))
+            self.ints[:row] = ints[:row]
+            self.rays[:row] = rays[:row]
+        rows = slice(row, need)
+        np.concatenate([ints for ints, _ in segment_pieces], out=self.ints[rows])
+        np.concatenate([rays for _, rays in segment_pieces], out=self.rays[rows])
+        piece_starts = records.n + np.cumsum([0] + [len(piece) for piece in pieces[:-1]])
+        self.ints[rows, SegmentColumn.FIRST:SegmentColumn.STOP + 1] += np.repeat(
+            piece_starts, [len(ints) for ints, _ in segment_pieces])[:, None]
+        records.extend(pieces)
+        self.n_segments = need
+
+    def finish(self) -> tuple:
+        """The records, shape (R,) uint32, and the :class:`RaySegments`, each trimmed to what was appended."""
+        self.ints.resize((self.n_segments, N_SEGMENT_COLUMNS), refcheck=False)
+        self.rays.resize((self.n_segments, N_SEGMENT_RAY_COLUMNS), refcheck=False)
+        return self.records.finish(), RaySegments(self.ints, self.rays)
+
+
+def _slot_buffers(n_items: int, slot: int, segment_slot: int) -> tuple:
+    """Records, segment ints and segment rays for ``n_items`` work items of these slot sizes."""
+    return (np.empty(slot * n_items, np.uint32), np.empty((segment_slot * n_items, N_SEGMENT_COLUMNS), np.int64),
+            np.empty((segment_slot * n_items, N_SEGMENT_RAY_COLUMNS)))
 
 
 def _trace_batches(inputs, out, memory_budget: int, sink) -> None:
-    """Trace every pixel once, handing ``sink(record pieces, segment pieces)`` each batch in pixel order.
+    """Trace every pixel once, handing ``sink(record pieces, segment pieces, pixels done)`` each batch in
+    pixel order.
 
     With ``memory_budget`` 0 nothing is logged (slots of size 0). Each work
     item logs into its own slot of one reused buffer (records and segment
     rows); an item that overflows either slot is traced again into buffers
     of the sizes it reported, so the output depends on neither the slot
-    sizes nor the schedule. The pieces are views of reused buffers: copy
-    them before the next batch.
+    sizes nor the schedule. The first batch's slots hold
+    :data:`FIRST_SLOT_RECORDS` records and :data:`FIRST_SLOT_SEGMENTS`
+    segments per sample; after a batch that overflowed, slots grow to twice
+    the most any item used, within the memory budget (segments: one per
+    :data:`RECORDS_PER_SEGMENT` records of it). Slots are kept small
+    because a buffer's pages are zeroed where first written, a whole huge
+    page at a time. The pieces are views of reused buffers: copy them
+    before the next batch.
     """
     n_pix = out.counts.shape[0]
     items = np.arange(0, n_pix, PIXEL_CHUNK, dtype=np.int64)
-    slot = max(1, min(memory_budget, SLOT_BUFFER_BYTES) // (4 * BATCH_ITEMS)) if memory_budget else 0
-    seg_slot = max(1, slot // RECORDS_PER_SEGMENT) if memory_budget else 0
+    most = max(1, min(memory_budget, SLOT_BUFFER_BYTES) // (4 * BATCH_ITEMS)) if memory_budget else 0
+    most_segments = max(1, most // RECORDS_PER_SEGMENT) if memory_budget else 0
+    spp = inputs[1].spp
+    slot = min(most, FIRST_SLOT_RECORDS * PIXEL_CHUNK * spp)
+    seg_slot = min(most_segments, FIRST_SLOT_SEGMENTS * PIXEL_CHUNK * spp)
     n_batch = min(BATCH_ITEMS, len(items))
-    records = np.empty(slot * n_batch, np.uint32)
-    seg_ints = np.empty((seg_slot * n_batch, N_SEGMENT_COLUMNS), np.int64)
-    seg_rays = np.empty((seg_slot * n_batch, N_SEGMENT_RAY_COLUMNS))
+    records, seg_ints, seg_rays = _slot_buffers(n_batch, slot, seg_slot)
     for b0 in range(0, len(items), BATCH_ITEMS):
         start = items[b0:b0 + BATCH_ITEMS]
         k = len(start)
@@ -233,13 +281,15 @@ def _trace_batches(inputs, out, memory_budget: int, sink) -> None:
             seg_base = np.concatenate([[0], np.cumsum(seg_used)[:-1]]).astype(np.int64)
             exact = PathWork(start[over], base, used.copy(), np.empty(len(over), np.int64), seg_base, seg_used.copy(),
                              np.empty(len(over), np.int64))
-            exact_records = np.empty(int(used.sum()), np.uint32)
-            exact_ints = np.empty((int(seg_used.sum()), N_SEGMENT_COLUMNS), np.int64)
-            exact_rays = np.empty((int(seg_used.sum()), N_SEGMENT_RAY_COLUMNS))
+            exact_records, exact_ints, exact_rays = _slot_buffers(1, int(used.sum()), int(seg_used.sum()))
             with numba.parallel_chunksize(1):
                 path_kernel(exact, (exact_records, exact_ints, exact_rays), *inputs, out)
             for n, j in enumerate(over):
                 pieces[j] = exact_records[base[n]:base[n] + used[n]]
                 rows = slice(seg_base[n], seg_base[n] + seg_used[n])
                 segment_pieces[j] = (exact_ints[rows], exact_rays[rows])
-        sink(pieces, segment_pieces)
+        sink(pieces, segment_pieces, min(n_pix, int(start[-1]) + PIXEL_CHUNK))
+        if len(over):
+            slot = min(most, max(slot, 2 * int(work.used.max())))
+            seg_slot = min(most_segments, max(seg_slot, 2 * int(work.segments_used.max())))
+            records, seg_ints, seg_rays = _slot_buffers(n_batch, slot, seg_slot)

@@ -139,6 +139,14 @@ class _GrowingRecords:
             self.data[self.n:self.n + len(piece)] = piece
             self.n += len(piece)
 
+    def reserve(self, capacity: int) -> None:
+        """Make room for ``capacity`` records (at most the budget's) in one fresh array, when more than now."""
+        capacity = min(capacity, self.memory_budget // 4)
+        if capacity > len(self.data):
+            data = np.empty(capacity, np.uint32)
+            data[:self.n] = self.data[:self.n]
+            self.data = data
+
     def finish(self) -> np.ndarray:
         self.data.resize(self.n, refcheck=False)
         return self.data
