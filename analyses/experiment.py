@@ -110,7 +110,14 @@ class Experiment:
         (:meth:`coherence.platforms.Platform.thread_view`), and the
         parameters say so. Its process counts are
         :meth:`~coherence.platforms.Platform.default_processes` when a
-        caller takes them from it. None: the study's machine.
+        caller takes them from it. Under a platform, the trace logs the
+        tracer's per-ray data and frame-buffer writes (:meth:`logs_ray_data`).
+        None: the study's machine.
+    frame_buffer_bytes : int, optional
+        Bytes of a frame-buffer pixel, one of
+        :data:`coherence.layout.FRAME_BUFFER_BYTES` (3, 4, 16)
+        (:meth:`coherence.layout.MemoryLayout.with_frame_buffer`); None: the
+        layout's own (12 in ``compact``, 3 in ``alpha1997``).
 
     Raises
     ------
@@ -142,6 +149,7 @@ class Experiment:
     memory_budget: int = DEFAULT_MEMORY_BUDGET
     progress: bool = True
     platform: object = None
+    frame_buffer_bytes: int | None = None
 
     def __post_init__(self):
         from coherence.mappings import get_mapping
@@ -196,6 +204,12 @@ class Experiment:
         require_int("Experiment.n_cpus", self.n_cpus, 1)
         if self.platform is not None:
             _check_platform(self)
+        if self.frame_buffer_bytes is not None:
+            from coherence.layout import FRAME_BUFFER_BYTES
+
+            if isinstance(self.frame_buffer_bytes, bool) or self.frame_buffer_bytes not in FRAME_BUFFER_BYTES:
+                raise InputError(f"Experiment.frame_buffer_bytes must be None or one of "
+                                 f"{', '.join(map(str, FRAME_BUFFER_BYTES))}, got {self.frame_buffer_bytes!r}")
         require_int("Experiment.background", self.background, 0)
         require_int("Experiment.background_footprint", self.background_footprint, 0)
         _choose("page_placement", self.page_placement, PAGE_PLACEMENTS)
@@ -231,8 +245,26 @@ class Experiment:
         return _hierarchy(self.hierarchy) if platform is None else platform.thread_view()
 
     def layout_object(self):
-        """The :class:`coherence.layout.MemoryLayout`."""
-        return _layout(self.layout)
+        """The :class:`coherence.layout.MemoryLayout`, its frame-buffer pixels ``frame_buffer_bytes`` when set."""
+        layout = _layout(self.layout)
+        return layout if self.frame_buffer_bytes is None else layout.with_frame_buffer(self.frame_buffer_bytes)
+
+    def logs_ray_data(self) -> bool:
+        """Whether the trace logs the tracer's per-ray data and frame buffer: when the workload does
+        (``study1997``), or under a platform with Whitted's renderer (the path tracer logs none)."""
+        from tracer.rendering.workload import WORKLOADS
+
+        return not isinstance(self.trace_workload(), str) or WORKLOADS[self.workload].log_ray_data
+
+    def trace_workload(self):
+        """The workload as :func:`analyses.traces.cached_trace` takes it: its name, or under a platform the
+        preset made to log its per-ray data (:func:`analyses.traces.with_ray_data`) when it does not."""
+        from analyses.traces import with_ray_data
+        from tracer.rendering.workload import WORKLOADS
+
+        preset = WORKLOADS[self.workload]
+        logged = with_ray_data(preset, self.platform is not None)
+        return self.workload if logged is preset else logged
 
     def cost_model(self):
         """The :class:`coherence.cost.CostModel` (the platform's under one)."""
@@ -281,9 +313,12 @@ class Experiment:
         ``cache_dir``, ``dask``, ``memory_budget`` and ``progress`` are
         left out: no result depends on them. Under a platform, ``platform``
         too (:func:`platform_parameters`); without one there is no such key.
+        ``frame_buffer_bytes`` only when set.
         """
         platform = self.platform_object()
         extra = {} if platform is None else {"platform": platform_parameters(platform)}
+        if self.frame_buffer_bytes is not None:
+            extra["frame_buffer_bytes"] = int(self.frame_buffer_bytes)
         return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
                 "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
                 "n_processes": list(self.n_processes), "hierarchy": self.hierarchy_object().to_dict(),

@@ -209,7 +209,8 @@ def build_report(experiment: Experiment, *, out=None, miss_map=None) -> Report:
                             enabled=experiment.dask is None) as warm:
         scene, trace, info = cached_trace(experiment.scene, experiment.size, cache_dir=experiment.cache_dir,
                                           kd=setup.kd, max_depth=experiment.max_depth, progress=progress,
-                                          workload=experiment.workload, tree_variant=experiment.tree_variant,
+                                          workload=experiment.trace_workload(),
+                                          tree_variant=experiment.tree_variant,
                                           path_samples=(experiment.spp, experiment.seed),
                                           memory_budget=setup.shares["render_records"])
         warm.wait(progress=progress)

@@ -60,7 +60,7 @@ import xxhash
 
 from rtcommon.files import make_temp_dir, remove_stale_temporaries
 from rtcommon.jsonio import json_default
-from rtcommon.validate import InputError, require_int
+from rtcommon.validate import InputError, require_bool, require_int
 from tracer.trace.check import META_CHECKSUM, matches_checksum, write_with_checksum
 
 __all__ = ["cached_trace", "cache_root", "check_cache_dir", "default_cache_dir", "trace_key", "CACHE_ENV"]
@@ -164,7 +164,7 @@ def _scene_identity(name_or_path) -> tuple[str, str]:
 
 def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workload: str = "modern",
               path_samples: tuple = (1, 0),
-              tree_variant: str | None = None) -> str:
+              tree_variant: str | None = None, ray_data: bool = False) -> str:
     """Folder name of a cache entry: readable prefix plus a hash of every ingredient.
 
     Parameters
@@ -185,6 +185,10 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
     path_samples : (int, int)
         Samples per pixel and seed of a path-traced workload (hashed for it
         only).
+    ray_data : bool
+        The workload made to log the tracer's per-ray data
+        (:func:`with_ray_data`); the label then ends ``-raydata``. False, or
+        a workload that logs it already, leaves the key as it was.
     """
     from coherence import __version__
     from tracer.trace.access import FORMAT_VERSION
@@ -192,8 +196,9 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
 
     label, identity = _scene_identity(name_or_path)
     preset = workload_with_tree(workload, tree_variant)
+    logged = with_ray_data(preset, ray_data)
     ingredients = {"scene": identity, "size": int(size), "kd": kd, "max_depth": int(max_depth),
-                   "workload": preset.to_dict(),
+                   "workload": logged.to_dict(),
                    "version": __version__, "format_version": FORMAT_VERSION, "tracer_source": _source_digest()}
     if preset.renderer == "pathtrace":
         ingredients["path_samples"] = [int(path_samples[0]), int(path_samples[1])]
@@ -201,7 +206,42 @@ def trace_key(name_or_path, size: int, *, kd: str = "sah", max_depth: int, workl
     named = "" if preset.name == "modern" else f"-{preset.name}"
     if tree_variant not in (None, STUDY_TREE_VARIANT):
         named += f"-{tree_variant}"
+    if logged is not preset:
+        named += "-raydata"
     return f"{label}-{int(size)}{named}-{kd}-d{int(max_depth)}-{digest}"
+
+
+def with_ray_data(workload, ray_data: bool):
+    """``workload`` (a :class:`tracer.rendering.workload.Workload`) logging its per-ray data when ``ray_data``.
+
+    The same object when ``ray_data`` is False, when the workload logs that
+    data already, or when its renderer is not Whitted's (the path tracer
+    logs none).
+    """
+    from dataclasses import replace
+
+    if not require_bool("ray_data", ray_data) or workload.log_ray_data or workload.renderer != "whitted":
+        return workload
+    return replace(workload, log_ray_data=True)
+
+
+def preset_and_ray_data(workload) -> tuple[str, bool]:
+    """The preset's name and whether its ray data is logged, for a workload as :func:`cached_trace` takes it.
+
+    Raises
+    ------
+    ValueError
+        Neither a preset's name nor a preset made to log its ray data by :func:`with_ray_data`.
+    """
+    from tracer.rendering.workload import WORKLOADS, Workload
+
+    if isinstance(workload, str) and workload in WORKLOADS:
+        return workload, False
+    if isinstance(workload, Workload) and workload.name in WORKLOADS and \
+            workload == with_ray_data(WORKLOADS[workload.name], True):
+        return workload.name, True
+    raise InputError(f"workload must be one of {', '.join(WORKLOADS)} or such a preset logging its ray data "
+                     f"(analyses.traces.with_ray_data), got {workload!r}")
 
 
 def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | None = None,
@@ -225,8 +265,11 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
         Ray-tree depth; default the scene's.
     progress : bool
         Show a progress bar on stderr while rendering.
-    workload : str
-        The tracer imitated: a :data:`tracer.rendering.workload.WORKLOADS` name.
+    workload : str or Workload
+        The tracer imitated: a :data:`tracer.rendering.workload.WORKLOADS`
+        name, or a preset made to log its per-ray data and frame-buffer
+        writes by :func:`with_ray_data` (what a run under a platform
+        renders; its entry is keyed apart, see :func:`trace_key`).
     memory_budget : int, optional
         Bytes of records a render holds in RAM before it writes them to the
         entry in chunks (default :data:`tracer.rendering.render.DEFAULT_MEMORY_BUDGET`).
@@ -268,8 +311,7 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     from tracer.trace.access import TraceIntegrityError
 
     size = require_int("size", size, 1)
-    if workload not in WORKLOADS:
-        raise InputError(f"workload must be one of {', '.join(WORKLOADS)}, got {workload!r}")
+    workload, ray_data = preset_and_ray_data(workload)
     preset = workload_with_tree(workload, tree_variant)
     if kd is None:
         kd = preset.kd_config.builder
@@ -281,7 +323,8 @@ def cached_trace(scene_name_or_path, size: int, *, cache_dir=None, kd: str | Non
     root = check_cache_dir(cache_dir)
     scene = load(scene_name_or_path, max_depth=max_depth)
     key = trace_key(scene_name_or_path, size, kd=kd, max_depth=scene.max_depth, workload=workload,
-                    tree_variant=tree_variant, path_samples=path_samples)
+                    tree_variant=tree_variant, path_samples=path_samples, ray_data=ray_data)
+    preset = with_ray_data(preset, ray_data)
     entry = root / "traces" / key
     remove_stale_temporaries(entry.parent)  # on a hit too: a killed run's leftovers go at the next run
     try:

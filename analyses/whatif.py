@@ -446,7 +446,7 @@ def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
     for key in dict.fromkeys(_scene_key(point) for point in points):
         scene = study.scene if key is None else _sized_scene_file(study.scene, key, cache_dir)
         _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, kd=base.kd, max_depth=base.max_depth,
-                                  progress=progress, workload=base.workload, memory_budget=records_budget,
+                                  progress=progress, workload=base.trace_workload(), memory_budget=records_budget,
                                   tree_variant=base.tree_variant)
         folders[key] = str(Path(info["path"]) / "trace")
     return folders

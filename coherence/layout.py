@@ -91,6 +91,10 @@ PRESET_RECORDS = {
     "texture": (RecordLayout(32, 8), RecordLayout(64, 8)),
 }
 
+#: Frame-buffer pixel sizes a layout may be given (:meth:`MemoryLayout.with_frame_buffer`): 8-bit RGB,
+#: 8-bit RGBA and float32 RGBA.
+FRAME_BUFFER_BYTES = (3, 4, 16)
+
 # what a layout that does not name the texture kinds gets (the compact sizes)
 _TEXTURE_DEFAULTS = {name: PRESET_RECORDS[name][0] for name in ("texel", "texture")}
 
@@ -167,6 +171,23 @@ class MemoryLayout:
         """This layout with its texels in the order of ``texels``."""
         return MemoryLayout(records=dict(self.records), base=self.base, region_align=self.region_align,
                             name=self.name, texels=texels, heap=self.heap)
+
+    def with_frame_buffer(self, pixel_bytes: int) -> "MemoryLayout":
+        """This layout with frame-buffer pixels of ``pixel_bytes`` bytes (one of :data:`FRAME_BUFFER_BYTES`).
+
+        3: packed 8-bit RGB; 4: RGBA; 16: four float32 channels. A pixel is
+        aligned to the largest power of two dividing its size (3 -> 1), so
+        that pixels lie packed side by side and one cache line holds several
+        pixels, which threads writing neighbouring pixels then share. The
+        layout keeps its name; a run records the size beside it.
+        """
+        if isinstance(pixel_bytes, bool) or pixel_bytes not in FRAME_BUFFER_BYTES:
+            raise InputError(f"frame-buffer pixel size must be one of {', '.join(map(str, FRAME_BUFFER_BYTES))} "
+                             f"bytes, got {pixel_bytes!r}")
+        pixel_bytes = int(pixel_bytes)
+        records = {**self.records, "frame_buffer": RecordLayout(pixel_bytes, pixel_bytes & -pixel_bytes)}
+        return MemoryLayout(records=records, base=self.base, region_align=self.region_align, name=self.name,
+                            texels=self.texels, heap=self.heap)
 
     def _texel_starts(self, count: int, stride: int, textures):
         """Offsets of ``count`` texels from their region's start, and the region's bytes."""

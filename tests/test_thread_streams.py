@@ -123,10 +123,13 @@ def test_tetra_p_has_false_sharing_and_s_less(tmp_path):
     scene, trace, _ = cached_trace("tetra", 16, cache_dir=tmp_path, progress=False, workload="study1997")
     placed = place_layout(get_layout("alpha1997"), trace, scene)
     machine = SharedHierarchy(modern(), n_cores=8, shared_by=("thread", "thread", "machine"))
-    false_sharing = {}
-    for mapping in ("P", "S"):
-        stream = thread_stream(trace, placed, mapping, 8)
-        result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes,
-                                  sizes=stream.sizes, kinds=stream.kinds)
-        false_sharing[mapping] = int(result.level_counts()[:, FALSE_SHARING_MISSES].sum())
+    false_sharing = {mapping: false_sharing_misses(trace, placed, machine, mapping, 8) for mapping in ("P", "S")}
     assert false_sharing["P"] > 0 and false_sharing["P"] > false_sharing["S"]
+
+
+def false_sharing_misses(trace, placed, machine, mapping, n_threads):
+    """False-sharing misses over every level of ``machine`` when ``n_threads`` threads render ``trace``."""
+    stream = thread_stream(trace, placed, mapping, n_threads)
+    result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes,
+                              sizes=stream.sizes, kinds=stream.kinds)
+    return int(result.level_counts()[:, FALSE_SHARING_MISSES].sum())
