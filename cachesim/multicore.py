@@ -396,6 +396,14 @@ def _replay(stream, geometry, machine, state, clock, scratch):
     return clock
 
 
+#: The replay loop for callers that feed a stream piece by piece (a schedule that
+#: interleaves hardware threads as it runs them, :mod:`coherence.shared_schedule`):
+#: :func:`simulate_threads_stream` without its totals of accesses and writes, which
+#: such a caller adds once at the end (``ACCESSES = HITS + MISSES``,
+#: ``WRITES = WRITE_HITS + WRITE_MISSES``). Arguments: stream, geometry, machine,
+#: state, clock and a scratch array of int64 (3, L); returns the clock after the stream.
+replay_span = _replay
+
 def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tuple[CacheGeometry, MachineGeometry]:
     """The kernel's view: one thread's geometry with offsets over all instances, and the machine."""
     n_levels = len(machine.hierarchy.levels)

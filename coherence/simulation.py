@@ -255,6 +255,20 @@ class Schedule(NamedTuple):
     take_ahead: int
 
 
+def schedule_of(distribution: Distribution) -> Schedule:
+    """The kernels' view of a distribution's tasks: static processes' own tasks in order, or the hand-out rules."""
+    n_processes = distribution.n_processes
+    if distribution.dynamic:
+        own_offsets = np.zeros(n_processes + 1, dtype=np.int64)
+        own_tasks = np.zeros(0, dtype=np.int64)
+    else:
+        owner = np.asarray(distribution.task_process, dtype=np.int64)
+        own_tasks = np.argsort(owner, kind="stable").astype(np.int64)
+        own_offsets = np.searchsorted(owner[own_tasks], np.arange(n_processes + 1)).astype(np.int64)
+    return Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
+                    distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead))
+
+
 @dataclass(frozen=True)
 class Run:
     """Result of one simulated run.
@@ -357,13 +371,6 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
         placed = placed.with_pages(machine.page_placement, hierarchy)
     n_processes = distribution.n_processes
     _warn_idle_processes(distribution)
-    if distribution.dynamic:
-        own_offsets = np.zeros(n_processes + 1, dtype=np.int64)
-        own_tasks = np.zeros(0, dtype=np.int64)
-    else:
-        owner = np.asarray(distribution.task_process, dtype=np.int64)
-        own_tasks = np.argsort(owner, kind="stable").astype(np.int64)
-        own_offsets = np.searchsorted(owner[own_tasks], np.arange(n_processes + 1)).astype(np.int64)
 
     queues = machine.run_queues(n_processes)
     n_all = n_processes + machine.background_load
@@ -392,8 +399,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     run_schedule(PixelReads(np.asarray(trace.pixel_offsets, dtype=np.int64), np.asarray(trace.records),
                             placed.placement, line_shift, lines),
                  state.geometry, caches, tlbs, PixelCost(compute, latency),
-                 Schedule(distribution.task_offsets, distribution.task_pixels, own_offsets, own_tasks,
-                          distribution.dynamic, float(distribution.dispatch_cycles), int(distribution.take_ahead)),
+                 schedule_of(distribution),
                  queues, _background(machine, line_shift, state, tlbs),
                  RunOutputs(out_cycles, out_placement, task_owner, out_misses))
     if not distribution.dynamic:

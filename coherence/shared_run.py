@@ -1,0 +1,241 @@
+"""One run of a trace under a mapping on a machine with shared cache levels (the checked entry to :mod:`coherence.shared_schedule`).
+
+>>> from coherence.shared_run import simulate_shared_run          # doctest: +SKIP
+>>> run = simulate_shared_run(trace, distribution, platform.hierarchy, placed, platform.cost,
+...                           Machine(n_cpus=platform.n_threads), interleave_cycles=1000)
+>>> run.run.processes, run.shared.level_frame()                     # doctest: +SKIP
+
+The rules of the schedule and of the interleaving are in
+:mod:`coherence.shared_schedule`; those of the shared levels and their
+coherence in :mod:`cachesim.multicore`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from cachesim import multicore as MC
+from cachesim.multicore import SharedResult, SharedState
+from cachesim.sharing import SharedHierarchy
+from coherence.cost import CostModel
+from coherence.distribution import Distribution
+from coherence.layout import PlacedLayout
+from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
+                              fixed_schedule)
+from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
+                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
+from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, run_shared_schedule
+from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, schedule_of
+from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces
+from rtcommon.validate import InputError, require_bool, require_number
+
+__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SharedRun", "pixel_pieces", "simulate_shared_run"]
+
+#: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
+#: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
+DEFAULT_INTERLEAVE_CYCLES = 1000
+
+
+@dataclass(frozen=True)
+class SharedRun:
+    """A run on shared levels: the run as :func:`coherence.simulation.simulate_run` gives it, and the machine's counts.
+
+    Attributes
+    ----------
+    run : coherence.simulation.Run
+        Per process: the same columns as a private-cache run (hits and
+        misses per level are the process's accesses, wherever they were
+        served).
+    shared : cachesim.multicore.SharedResult
+        Counts per level, instance and record kind of the machine's
+        instances (background reads included, as kind 0), with coherence
+        invalidations, coherence misses and false-sharing misses.
+    log : (ndarray, ndarray, ndarray) or None
+        With ``log=True``: address, hardware thread and piece index (-1: a
+        background read) of every access in the order the machine served it.
+    """
+
+    run: Run
+    shared: SharedResult
+    log: tuple | None = None
+
+
+def pixel_pieces(trace, placed: PlacedLayout, line_size: int) -> PixelPieces:
+    """Every pixel's accesses: one per line of ``line_size`` bytes a record spans, with its bytes, kind and flags.
+
+    Parameters
+    ----------
+    trace : tracer.trace.access.AccessTrace
+    placed : PlacedLayout
+        Where the records live (virtual addresses: no page placement).
+    line_size : int
+        The first level's line size.
+
+    Returns
+    -------
+    PixelPieces
+        Private kinds at their layout address (``private`` True), to be
+        moved to a process's copy as it makes them.
+    """
+    offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
+    n_pixels = offsets.shape[0] - 1
+    record_pixel = np.repeat(np.arange(n_pixels, dtype=np.int64), np.diff(offsets))
+    # record_pieces moves a private record to copy (thread + 1); given each record's
+    # pixel as its "thread", the pieces come back tagged with their pixel.
+    stream = record_pieces(np.asarray(trace.records), record_pixel, placed, line_size)
+    pixel_of = stream.threads
+    span = private_span(placed)
+    private = np.isin(stream.kinds, np.array([int(kind) for kind in PRIVATE_KINDS], dtype=np.uint8))
+    addresses = stream.addresses - np.where(private, (pixel_of + 1) * span, 0).astype(np.uint64)
+    piece_offsets = np.searchsorted(pixel_of, np.arange(n_pixels + 1)).astype(np.int64)
+    return PixelPieces(piece_offsets, addresses, stream.sizes.astype(np.int64), stream.kinds, stream.writes,
+                       private, int(span))
+
+
+def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHierarchy, placed: PlacedLayout,
+                        cost: CostModel, machine: Machine, *, interleave_cycles: float = DEFAULT_INTERLEAVE_CYCLES,
+                        compute: np.ndarray | None = None, pieces: PixelPieces | None = None,
+                        log: bool = False) -> SharedRun:
+    """Simulate one distribution of a trace on the hardware threads of a shared hierarchy.
+
+    Parameters
+    ----------
+    trace : tracer.trace.access.AccessTrace
+    distribution : Distribution
+    hierarchy : SharedHierarchy
+        Levels, latencies and which hardware threads share each level; one
+        CPU of the schedule is one hardware thread.
+    placed : PlacedLayout
+        Record addresses (no page placement: the machine's must be ``contiguous``).
+    cost : CostModel
+    machine : Machine
+        ``n_cpus`` must equal the hierarchy's hardware threads; scheduler,
+        time slice, switch cycles and background load as in
+        :func:`coherence.simulation.simulate_run`.
+    interleave_cycles : float
+        ``Q`` >= 1 (see :mod:`coherence.shared_schedule`).
+    compute : ndarray of float64, shape (P,), optional
+        Compute cycles per pixel (saves time over many runs).
+    pieces : PixelPieces, optional
+        :func:`pixel_pieces` of this trace, layout and first-level line size (saves time over many runs).
+    log : bool
+        Also return the order the machine served the accesses in (for tests; memory per access).
+
+    Returns
+    -------
+    SharedRun
+    """
+    from tracer.trace.access import COUNTER_NAMES
+
+    if not isinstance(hierarchy, SharedHierarchy):
+        raise InputError(f"simulate_shared_run needs a SharedHierarchy, got {type(hierarchy).__name__}")
+    levels = hierarchy.hierarchy.levels
+    if hierarchy.hierarchy.prefetches:
+        raise InputError(f"hierarchy {hierarchy.name!r} has prefetchers, which the schedule does not model")
+    if machine.n_cpus != hierarchy.n_threads:
+        raise InputError(f"Machine.n_cpus is {machine.n_cpus}; on shared hierarchy {hierarchy.name!r} it must be its "
+                         f"{hierarchy.n_threads} hardware threads")
+    if machine.page_placement.translates:
+        raise InputError(f"page placement {machine.page_placement!r}: runs on shared levels take virtual "
+                         "addresses; use contiguous")
+    if (distribution.width, distribution.height) != (trace.width, trace.height):
+        raise InputError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
+                         f"the trace for {trace.width}x{trace.height}")
+    q = require_number("interleave_cycles", interleave_cycles, 1)
+    require_bool("log", log)
+    n_pixels = trace.width * trace.height
+    counters = np.asarray(trace.counters)
+    if compute is None:
+        compute = cost.compute_cycles(counters, COUNTER_NAMES)
+    compute = np.ascontiguousarray(compute, dtype=np.float64)
+    if compute.shape != (n_pixels,):
+        raise InputError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+    line_size = levels[0].line_size
+    if pieces is None:
+        pieces = pixel_pieces(trace, placed, line_size)
+    elif pieces.piece_offsets.shape != (n_pixels + 1,):
+        raise InputError(f"pieces are for {pieces.piece_offsets.shape[0] - 1} pixels; this run needs {n_pixels}")
+
+    n_processes = distribution.n_processes
+    queues = machine.run_queues(n_processes)
+    state = SharedState(hierarchy)
+    n_levels = len(levels)
+    latency = np.array([level.latency for level in levels] + [hierarchy.hierarchy.memory_latency], dtype=np.float64)
+    out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)
+    out_placement = np.zeros((n_processes, N_PLACEMENT_COLUMNS), dtype=np.int64)
+    out_placement[:, FIRST_CPU] = -1
+    task_owner = np.full(distribution.n_tasks, -1, dtype=np.int64)
+    accesses = np.zeros((n_processes, n_levels, N_ACCESS_COLUMNS), dtype=np.int64)
+    line_shift = line_size.bit_length() - 1
+    background = machine.background(line_shift)
+    n_logged = _log_room(pieces, machine, log)
+    out = SharedOutputs(out_cycles, out_placement, task_owner, accesses, np.zeros((0, n_levels), dtype=np.int64),
+                        np.zeros(n_logged, dtype=np.uint64), np.zeros(n_logged, dtype=np.int64),
+                        np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
+    state.clock = int(run_shared_schedule(
+        pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift),
+        PixelCost(compute, latency),
+        schedule_of(distribution),
+        queues, background, out, float(q)))
+    state.counts[..., MC.ACCESSES] = state.counts[..., MC.HITS] + state.counts[..., MC.MISSES]
+    state.counts[..., MC.WRITES] = state.counts[..., MC.WRITE_HITS] + state.counts[..., MC.WRITE_MISSES]
+    if not distribution.dynamic:
+        task_owner[:] = distribution.task_process
+    run = _run(trace, distribution, hierarchy, cost, machine, counters, out)
+    shared = SharedResult(hierarchy, state.counts.copy(), state.served.copy(), True, state)
+    logged = None
+    if log:
+        length = int(out.log_length[0])
+        logged = (out.log_addresses[:length], out.log_threads[:length], out.log_pieces[:length])
+    return SharedRun(run, shared, logged)
+
+
+def _log_room(pieces: PixelPieces, machine: Machine, log: bool) -> int:
+    """Entries the access log needs: every piece once, plus background reads (0 without a log)."""
+    if not log:
+        return 0
+    if machine.background_load:
+        raise InputError("simulate_shared_run: log=True is for runs without a background load")
+    return int(pieces.addresses.shape[0])
+
+
+def _run(trace, distribution, hierarchy: SharedHierarchy, cost: CostModel, machine: Machine, counters,
+         out: SharedOutputs) -> Run:
+    """The run's per-process table, as :func:`coherence.simulation.simulate_run` lays it out."""
+    from tracer.trace.access import COUNTER_NAMES
+
+    n_processes = distribution.n_processes
+    n_pixels = trace.width * trace.height
+    task_owner = out.task_owner
+    pixel_owner = np.empty(n_pixels, dtype=np.int64)
+    pixel_owner[distribution.task_pixels] = np.repeat(task_owner, np.diff(distribution.task_offsets))
+    frame = {
+        "process": np.arange(n_processes, dtype=np.int64),
+        "cpu": out.placement[:, FIRST_CPU],
+        "migrations": out.placement[:, MIGRATIONS],
+        "tasks": np.bincount(task_owner, minlength=n_processes).astype(np.int64),
+        "pixels": np.bincount(pixel_owner, minlength=n_processes).astype(np.int64),
+    }
+    by_process = _counters_by_process(counters, pixel_owner, n_processes)
+    for column, name in enumerate(COUNTER_NAMES):
+        frame[name] = by_process[:, column]
+    accesses = out.accesses
+    hits = accesses[:, :, READ_HITS] + accesses[:, :, WRITE_HITS]
+    misses = accesses[:, :, READ_MISSES] + accesses[:, :, WRITE_MISSES]
+    for index, name in enumerate(hierarchy.hierarchy.level_names):
+        frame[f"{name}_accesses"] = hits[:, index] + misses[:, index]
+        frame[f"{name}_hits"] = hits[:, index]
+        frame[f"{name}_misses"] = misses[:, index]
+    frame["memory_accesses"] = misses[:, -1]
+    cycles = out.cycles
+    frame["compute_cycles"] = cycles[:, COMPUTE_CYCLES]
+    frame["memory_cycles"] = cycles[:, MEMORY_CYCLES]
+    frame["dispatch_cycles"] = cycles[:, DISPATCH_CYCLES]
+    frame["user_cycles"] = cycles[:, COMPUTE_CYCLES] + cycles[:, MEMORY_CYCLES] + cycles[:, DISPATCH_CYCLES]
+    frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
+    frame["finish_cycles"] = cycles[:, FINISH_CYCLES]
+    miss_counts = MissCounts(accesses.copy(), np.zeros(n_processes, np.int64), by_process, tuple(COUNTER_NAMES),
+                             fixed_schedule(distribution, machine))
+    return Run(pd.DataFrame(frame), task_owner, float(cycles[:, FINISH_CYCLES].max()), None, miss_counts)

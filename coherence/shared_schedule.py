@@ -1,0 +1,403 @@
+"""The schedule on a machine whose hardware threads share cache levels: processes that run at the same time interleave.
+
+:func:`run_shared_schedule` is the event loop of :mod:`coherence.scheduler`
+(run queues, time slices, dynamic hand-outs, take-ahead, context switches,
+background slices: the same rules, in the same order) on the hardware
+threads of a :class:`cachesim.sharing.SharedHierarchy`. A CPU of the
+scheduler is a hardware thread. Every access goes through the shared
+machine's one state (:func:`cachesim.multicore.replay_span`): the instances
+of each level that serve the thread, write-invalidate coherence between
+instances on, so processes running on different cores at the same time warm
+and evict each other's lines at the levels they share and take lines from
+each other's private levels.
+
+**Interleaving granularity** ``interleave_cycles`` (``Q``): the hardware
+thread whose clock is lowest (ties: the lowest index) takes a *turn*: it
+runs accesses until its clock has advanced by ``Q`` cycles or more since
+the turn began, or its pixel ends (an end of pixel is where the operating
+system decides: slice ends, dynamic hand-outs, a process finishing). A
+pixel is split between turns: its compute cycles are spread evenly over
+its accesses, so access ``k`` of a pixel of ``n`` accesses and ``C``
+compute cycles advances the thread's clock by ``C / n`` plus its own
+latency (a read: the latency of the level that served it, memory's if none
+did; a write: the first level's, a store retired into a store buffer). A
+pixel without accesses takes its compute cycles at once. With ``Q = 1`` a
+turn is one access whenever an access costs at least one cycle, so the
+threads interleave access by access in clock order. SMT threads of one
+core are hardware threads like any other: each has its own clock and they
+interleave at the same ``Q`` (at ``Q = 1`` access by access).
+
+Other users' background processes take whole slices as in
+:mod:`coherence.scheduler`; a background slice is one turn, its reads
+(one per line of its stream, kind 0) going through the thread's instances
+at once.
+
+Per-ray data is private to a process: the records of
+:data:`coherence.thread_streams.PRIVATE_KINDS` of process ``p`` lie at
+their layout address plus ``(p + 1) * span`` (``span`` from
+:func:`coherence.thread_streams.private_span`); the scene and the frame
+buffer are shared, and each record's accesses carry its bytes in the line
+(:func:`coherence.thread_streams.record_pieces`), so false sharing shows.
+
+User time of a process = its compute cycles + its memory cycles + its
+dispatch waits; real time = when the last of ours finished.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from cachesim.multicore import ThreadStream, replay_span
+from coherence.recost import READ_HITS, WRITE_HITS
+from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
+                                 MIGRATIONS, NO_PROCESS, _has_pixels, _lowest_clock_cpu, _next_task, _pop,
+                                 _push)
+
+
+
+class PixelPieces(NamedTuple):
+    """Every pixel's accesses with their bytes and kinds, as the kernel reads them.
+
+    Attributes
+    ----------
+    piece_offsets : ndarray of int64, shape (P + 1,)
+        Pixel ``p`` makes accesses ``piece_offsets[p]:piece_offsets[p + 1]``.
+    addresses : ndarray of uint64, shape (N,)
+        First byte of each access, private kinds at their layout address.
+    sizes : ndarray of int64, shape (N,)
+        Bytes each access touches in its line.
+    kinds : ndarray of uint8, shape (N,)
+    writes : ndarray of bool, shape (N,)
+    private : ndarray of bool, shape (N,)
+        Accesses to a process's own copy: ``(p + 1) * private_span`` is
+        added to their address when process ``p`` makes them.
+    private_span : int
+        Bytes between two processes' copies (a multiple of the page size).
+    """
+
+    piece_offsets: np.ndarray
+    addresses: np.ndarray
+    sizes: np.ndarray
+    kinds: np.ndarray
+    writes: np.ndarray
+    private: np.ndarray
+    private_span: int
+
+
+class SharedMachine(NamedTuple):
+    """The shared machine's kernel view and state (:class:`cachesim.multicore.SharedState`).
+
+    Attributes
+    ----------
+    geometry : cachesim.sets.CacheGeometry
+    machine : cachesim.multicore.MachineGeometry
+    state : cachesim.multicore.SharedArrays
+        Updated in place; ``state.served`` (T, L + 1) tells the level that served each access.
+    line_shift : int
+        log2 of the first level's line size.
+    """
+
+    geometry: object
+    machine: object
+    state: object
+    line_shift: int
+
+
+class SharedOutputs(NamedTuple):
+    """What the shared event loop writes.
+
+    Attributes
+    ----------
+    cycles : ndarray of float64, shape (n, N_CYCLE_COLUMNS)
+        Compute, memory, dispatch and finish cycles per process.
+    placement : ndarray of int64, shape (n, N_PLACEMENT_COLUMNS)
+        First hardware thread (-1: never ran) and migrations per process.
+    task_owner : ndarray of int64, shape (T,)
+    accesses : ndarray of int64, shape (n, L, coherence.recost.N_ACCESS_COLUMNS)
+        Read hits, read misses, write hits and write misses of each process at each
+        level (columns :data:`coherence.recost.READ_HITS` ...; a miss column is its hit column + 1).
+    pixel_misses : ndarray of int64, shape (P, L), or (0, L) when not wanted
+        Misses of each pixel at each level, reads and writes.
+    log_addresses : ndarray of uint64, shape (M,), or (0,)
+        When not empty, the address of every access in the order the
+        machine served it (ours and the background's); room for all of them.
+    log_threads : ndarray of int64, shape (M,) or (0,)
+        Hardware thread of each logged access.
+    log_pieces : ndarray of int64, shape (M,) or (0,)
+        Index into :class:`PixelPieces` of each logged access (-1: a background read).
+    log_length : ndarray of int64, shape (1,)
+        Accesses logged.
+    """
+
+    cycles: np.ndarray
+    placement: np.ndarray
+    task_owner: np.ndarray
+    accesses: np.ndarray
+    pixel_misses: np.ndarray
+    log_addresses: np.ndarray
+    log_threads: np.ndarray
+    log_pieces: np.ndarray
+    log_length: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _served_level(served_row, before):
+    """The level whose count in ``served_row`` (L + 1,) went up since ``before`` (L + 1,) (L: memory)."""
+    for level in range(served_row.shape[0]):
+        if served_row[level] != before[level]:
+            return level
+    return served_row.shape[0] - 1
+
+
+@njit(cache=True, nogil=True)
+def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out, interleave_cycles):
+    """The event loop on shared levels (see the module docstring).
+
+    Parameters
+    ----------
+    pieces : PixelPieces
+    shared : SharedMachine
+        Updated in place.
+    cost : coherence.simulation.PixelCost
+        ``latency`` (L + 1,): cycles of an access served by each level, memory last.
+    schedule : coherence.simulation.Schedule
+    queues : coherence.scheduler.RunQueues
+        ``n_queues`` 1 (shared queue) or one per hardware thread (static).
+    background : coherence.scheduler.BackgroundLoad
+        ``skip`` and page placement are not used: every background read is made.
+    out : SharedOutputs
+    interleave_cycles : float
+        ``Q`` >= 1: the cycles a turn lasts at least (unless its pixel ends).
+
+    Returns
+    -------
+    int
+        The access clock after the run (accesses made, ours and the background's).
+    """
+    state = shared.state
+    served = state.served
+    piece_offsets = pieces.piece_offsets
+    piece_addresses = pieces.addresses
+    piece_sizes = pieces.sizes
+    piece_kinds = pieces.kinds
+    piece_writes = pieces.writes
+    piece_private = pieces.private
+    span = np.uint64(pieces.private_span)
+    compute = cost.compute
+    latency = cost.latency
+    task_offsets = schedule.task_offsets
+    task_pixels = schedule.task_pixels
+    own_offsets = schedule.own_offsets
+    dynamic = schedule.dynamic
+    process_queue = queues.process_queue
+    quantum = queues.quantum
+    switch_cycles = queues.switch_cycles
+    first_line = background.first_line
+    footprint_lines = background.footprint_lines
+    out_cycles = out.cycles
+    out_placement = out.placement
+    task_owner = out.task_owner
+    accesses = out.accesses
+    pixel_misses = out.pixel_misses
+    record_pixel_misses = pixel_misses.shape[0] > 0
+    log_addresses = out.log_addresses
+    log_threads = out.log_threads
+    log_pieces = out.log_pieces
+    logging = log_addresses.shape[0] > 0
+    n_ours = out_cycles.shape[0]
+    n_all = process_queue.shape[0]
+    n_cpus = served.shape[0]
+    n_queues = queues.n_queues
+    n_levels = latency.shape[0] - 1
+    line_shift = shared.line_shift
+
+    queue_items = np.empty((n_queues, n_all), dtype=np.int64)
+    queue_head = np.zeros(n_queues, dtype=np.int64)
+    queue_length = np.zeros(n_queues, dtype=np.int64)
+    ours_waiting = np.zeros(n_queues, dtype=np.int64)
+    for process in queues.start_order:
+        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
+
+    cpu_clock = np.zeros(n_cpus)
+    running = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
+    last_ran = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
+    slice_used = np.zeros(n_cpus)
+    active = np.ones(n_cpus, dtype=np.bool_)
+    # The pixel each hardware thread is in, its next access (-1: between pixels)
+    # and the compute cycles each of its accesses carries.
+    cpu_pixel = np.zeros(n_cpus, dtype=np.int64)
+    next_piece = np.full(n_cpus, -1, dtype=np.int64)
+    compute_share = np.zeros(n_cpus)
+    previous_cpu = np.full(n_ours, -1, dtype=np.int64)
+    background_slices = np.zeros(n_all - n_ours, dtype=np.int64)
+    ours_left = n_ours
+
+    own_next = own_offsets[:n_ours].copy()
+    current_task = np.full(n_ours, -1, dtype=np.int64)
+    position = np.zeros(n_ours, dtype=np.int64)
+    held = np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
+    held_count = np.zeros(n_ours, dtype=np.int64)
+    next_task = np.zeros(1, dtype=np.int64)
+
+    # One access at a time goes through the machine as a stream of one, in these arrays.
+    one_address = np.zeros(1, dtype=np.uint64)
+    one_thread = np.zeros(1, dtype=np.int64)
+    one_write = np.zeros(1, dtype=np.bool_)
+    one_size = np.ones(1, dtype=np.int64)
+    one_kind = np.zeros(1, dtype=np.uint8)
+    one = ThreadStream(one_address, one_thread, one_write, one_size, one_kind)
+    background_addresses = np.empty(max(footprint_lines, 1), dtype=np.uint64)
+    background_threads = np.empty(max(footprint_lines, 1), dtype=np.int64)
+    no_flags = np.zeros(0, dtype=np.bool_)
+    no_sizes = np.zeros(0, dtype=np.int64)
+    no_kinds = np.zeros(0, dtype=np.uint8)
+    scratch = np.empty((3, n_levels), dtype=np.int64)
+    before = np.zeros(n_levels + 1, dtype=np.int64)
+    access_clock = 0
+    logged = 0
+
+    while ours_left > 0:
+        cpu = _lowest_clock_cpu(cpu_clock, active)
+        if cpu < 0:
+            break
+        clock = cpu_clock[cpu]
+        turn_start = clock
+        queue = cpu if n_queues > 1 else 0
+        process = running[cpu]
+        if next_piece[cpu] < 0:  # between pixels: the operating system decides
+            slice_over = process >= 0 and quantum > 0 and slice_used[cpu] >= quantum
+            if process < 0 or slice_over:
+                if queue_length[queue] > 0:
+                    if process >= 0:
+                        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process],
+                              process, n_ours)
+                    process = _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours)
+                elif process < 0:
+                    active[cpu] = False
+                    continue
+                running[cpu] = process
+                slice_used[cpu] = 0.0
+                if last_ran[cpu] >= 0 and last_ran[cpu] != process:
+                    clock += switch_cycles
+                last_ran[cpu] = process
+            if process >= n_ours:
+                if ours_waiting[queue] == 0 and (n_queues > 1 or queue_length[queue] == 0):
+                    active[cpu] = False
+                    continue
+                b = process - n_ours
+                start = first_line[b] + background_slices[b] * footprint_lines
+                background_slices[b] += 1
+                for i in range(footprint_lines):
+                    background_addresses[i] = np.uint64((start + i) << line_shift)
+                    background_threads[i] = cpu
+                if logging:
+                    for i in range(footprint_lines):
+                        log_addresses[logged + i] = background_addresses[i]
+                        log_threads[logged + i] = cpu
+                        log_pieces[logged + i] = -1
+                    logged += footprint_lines
+                access_clock = replay_span(
+                    ThreadStream(background_addresses[:footprint_lines], background_threads[:footprint_lines],
+                                 no_flags, no_sizes, no_kinds),
+                    shared.geometry, shared.machine, state, access_clock, scratch)
+                clock += quantum
+                slice_used[cpu] = quantum
+                cpu_clock[cpu] = clock
+                continue
+            if previous_cpu[process] < 0:
+                out_placement[process, FIRST_CPU] = cpu
+            elif previous_cpu[process] != cpu:
+                out_placement[process, MIGRATIONS] += 1
+            previous_cpu[process] = cpu
+
+        finished = False
+        offset = np.uint64((process + 1)) * span
+        while True:
+            if next_piece[cpu] < 0:  # the next pixel
+                task = current_task[process]
+                if task < 0:
+                    task, waited = _next_task(process, schedule, own_next, held, held_count, next_task, task_owner)
+                    clock += waited
+                    out_cycles[process, DISPATCH_CYCLES] += waited
+                    slice_used[cpu] += waited
+                    if task < 0:
+                        finished = True
+                        break
+                    current_task[process] = task
+                    position[process] = task_offsets[task]
+                pixel = task_pixels[position[process]]
+                position[process] += 1
+                cpu_pixel[cpu] = pixel
+                first = piece_offsets[pixel]
+                n_pieces = piece_offsets[pixel + 1] - first
+                next_piece[cpu] = first
+                out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
+                if n_pieces > 0:
+                    compute_share[cpu] = compute[pixel] / n_pieces
+                else:
+                    clock += compute[pixel]
+                    slice_used[cpu] += compute[pixel]
+            pixel = cpu_pixel[cpu]
+            stop = piece_offsets[pixel + 1]
+            k = next_piece[cpu]
+            share = compute_share[cpu]
+            while k < stop and clock - turn_start < interleave_cycles:
+                address = piece_addresses[k]
+                if piece_private[k]:
+                    address += offset
+                is_write = piece_writes[k]
+                one_address[0] = address
+                one_thread[0] = cpu
+                one_write[0] = is_write
+                one_size[0] = piece_sizes[k]
+                one_kind[0] = piece_kinds[k]
+                for level in range(n_levels + 1):
+                    before[level] = served[cpu, level]
+                access_clock = replay_span(one, shared.geometry, shared.machine, state, access_clock, scratch)
+                level_served = _served_level(served[cpu], before)
+                if logging:
+                    log_addresses[logged] = address
+                    log_threads[logged] = cpu
+                    log_pieces[logged] = k
+                    logged += 1
+                hit_column = WRITE_HITS if is_write else READ_HITS
+                for level in range(level_served):
+                    accesses[process, level, hit_column + 1] += 1
+                    if record_pixel_misses:
+                        pixel_misses[pixel, level] += 1
+                if level_served < n_levels:
+                    accesses[process, level_served, hit_column] += 1
+                memory = latency[0] if is_write else latency[level_served]
+                out_cycles[process, MEMORY_CYCLES] += memory
+                clock += share + memory
+                slice_used[cpu] += share + memory
+                k += 1
+            next_piece[cpu] = k
+            if k < stop:
+                break  # the turn is over inside the pixel
+            next_piece[cpu] = -1
+            task = current_task[process]
+            if position[process] == task_offsets[task + 1]:
+                current_task[process] = -1
+                if dynamic:
+                    break
+                if own_next[process] == own_offsets[process + 1] or not _has_pixels(
+                        schedule, own_next[process], own_offsets[process + 1]):
+                    finished = True
+                    break
+            if quantum > 0 and slice_used[cpu] >= quantum:
+                break
+            if clock - turn_start >= interleave_cycles:
+                break
+        if finished:
+            out_cycles[process, FINISH_CYCLES] = clock
+            running[cpu] = NO_PROCESS
+            ours_left -= 1
+        cpu_clock[cpu] = clock
+    out.log_length[0] = logged
+    return access_clock
+
+
+__all__ = ["PixelPieces", "SharedMachine", "SharedOutputs", "run_shared_schedule"]

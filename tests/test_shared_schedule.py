@@ -1,0 +1,141 @@
+"""coherence.shared_schedule / shared_run: the schedule on shared levels, against the interleaved replay."""
+import numpy as np
+import pytest
+
+from cachesim import CacheLevel, Hierarchy
+from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, FALSE_SHARING_MISSES, simulate_threads
+from cachesim.sharing import SharedHierarchy
+from coherence.cost import get_cost_model
+from coherence.layout import get_layout
+from coherence.mappings import get_mapping
+from coherence.shared_run import pixel_pieces, simulate_shared_run
+from coherence.simulation import Machine
+from coherence.studies import place_layout
+from test_thread_streams import synthetic_trace
+from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
+
+COST = get_cost_model("modern")
+
+
+def tiny_machine(smt, shared_by, seed):
+    """Two cores of ``smt`` threads with a small L1 and L2, so that lines are evicted and shared."""
+    rng = np.random.default_rng(seed)
+    l1_ways = int(rng.choice([1, 2, 4]))
+    hierarchy = Hierarchy((CacheLevel("L1", 32 * 4 * l1_ways, 32, l1_ways, "lru", latency=1),
+                           CacheLevel("L2", 4096, 32, 4, "lru", latency=6)), memory_latency=40, name="tiny")
+    return SharedHierarchy(hierarchy, n_cores=2, smt=smt, shared_by=shared_by)
+
+
+def replay_log(run, machine, pieces):
+    """The logged order replayed access by access through cachesim.multicore.simulate_threads."""
+    addresses, threads, piece = run.log
+    return simulate_threads(addresses, threads, machine, writes=pieces.writes[piece], sizes=pieces.sizes[piece],
+                            kinds=pieces.kinds[piece])
+
+
+@pytest.mark.parametrize("seed, mapping, n_processes, smt, shared_by, scheduler", [
+    (0, "P", 3, 1, ("thread", "machine"), "shared-queue"),
+    (1, "S", 4, 2, ("thread", "machine"), "static"),
+    (2, "DB", 5, 2, ("core", "machine"), "shared-queue"),
+    (3, "B", 2, 2, ("thread", "core"), "shared-queue"),
+    (4, "R", 6, 1, ("thread", "thread"), "static"),
+])
+def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processes, smt, shared_by, scheduler):
+    """At Q = 1 every count of every instance (and the accesses each thread had served by each level) equals
+    simulate_threads replaying the order the kernel served the accesses in; each process's per-level counts
+    sum to the machine's. Mutation: ``one_thread[0] = cpu`` -> ``one_thread[0] = 0`` in run_shared_schedule."""
+    trace = synthetic_trace(7, 5, seed=seed)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    machine = tiny_machine(smt, shared_by, seed)
+    distribution = get_mapping(mapping).build(trace.width, trace.height, n_processes)
+    os_machine = Machine(n_cpus=machine.n_threads, quantum_cycles=400.0, scheduler=scheduler, switch_cycles=3.0)
+    compute = np.random.default_rng(seed).uniform(0, 50, trace.width * trace.height)
+    run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1,
+                              compute=compute, log=True)
+    pieces = pixel_pieces(trace, placed, 32)
+    assert run.log[0].shape == pieces.addresses.shape  # every access once
+    reference = replay_log(run, machine, pieces)
+    np.testing.assert_array_equal(run.shared.counts, reference.counts)
+    np.testing.assert_array_equal(run.shared.served, reference.served)
+    processes = run.run.processes
+    totals = run.shared.level_counts()
+    for level, name in enumerate(machine.hierarchy.level_names):
+        assert processes[f"{name}_misses"].sum() == totals[level, 2]
+    assert processes["pixels"].sum() == trace.width * trace.height
+
+
+def test_larger_q_still_replays_exactly_and_keeps_each_process_in_order():
+    """At Q = 200 the logged order still replays to the same counts, and each process's accesses come in
+    its pixels' order (a turn splits a pixel but never reorders it). Mutation: ``one_thread[0] = cpu`` ->
+    ``one_thread[0] = 0`` in run_shared_schedule."""
+    trace = synthetic_trace(6, 6, seed=7)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    machine = tiny_machine(2, ("thread", "machine"), 7)
+    distribution = get_mapping("P").build(6, 6, 4)
+    run = simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=4, quantum_cycles=0),
+                              interleave_cycles=200, compute=np.full(36, 30.0), log=True)
+    pieces = pixel_pieces(trace, placed, 32)
+    np.testing.assert_array_equal(run.shared.counts, replay_log(run, machine, pieces).counts)
+    piece = run.log[2]
+    for process in range(4):
+        pixels = distribution.process_pixels(process)
+        expected = np.concatenate([np.arange(pieces.piece_offsets[p], pieces.piece_offsets[p + 1]) for p in pixels])
+        np.testing.assert_array_equal(piece[run.log[1] == process], expected)  # static, one thread each
+
+
+def two_pixel_trace():
+    """Pixel 0 writes then reads frame-buffer pixel 0; pixel 1 the same with pixel 1 (one line holds both)."""
+    records = []
+    for pixel in range(2):
+        records.append(pack(np.array([RecordKind.FRAME_BUFFER] * 2), np.array([pixel, pixel]),
+                            np.array([True, False])))
+    counters = np.zeros((2, len(COUNTER_NAMES)), dtype=np.int64)
+    return AccessTrace(np.array([0, 2, 4], dtype=np.int64), np.concatenate(records), counters, 2, 1, {})
+
+
+@pytest.mark.parametrize("q, false_sharing", [(1, 1), (1000, 0)])
+def test_hand_checked_false_sharing_needs_fine_interleaving(q, false_sharing):
+    """Two cores, private L1 (latency 1), shared L2 (6), memory 40, no compute. At Q = 1: thread 0 writes
+    pixel 0 (memory; a write costs 1, clock 1), thread 1 writes pixel 1 (L2 hit; invalidates thread 0's line),
+    thread 0 reads pixel 0: a coherence miss on disjoint bytes (false sharing) served by L2 (clock 1 + 6),
+    thread 1 reads pixel 1 (L1 hit). At Q = 1000 each thread does its pixel in one turn: thread 0's read hits
+    before thread 1 writes, no false sharing. Mutation: ``clock - turn_start < interleave_cycles`` ->
+    ``True`` in the access loop (turns never end inside a pixel)."""
+    trace = two_pixel_trace()
+    placed = place_layout(get_layout("alpha1997"), trace)
+    row = placed.kind_first[RecordKind.FRAME_BUFFER]
+    assert placed.record_start[row] // 32 == placed.record_start[row + 1] // 32  # one line holds both pixels
+    hierarchy = Hierarchy((CacheLevel("L1", 1024, 32, 2, "lru", latency=1),
+                           CacheLevel("L2", 8192, 32, 4, "lru", latency=6)), memory_latency=40, name="two")
+    machine = SharedHierarchy(hierarchy, n_cores=2, smt=1, shared_by=("thread", "machine"))
+    run = simulate_shared_run(trace, get_mapping("P").build(2, 1, 2), machine, placed, COST,
+                              Machine(n_cpus=2, quantum_cycles=0), interleave_cycles=q, compute=np.zeros(2))
+    l1 = run.shared.counts[0].sum(axis=1)  # (instance, counter)
+    assert l1[0, FALSE_SHARING_MISSES] == false_sharing
+    assert l1[0, COHERENCE_MISSES] == false_sharing
+    assert l1[1, FALSE_SHARING_MISSES] == 0
+    memory = run.run.processes["memory_cycles"].tolist()
+    if q == 1:
+        assert l1[0, COHERENCE_INVALIDATIONS] == 1
+        assert memory == [1 + 6, 1 + 1]
+    else:  # thread 0: write, read hit; thread 1: write (L2), read hit; thread 1's write invalidates 0's copy
+        assert memory == [1 + 1, 1 + 1]
+
+
+def test_refusals_name_the_field():
+    """A machine with the wrong CPU count, page placement or Q is refused in one line.
+    Mutation: drop the n_cpus check in simulate_shared_run."""
+    from coherence.page_placement import PagePlacement
+    from rtcommon.validate import InputError
+
+    trace = two_pixel_trace()
+    placed = place_layout(get_layout("alpha1997"), trace)
+    machine = tiny_machine(1, ("thread", "machine"), 0)
+    distribution = get_mapping("P").build(2, 1, 2)
+    with pytest.raises(InputError, match="n_cpus is 8"):
+        simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=8))
+    with pytest.raises(InputError, match="interleave_cycles"):
+        simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=2), interleave_cycles=0)
+    with pytest.raises(InputError, match="virtual addresses"):
+        simulate_shared_run(trace, distribution, machine, placed, COST,
+                            Machine(n_cpus=2, page_placement=PagePlacement("random")))
