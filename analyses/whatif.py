@@ -24,6 +24,19 @@ Grid parameters (names as in flags and TOML files):
                        ``blocked<k>x<s>`` (:mod:`coherence.texture_layout`)
 ``scene_size``         SPD size factor of the scene (balls, tetra, shell only)
 ``n_processes``        processes; ``n_cpus``, ``background`` the machine
+``frame_buffer_bytes`` bytes of a frame-buffer pixel: 3, 4 or 16
+=====================  ========================================================
+
+Under a platform (base ``platform``), its variants
+(:meth:`coherence.platforms.Platform.variant`):
+
+=====================  ========================================================
+``cores``              cores of the machine (complexes keep their size)
+``smt``                ``on`` (the platform's SMT), ``off`` (one thread a
+                       core) or threads per core
+``l3_size``            bytes of the whole shared L3 (``16MB``)
+``prefetch``           ``on`` / ``off``: the prefetchers of
+                       :data:`coherence.platforms.PREFETCHERS_ON`
 =====================  ========================================================
 
 Each row of the result says, for one point, mapping and process count, how
@@ -55,7 +68,10 @@ from rtcommon.validate import InputError, require_int, require_number
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
-          "n_processes", "n_cpus", "background", "line_size")
+          "n_processes", "n_cpus", "background", "line_size", "frame_buffer_bytes")
+#: Grid parameters that vary the base's platform (:meth:`coherence.platforms.Platform.variant`).
+PLATFORM_VARIANTS = ("cores", "smt", "l3_size", "prefetch")
+_SWITCHES = {"on": True, "true": True, "off": False, "false": False}
 _UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
 
 
@@ -66,7 +82,7 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 #: Fields of the base :class:`~analyses.experiment.Experiment` a study file or
 #: :meth:`WhatIf.of` may set.
 BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
-               "layout", "cost", "n_cpus", "background", "memory_budget", "platform")
+               "layout", "cost", "n_cpus", "background", "memory_budget", "platform", "frame_buffer_bytes")
 
 #: Grid parameters a platform sets, so a study under one may not vary them.
 PLATFORM_PARAMETERS = ("hierarchy", "cost", "n_cpus")
@@ -120,6 +136,9 @@ class WhatIf:
             if key in PLATFORM_PARAMETERS and self.experiment.platform is not None:
                 raise InputError(f"grid[{key!r}]: the platform {self.experiment.platform_object().name} sets the "
                                  f"hierarchy, the cost and the CPUs; vary them without a platform")
+            if key in PLATFORM_VARIANTS and self.experiment.platform is None:
+                raise InputError(f"grid[{key!r}] varies a platform: give the base one (--platform NAME, "
+                                 f"platform = \"NAME\" in a study file)")
         base = self.base_hierarchy()
         for point in self.points():  # every point must make a valid configuration
             configure(self, point, base)
@@ -163,12 +182,12 @@ class WhatIf:
 
 
 def _check_parameter(key: str) -> None:
-    if key in SIMPLE:
+    if key in SIMPLE or key in PLATFORM_VARIANTS:
         return
     level, _, attribute = key.partition(".")
     if attribute in LEVEL_FIELDS and level:
         return
-    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE)} or "
+    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE + PLATFORM_VARIANTS)} or "
                      f"<level>.{{{','.join(LEVEL_FIELDS)}}}")
 
 
@@ -226,8 +245,16 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
     from coherence.layout import get_layout
     from coherence.simulation import Machine
 
-    hierarchy = get_hierarchy(point.get("hierarchy", study.hierarchy)) if "hierarchy" in point \
-        else (base or study.base_hierarchy())
+    platform = platform_variant(study, point)
+    if platform is not None:  # a grid may not vary the hierarchy under a platform
+        hierarchy = platform.thread_view()
+        if hierarchy.prefetches:
+            raise InputError(f"what-if point {point}: prefetch on: the schedule simulation does not model "
+                             "prefetchers yet (cachesim.multicore.simulate_threads does); vary prefetch there")
+    elif "hierarchy" in point:
+        hierarchy = get_hierarchy(point["hierarchy"])
+    else:
+        hierarchy = base or study.base_hierarchy()
     levels = {level.name: level for level in hierarchy.levels}
     updates: dict[str, dict] = {}
     for key, value in point.items():
@@ -256,14 +283,43 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 
         cost = replace(cost, **{name: getattr(cost, name) * scale for name in OPERATIONS})
     layout = get_layout(point.get("layout", study.layout))
+    pixel_bytes = point.get("frame_buffer_bytes", study.experiment.frame_buffer_bytes)
+    if pixel_bytes is not None:
+        layout = layout.with_frame_buffer(pixel_bytes)
     if "texture_layout" in point:
         from coherence.texture_layout import TextureLayout
 
         layout = layout.with_texels(TextureLayout.from_label(point["texture_layout"]))
-    machine = Machine(n_cpus=int(point.get("n_cpus", study.n_cpus)),
+    n_cpus = platform.n_threads if platform is not None else int(point.get("n_cpus", study.n_cpus))
+    machine = Machine(n_cpus=n_cpus,
                       background_load=int(point.get("background", study.background)))
     n_processes = int(point.get("n_processes", study.n_processes))
     return hierarchy, layout, cost, machine, n_processes
+
+
+def platform_variant(study: WhatIf, point: dict):
+    """The base's platform changed by the point's :data:`PLATFORM_VARIANTS` (None without a platform).
+
+    ``smt`` and ``prefetch`` take ``on``/``off`` (or True/False); ``smt`` also a count of threads per core.
+    """
+    platform = study.experiment.platform_object()
+    if platform is None:
+        return None
+    choices = {}
+    for key in PLATFORM_VARIANTS:
+        if key not in point:
+            continue
+        value = point[key]
+        if key in ("smt", "prefetch") and isinstance(value, str):
+            if value.lower() not in _SWITCHES:
+                raise InputError(f"what-if parameter {key} must be on or off"
+                                 f"{' or threads per core' if key == 'smt' else ''}, got {value!r}")
+            value = _SWITCHES[value.lower()]
+        choices[key] = value
+    try:
+        return platform.variant(**choices)
+    except ValueError as error:
+        raise InputError(f"what-if point {point}: {error}") from None
 
 
 def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:

@@ -26,11 +26,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from cachesim.config import CacheLevel, Hierarchy
-from cachesim.sharing import SharedHierarchy
+from cachesim.prefetch_config import Prefetcher
+from cachesim.sharing import MAX_CORES, MAX_SMT, SharedHierarchy
 from coherence.cost import COST_MODELS, CostModel
-from rtcommon.validate import InputError, require_number
+from rtcommon.validate import InputError, require_bool, require_int, require_number
 
-__all__ = ["MAX_DEFAULT_PROCESSES", "PLATFORMS", "Platform", "get_platform", "SHARED_LEVELS_NOTE"]
+__all__ = ["MAX_DEFAULT_PROCESSES", "PLATFORMS", "PREFETCHERS_ON", "Platform", "get_platform", "SHARED_LEVELS_NOTE"]
 
 #: The most processes a platform's default process counts go to.
 MAX_DEFAULT_PROCESSES = 32
@@ -40,6 +41,13 @@ SHARED_LEVELS_NOTE = ("shared levels not yet interleaved: each hardware thread i
                       "every level, a shared level cut to the thread's share of its capacity (size / threads "
                       "sharing it), which overstates misses and shows no coherence miss: a pessimistic bound; see "
                       "docs/platforms.md")
+
+#: The prefetchers of a platform variant with prefetching on (:meth:`Platform.variant`), for its first
+#: levels in order: next-line on a miss at L1 (Smith 1982), a stride table at L2 fetching two strides
+#: ahead (Chen & Baer 1995). Generic models of the kinds today's cores document, not any vendor's tuned
+#: prefetchers (``docs/platforms.md``).
+PREFETCHERS_ON = (Prefetcher("next-line", degree=1, distance=1, trigger="miss"),
+                  Prefetcher("stride", degree=2, distance=1, trigger="access"))
 
 _KB = 1024
 _MB = 1024 * 1024
@@ -108,6 +116,76 @@ class Platform:
             size = max(level.size // sharing // set_bytes, 1) * set_bytes
             levels.append(replace(level, size=size))
         return replace(machine.hierarchy, levels=tuple(levels), name=f"{self.name}-thread")
+
+    def variant(self, *, cores: int | None = None, smt=None, l3_size: int | None = None,
+                prefetch: bool | None = None) -> "Platform":
+        """This platform changed for a what-if study; every choice left None stays the platform's.
+
+        Parameters
+        ----------
+        cores : int, optional
+            Cores, in [1, :data:`cachesim.sharing.MAX_CORES`]. Core complexes
+            keep their size; fewer cores than a complex make one complex of
+            them all, and more must fill whole complexes.
+        smt : bool or int, optional
+            Hardware threads per core: True keeps the platform's, False makes
+            one; an int sets it, in [1, :data:`cachesim.sharing.MAX_SMT`].
+        l3_size : int, optional
+            Bytes of the level named ``L3``, the whole shared instance (a thread's
+            share follows from it in :meth:`thread_view`).
+        prefetch : bool, optional
+            True: the prefetchers of :data:`PREFETCHERS_ON` on the first
+            levels; False: none (the presets have none).
+
+        Returns
+        -------
+        Platform
+            Named ``<name>[cores=8,smt=1,...]`` after the choices that change
+            it; the same platform when none does.
+
+        Raises
+        ------
+        ValueError
+            Naming the choice and what it may be.
+        """
+        machine, changes = self.hierarchy, []
+        levels = list(machine.hierarchy.levels)
+        n_cores, per_complex, threads = machine.n_cores, machine.cores_per_complex, machine.smt
+        if cores is not None and cores != n_cores:
+            n_cores = require_int("Platform.variant: cores", cores, 1, MAX_CORES)
+            per_complex = min(per_complex, n_cores)
+            if n_cores % per_complex:
+                raise InputError(f"Platform.variant: cores must fill whole core complexes of {per_complex} on "
+                                 f"{self.name}, got {n_cores}")
+            changes.append(f"cores={n_cores}")
+        if smt is not None:
+            threads = (machine.smt if smt else 1) if isinstance(smt, bool) else \
+                require_int("Platform.variant: smt", smt, 1, MAX_SMT)
+            if threads != machine.smt:
+                changes.append(f"smt={threads}")
+        if l3_size is not None:
+            names = machine.hierarchy.level_names
+            if "L3" not in names:
+                raise InputError(f"Platform.variant: {self.name} has no L3 (levels {', '.join(names)}); l3_size "
+                                 "applies to platforms with one")
+            index = names.index("L3")
+            try:
+                levels[index] = replace(levels[index], size=l3_size)
+            except ValueError as error:
+                raise InputError(f"Platform.variant: l3_size: {error}") from None
+            if levels[index].size != machine.hierarchy.levels[index].size:
+                changes.append(f"l3={levels[index].size}")
+        if prefetch is not None and require_bool("Platform.variant: prefetch", prefetch):
+            for index, prefetcher in enumerate(PREFETCHERS_ON[:len(levels)]):
+                levels[index] = replace(levels[index], prefetcher=prefetcher)
+            changes.append("prefetch")
+        if not changes:
+            return self
+        name = f"{self.name}[{','.join(changes)}]"
+        hierarchy = replace(machine.hierarchy, levels=tuple(levels), name=name)
+        shared = SharedHierarchy(hierarchy, n_cores=n_cores, smt=threads, cores_per_complex=per_complex,
+                                 shared_by=machine.shared_by)
+        return replace(self, name=name, hierarchy=shared)
 
     def to_dict(self) -> dict:
         """Name, clock, source, the shared hierarchy's table and the cost model's fields (JSON-ready)."""

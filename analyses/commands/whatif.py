@@ -36,7 +36,10 @@ your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
 parameters: memory_latency, <level>.size|line_size|assoc|latency|policy,
 line_size, hierarchy, compute_scale, cost, layout, texture_layout
 (linear, tiled<k>, morton, blocked<k>x<s>), scene_size, n_processes,
-n_cpus, background. Sizes take KB/MB suffixes. On a textured scene the
+n_cpus, background, frame_buffer_bytes (3, 4, 16). Under --platform
+also its variants: cores (complexes keep their size), smt (on, off or
+threads per core), l3_size (the whole shared L3), prefetch (on, off;
+refused by the schedule simulation for now). Sizes take KB/MB suffixes. On a textured scene the
 CSV also has texel_<level>_misses_per_access and texture_<level>_miss_share.
 
 outputs in --out DIR: whatif-<name>.csv (long form: the grid's columns,
@@ -50,6 +53,7 @@ examples:
   coherence whatif latency --size 64
   coherence whatif --grid L1.size=4KB,8KB,32KB --grid memory_latency=80,300 --scene tetra
   coherence whatif caches --dask tcp://scheduler:8786
+  coherence whatif --platform zen4-7950x --grid cores=4,8,16 --grid smt=on,off
 """
 
 
