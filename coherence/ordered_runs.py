@@ -1,0 +1,260 @@
+"""Ray orders composed with pixel mappings: each process owns rays by the mapping, then orders its own rays.
+
+A path-traced trace (:mod:`tracer.trace.segments`) logs every ray's records
+as one segment, and a ray's records do not depend on when other rays run,
+so a ray order is a permutation of record *pieces* (a segment, or part of
+one), plus the auxiliary records the order itself reads and writes (ray
+state, queue entries). This module turns a mapping's
+:class:`~coherence.distribution.Distribution` and an order into a schedule
+the existing simulation runs unchanged (:func:`coherence.simulation.simulate_run`):
+
+* The unit an order works on is what one process owns at once: under a
+  static mapping, every pixel the process renders (its tasks in task
+  order); under a dynamic one (DB), each handed-out task, so rays are
+  ordered within each block.
+* An order (:data:`Order`) returns, for one unit's segments in depth-first
+  order, the pieces in replay order as ranges of an extended record space:
+  positions below ``n_records`` are the trace's records, positions from
+  ``n_records`` on index the unit's own auxiliary records.
+* Pieces become *pseudo-pixels*: consecutive pieces of one pixel that
+  follow each other in the records merge, and every pseudo-pixel is
+  numbered by where its records lie, so the pseudo-trace's records are the
+  trace's records followed by every unit's auxiliary records (no copy of
+  the trace's records when no order adds any). A unit is one task of the
+  pseudo-distribution, its pseudo-pixels in replay order; static units are
+  owned by their process, dynamic ones are handed out as the mapping's
+  tasks were.
+* A pixel's compute cycles are shared among its pieces by their record
+  counts (a whole pixel keeps its cycles exactly); its counters go to the
+  piece holding its first record (sums per process are unchanged). A
+  unit's sorting cycles are added to its first pseudo-pixel.
+
+So the depth-first order (each unit's segments as they are, no auxiliary
+records) replays exactly the run of the mapping itself.
+"""
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from coherence.distribution import Distribution
+from rtcommon.validate import InputError
+from tracer.trace.segments import SegmentColumn
+
+
+class OrderedUnit(NamedTuple):
+    """What an order makes of one unit's rays.
+
+    Attributes
+    ----------
+    starts, stops : ndarray of int64, shape (N,)
+        Pieces in replay order: positions ``starts[i] .. stops[i] - 1`` of
+        the extended record space (below ``n_records``: the trace's
+        records; from ``n_records`` on: ``aux[position - n_records]``).
+    aux : ndarray of uint32, shape (M,)
+        The unit's auxiliary records; every one in exactly one piece.
+    sort_cycles : float
+        Cycles the order spends sorting the unit's rays.
+    """
+
+    starts: np.ndarray
+    stops: np.ndarray
+    aux: np.ndarray
+    sort_cycles: float
+
+
+#: An order: ``order(segments, rows, n_records) -> OrderedUnit``, where ``segments``
+#: is the trace's :class:`~tracer.trace.segments.RaySegments` and ``rows`` (int64)
+#: the unit's segment rows in depth-first order.
+Order = Callable[..., OrderedUnit]
+
+
+def depth_first(segments, rows: np.ndarray, n_records: int) -> OrderedUnit:
+    """Each ray's segment in the order the path tracer traced it: the mapping's own run."""
+    ints = segments.ints
+    return OrderedUnit(ints[rows, SegmentColumn.FIRST], ints[rows, SegmentColumn.STOP], np.zeros(0, np.uint32), 0.0)
+
+
+class PieceTrace(NamedTuple):
+    """A trace whose pixels are pieces (``width`` pieces, ``height`` 1), as the simulation reads a trace."""
+
+    pixel_offsets: np.ndarray  #: (Q + 1,) int64
+    records: np.ndarray        #: (R + M,) uint32: the trace's records, then every unit's auxiliary records
+    counters: np.ndarray       #: (Q, K) int64
+    width: int
+    height: int
+
+
+class OrderedWork(NamedTuple):
+    """An ordered run's inputs for :func:`coherence.simulation.simulate_run`, and what it is made of."""
+
+    trace: PieceTrace
+    distribution: Distribution  #: over the pieces (``width`` x 1)
+    compute: np.ndarray         #: (Q,) float64 compute cycles per piece
+    n_aux: int                  #: auxiliary records of all units
+    sort_cycles: float          #: of all units
+
+
+def unit_pixels(distribution: Distribution) -> list:
+    """The pixels of each unit an order works on, in render order (static: per process; dynamic: per task)."""
+    if distribution.dynamic:
+        return [distribution.task(t) for t in range(distribution.n_tasks)]
+    return [distribution.process_pixels(p) for p in range(distribution.n_processes)]
+
+
+def _ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """The integers of every range ``starts[i] .. stops[i] - 1``, ranges one after another (int64)."""
+    lengths = stops - starts
+    total = int(lengths.sum())
+    if total == 0:
+        return np.zeros(0, np.int64)
+    ends = np.cumsum(lengths)
+    return np.arange(total, dtype=np.int64) + np.repeat(starts - (ends - lengths), lengths)
+
+
+def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute: np.ndarray,
+                 name: str = "order") -> OrderedWork:
+    """Compose ``distribution`` (a mapping's, for the trace's image) with ``order`` (module docstring).
+
+    Parameters
+    ----------
+    trace : tracer.trace.access.AccessTrace
+        Path-traced: with ``segments``.
+    distribution : Distribution
+    order : Order
+    pixel_compute : ndarray of float64, shape (P,)
+        Compute cycles of each pixel (:meth:`coherence.cost.CostModel.compute_cycles`).
+    name : str
+        The order's name, for error messages.
+
+    Returns
+    -------
+    OrderedWork
+
+    Raises
+    ------
+    ValueError
+        The trace has no segments, a pixel has no records, or the order's pieces do not replay
+        every record of the unit's rays and every auxiliary record exactly
+        once.
+    """
+    segments = trace.segments
+    if segments is None:
+        raise InputError("ray orders need a path-traced trace (with segments); render with --workload pathtrace")
+    if (distribution.width, distribution.height) != (trace.width, trace.height):
+        raise InputError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
+                         f"the trace for {trace.width}x{trace.height}")
+    n_records = int(trace.n_records)
+    pixel_offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
+    n_pixels = pixel_offsets.shape[0] - 1
+    if np.any(pixel_offsets[1:] == pixel_offsets[:-1]):
+        raise InputError("ray orders need every pixel to have records (each path's camera ray reads the root)")
+    seg_offsets = np.searchsorted(segments.ints[:, SegmentColumn.PIXEL], np.arange(n_pixels + 1)).astype(np.int64)
+    starts, stops, unit_of, aux_parts, sort = [], [], [], [], []
+    aux_base = n_records
+    for unit, pixels in enumerate(unit_pixels(distribution)):
+        rows = _ranges(seg_offsets[pixels], seg_offsets[pixels + 1])
+        result = order(segments, rows, n_records)
+        first, stop = _checked_unit(result, segments, rows, n_records, name)
+        shift = np.where(first >= n_records, aux_base - n_records, 0)
+        starts.append(first + shift)
+        stops.append(stop + shift)
+        unit_of.append(np.full(len(first), unit, np.int64))
+        aux_parts.append(np.asarray(result.aux, np.uint32))
+        aux_base += len(result.aux)
+        sort.append(float(result.sort_cycles))
+    starts, stops, unit_of = (np.concatenate(parts) if parts else np.zeros(0, np.int64)
+                              for parts in (starts, stops, unit_of))
+    starts, stops, unit_of = _merged(starts, stops, unit_of, pixel_offsets, n_records)
+    rank = np.argsort(starts, kind="stable")
+    offsets = np.append(starts[rank], aux_base)
+    if not np.array_equal(stops[rank], offsets[1:]) or (len(offsets) and offsets[0] != 0):
+        raise InputError(f"ray order {name!r}: its pieces do not replay every record exactly once")
+    piece_id = np.empty(len(rank), np.int64)
+    piece_id[rank] = np.arange(len(rank), dtype=np.int64)
+    aux = np.concatenate(aux_parts) if aux_parts else np.zeros(0, np.uint32)
+    records = np.asarray(trace.records) if len(aux) == 0 else np.concatenate([np.asarray(trace.records), aux])
+    compute, counters = _piece_costs(trace, np.asarray(pixel_compute, np.float64), offsets, pixel_offsets,
+                                     n_records)
+    n_units = len(sort)
+    first_piece = np.searchsorted(unit_of, np.arange(n_units))
+    has_piece = first_piece < np.append(first_piece[1:], len(unit_of))
+    np.add.at(compute, piece_id[first_piece[has_piece]], np.asarray(sort)[has_piece])
+    task_offsets = np.searchsorted(unit_of, np.arange(n_units + 1)).astype(np.int64)
+    n_pieces = len(rank)
+    if distribution.dynamic:
+        pieces = Distribution(distribution.name, n_pieces, 1, distribution.n_processes, task_offsets, piece_id, None,
+                              distribution.dispatch_cycles, distribution.take_ahead)
+    else:
+        pieces = Distribution(distribution.name, n_pieces, 1, distribution.n_processes, task_offsets, piece_id,
+                              np.arange(n_units, dtype=np.int64))
+    return OrderedWork(PieceTrace(offsets, records, counters, n_pieces, 1), pieces, compute, len(aux), float(sum(sort)))
+
+
+def _checked_unit(result, segments, rows, n_records: int, name: str) -> tuple:
+    """The pieces of one unit as int64 arrays, checked to stay within the unit's records and its aux."""
+    if not isinstance(result, OrderedUnit):
+        raise InputError(f"ray order {name!r} must return an OrderedUnit, got {type(result).__name__}")
+    first = np.asarray(result.starts, dtype=np.int64)
+    stop = np.asarray(result.stops, dtype=np.int64)
+    n_aux = len(result.aux)
+    if first.shape != stop.shape or first.ndim != 1 or np.any(stop < first) \
+            or np.any((first < n_records) & (stop > n_records)) or np.any(stop > n_records + n_aux):
+        raise InputError(f"ray order {name!r}: a piece is not a range of the trace's records or of the unit's "
+                         f"{n_aux} auxiliary records")
+    own = int((segments.ints[rows, SegmentColumn.STOP] - segments.ints[rows, SegmentColumn.FIRST]).sum())
+    if int((stop - first).sum()) != own + n_aux:
+        raise InputError(f"ray order {name!r}: its pieces hold {int((stop - first).sum())} records, the unit's "
+                         f"rays {own} and its auxiliary records {n_aux}")
+    return first, stop
+
+
+def _merged(starts, stops, unit_of, pixel_offsets, n_records: int) -> tuple:
+    """Join each piece to the one before it when it continues it: same unit, records that follow on, and
+    one pixel (or both auxiliary). Empty pieces are dropped."""
+    keep = stops > starts
+    starts, stops, unit_of = starts[keep], stops[keep], unit_of[keep]
+    pixel = np.where(starts < n_records, np.searchsorted(pixel_offsets, starts, side="right") - 1, -1)
+    joins = np.zeros(len(starts), bool)
+    joins[1:] = (starts[1:] == stops[:-1]) & (unit_of[1:] == unit_of[:-1]) & (pixel[1:] == pixel[:-1])
+    head = np.flatnonzero(~joins)
+    tail_stop = np.append(head[1:], len(starts)) - 1
+    return starts[head], stops[tail_stop], unit_of[head]
+
+
+def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -> tuple:
+    """Compute cycles (shared by record counts; a whole pixel keeps its own) and counters per piece."""
+    starts, stops = offsets[:-1], offsets[1:]
+    in_trace = starts < n_records
+    pixel = np.searchsorted(pixel_offsets, starts[in_trace], side="right") - 1
+    length = stops[in_trace] - starts[in_trace]
+    pixel_length = pixel_offsets[pixel + 1] - pixel_offsets[pixel]
+    cycles = pixel_compute[pixel]
+    compute = np.zeros(len(starts))
+    compute[in_trace] = np.where(length == pixel_length, cycles, cycles * length / pixel_length)
+    counters = np.asarray(trace.counters)
+    piece_counters = np.zeros((len(starts), counters.shape[1]), np.int64)
+    # the piece holding each pixel's first record takes its counters
+    np.add.at(piece_counters, np.searchsorted(offsets, pixel_offsets[:-1], side="right") - 1, counters)
+    return compute, piece_counters
+
+
+def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy, placed, cost, machine,
+                     name: str = "order") -> tuple:
+    """Simulate ``distribution`` with every unit's rays in ``order`` on ``machine``.
+
+    Parameters are those of :func:`coherence.simulation.simulate_run` (``placed``
+    placed for the trace, with a region for the order's auxiliary records
+    when it adds any) and of :func:`ordered_work`.
+
+    Returns
+    -------
+    (coherence.simulation.Run, OrderedWork)
+        The run's processes, pixels counting pieces; its ``pixel_misses`` are not asked for.
+    """
+    from coherence.simulation import simulate_run
+    from tracer.trace.access import COUNTER_NAMES
+
+    work = ordered_work(trace, distribution, order, cost.compute_cycles(trace.counters, COUNTER_NAMES), name)
+    return simulate_run(work.trace, work.distribution, hierarchy, placed, cost, machine, compute=work.compute), work

@@ -1,0 +1,116 @@
+"""Ray orders composed with mappings (coherence.ordered_runs): pseudo-pixels of record pieces replayed by the
+schedule simulation."""
+import numpy as np
+import pytest
+
+from analyses.experiment import Experiment
+from coherence.mappings import DynamicBlock, get_mapping
+from coherence.ordered_runs import OrderedUnit, depth_first, ordered_work, simulate_ordered, unit_pixels
+from coherence.simulation import simulate_run
+from coherence.studies import place_layout
+from tracer.kd.tree import build_kdtree
+from tracer.rendering.pathtrace import path_trace
+from tracer.rendering.render import RenderOptions
+from tracer.scenes.catalog import load
+from tracer.trace.access import COUNTER_NAMES
+from tracer.trace.records import AuxKind, pack_aux
+from tracer.trace.segments import SegmentColumn
+
+
+@pytest.fixture(scope="module")
+def setup():
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=8, workload="pathtrace", spp=2)).trace
+    experiment = Experiment(scene="balls", size=8)
+    return (trace, experiment.hierarchy_object(), place_layout(experiment.layout_object(), trace, scene),
+            experiment.cost_model(), experiment.machine())
+
+
+@pytest.mark.parametrize("mapping", ["S", "P", "B", "DB"])
+def test_depth_first_replays_the_mapping_itself(setup, mapping):
+    """The depth-first order (each unit's segments as traced) gives the same processes, cycle for cycle, as
+    simulating the mapping on the trace: pieces of one pixel merge back into the pixel. Fails if consecutive
+    pieces are no longer merged (``joins[1:] = False``) or a dynamic mapping's units become processes
+    (checked)."""
+    trace, hierarchy, placed, cost, machine = setup
+    chosen = DynamicBlock(block=2, dispatch_cycles=300.0) if mapping == "DB" else get_mapping(mapping)
+    distribution = chosen.build(trace.width, trace.height, 3)
+    expected = simulate_run(trace, distribution, hierarchy, placed, cost, machine)
+    run, work = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine, "depth-first")
+    assert work.trace.width == trace.width * trace.height and work.n_aux == 0
+    assert run.processes.equals(expected.processes)
+    assert run.real_cycles == expected.real_cycles
+
+
+def _reversed(segments, rows, n_records):
+    ints = segments.ints[rows[::-1]]
+    return OrderedUnit(ints[:, SegmentColumn.FIRST], ints[:, SegmentColumn.STOP], np.zeros(0, np.uint32), 0.0)
+
+
+def test_pieces_of_a_reordered_unit_by_hand():
+    """On a hand-built 2x1 trace (pixel 0: segments [0, 3) [3, 5); pixel 1: [5, 6)), one process, an order that
+    replays pixel 1, then segment [3, 5), an auxiliary record, then [0, 3), with 7 sorting cycles: the pieces
+    are numbered by where their records lie ([0, 3) [3, 5) [5, 6) then the aux record at 6), the task replays
+    them as 2, 1, 3, 0, compute is shared by record counts (pixel 0's 10 cycles as 6 and 4) plus the sorting
+    cycles on the first piece, and each pixel's counters sit on the piece with its first record. Fails if the
+    auxiliary records are not placed after the trace's (``aux_base = n_records`` dropped) (checked)."""
+    from types import SimpleNamespace
+
+    ints = np.array([[0, 0, 0, 0, 0, 3], [0, 0, 1, 1, 3, 5], [1, 0, 0, 0, 5, 6]], np.int64)
+    trace = SimpleNamespace(segments=SimpleNamespace(ints=ints), width=2, height=1, n_records=6,
+                            pixel_offsets=np.array([0, 5, 6]), records=np.arange(6, dtype=np.uint32),
+                            counters=np.array([[1, 2], [3, 4]], np.int64))
+    aux = pack_aux(AuxKind.RAY_STATE, 0)
+
+    def order(segments, rows, n_records):
+        assert rows.tolist() == [0, 1, 2]
+        return OrderedUnit(np.array([5, 3, 6, 0]), np.array([6, 5, 7, 3]), np.array([aux], np.uint32), 7.0)
+
+    distribution = get_mapping("S").build(2, 1, 1)
+    work = ordered_work(trace, distribution, order, np.array([10.0, 2.0]))
+    assert work.trace.pixel_offsets.tolist() == [0, 3, 5, 6, 7]
+    assert work.trace.records.tolist() == [0, 1, 2, 3, 4, 5, int(aux)]
+    assert work.distribution.task_pixels.tolist() == [2, 1, 3, 0]
+    assert work.distribution.task_process.tolist() == [0]
+    assert work.compute.tolist() == [6.0, 4.0, 2.0 + 7.0, 0.0]
+    assert work.trace.counters.tolist() == [[1, 2], [0, 0], [3, 4], [0, 0]]
+    assert (work.n_aux, work.sort_cycles) == (1, 7.0)
+
+
+def test_reordering_keeps_the_work_and_moves_the_misses(setup):
+    """Reversing each process's rays keeps every process's counters, compute cycles and first-level accesses
+    (each record is read once either way) and changes the misses. Fails if a unit's reversed pieces were
+    replayed in record order (``task_pixels`` given ``np.sort(piece_id)``) (checked)."""
+    trace, hierarchy, placed, cost, machine = setup
+    distribution = get_mapping("P").build(trace.width, trace.height, 2)
+    forward, _ = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine)
+    backward, work = simulate_ordered(trace, distribution, _reversed, hierarchy, placed, cost, machine, "reversed")
+    assert work.trace.width == trace.segments.n_segments
+    first = hierarchy.levels[0].name
+    for column in [*COUNTER_NAMES, f"{first}_accesses"]:
+        assert backward.processes[column].tolist() == forward.processes[column].tolist(), column
+    np.testing.assert_allclose(backward.processes["compute_cycles"], forward.processes["compute_cycles"], rtol=1e-12)
+    assert backward.processes[f"{first}_misses"].tolist() != forward.processes[f"{first}_misses"].tolist()
+
+
+def test_units_are_processes_or_handed_out_tasks():
+    """Static mappings order each process's pixels together, dynamic ones each task. Fails if static units were
+    tasks (P at 2 processes has 64 one-pixel tasks, not 2 units) (checked)."""
+    static = get_mapping("P").build(8, 8, 2)
+    assert [len(u) for u in unit_pixels(static)] == [32, 32]
+    dynamic = DynamicBlock(block=2).build(8, 8, 2)
+    assert len(unit_pixels(dynamic)) == dynamic.n_tasks > 2
+
+
+def test_an_order_that_drops_a_ray_is_refused(setup):
+    """An order whose pieces miss a record is refused naming the order. Fails if both the count check of
+    ``_checked_unit`` and the tiling check of ``ordered_work`` go (``if False:``; checked)."""
+    trace, *_ = setup
+    distribution = get_mapping("S").build(trace.width, trace.height, 2)
+
+    def dropping(segments, rows, n_records):
+        unit = depth_first(segments, rows, n_records)
+        return unit._replace(starts=unit.starts[1:], stops=unit.stops[1:])
+
+    with pytest.raises(ValueError, match="ray order 'dropping'"):
+        ordered_work(trace, distribution, dropping, np.zeros(trace.width * trace.height), "dropping")
