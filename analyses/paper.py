@@ -60,6 +60,7 @@ from analyses.output import check_output_folder
 from analyses.experiment import Experiment
 from analyses.memory_budget import memory_shares, runs_at_once, trace_pages_limited
 from analyses.paper_output import paper_html, paper_summary, speedup_figure, write_paper
+from analyses.paper_today import run_today, today_columns, today_of
 from analyses.paper_study import (DEFAULT_BACKGROUND, DEFAULT_MAPPINGS, DEFAULT_PROCESSES, PAPER_EXPERIMENT,
                                   STUDY_SIZE, STUDY_TABLE, PaperResult, check_process_counts, check_scenes)
 from analyses.verdict import LOSSES, VERDICT_PROCESSES, format_speedup, verdict, verdict_process_count
@@ -105,6 +106,10 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
         test, per ray and per node visit, each within its prior range;
         :data:`coherence.calibration.STUDY1997_COSTS` is the older fit
         within 5-5,000 cycles, :data:`coherence.calibration.FITS` names both).
+        With a ``platform``, the study's machine is still the one
+        calibrated and judged; the platform is an opt-in "today" column
+        beside it (:mod:`analyses.paper_today`): the same mappings and
+        process counts on the platform, with its own cost model, no fit.
     crossover : bool
         Also run :func:`analyses.crossover.crossover_study` per scene at the
         verdict's process count with the calibrated model: where would
@@ -131,6 +136,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     if not isinstance(experiment, Experiment):
         raise InputError(f"reproduce needs an analyses.experiment.Experiment, got {type(experiment).__name__}")
     experiment = replace(experiment, **choices) if choices else experiment
+    experiment, today = today_of(experiment)
     scenes = check_scenes(PAPER_SCENES if scenes is None else scenes)
     counts = sorted({1, *experiment.n_processes})
     size, background, progress = experiment.size, experiment.background, experiment.progress
@@ -189,6 +195,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
 
     # 4: every mapping at every count, per scene, with the calibrated model
     frames = []
+    today_frames = []
     crossings = []
     verdict_n = verdict_process_count(counts)
     with dask_executor(experiment.dask) as executor:
@@ -204,6 +211,8 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
                 result = study(trace, mapping_objects, counts, hierarchy=hierarchy, layout=layout, cost=model,
                                machine=machine, scene=scene, progress=progress, execution=execution)
                 frames.append(result.runs.assign(scene=name))
+                if today is not None:
+                    today_frames.append(run_today(today, trace, scene, counts, execution).assign(scene=name))
                 if crossover and verdict_n > 1:
                     from analyses.crossover import crossover_study
 
@@ -219,6 +228,13 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     predictions = sequential_predictions(runs, size, order=names)
     crossings = pd.concat(crossings, ignore_index=True) if crossings else None
     verdicts, numbers = scene_verdicts(runs, verdict_n, order=names)
+    today_result = None
+    if today is not None:
+        today_runs = pd.concat(today_frames, ignore_index=True)
+        today_runs = today_runs[["scene"] + [c for c in today_runs.columns if c != "scene"]]
+        columns, today_verdicts = today_columns(today_runs, verdict_n, names)
+        table = table.merge(columns, on="scene", how="left")
+        today_result = {"platform": today.parameters, "runs": today_runs, "verdicts": today_verdicts}
     # the experiment's record (one per scene: "scenes" for "scene"), with what this run resolved
     recorded = {key: value for key, value in experiment.as_parameters().items() if key != "scene"}
     parameters = {
@@ -232,7 +248,7 @@ def reproduce(experiment: Experiment = PAPER_EXPERIMENT, *, scenes=None, costs=N
     }
     return PaperResult(table=table, runs=runs, calibration=calibration, predictions=predictions,
                        verdicts=verdicts, verdict_numbers=numbers, parameters=parameters, info=info_out,
-                       crossover=crossings)
+                       crossover=crossings, today=today_result)
 
 
 def _calibrate(measurements: list, costs, clock_hz: float, size: int):

@@ -14,6 +14,7 @@ import pandas as pd
 from analyses.html import figure_png, render_page
 from analyses.output import check_output_folder, csv_text
 from analyses.paper_study import N_CPUS, STUDY_TABLE, PaperResult
+from analyses.paper_today import TODAY_FILES
 from analyses.plots import plot_speedup_panels
 from coherence.cost import OPERATIONS
 from coherence.metrics import DECOMPOSITION_COLUMNS
@@ -86,6 +87,10 @@ def paper_summary(result: PaperResult) -> dict:
         "crossover_boundary": _boundary(result),
         "verdicts": result.verdicts,
         "verdict_numbers": result.verdict_numbers,
+        **({} if result.today is None else {"today": {
+            "method": "the same traces, mappings and process counts on the platform, with its own cost model "
+                      "(not fitted to the study)",
+            "platform": result.today["platform"], "verdicts": result.today["verdicts"]}}),
     })
 
 
@@ -130,7 +135,8 @@ def paper_html(result: PaperResult, pngs: dict) -> str:
 
 
 def write_paper(result: PaperResult, out="paper") -> Path:
-    """Write paper.csv, scenes.csv, predictions.csv, paper.json, the speed-up PNGs and index.html into ``out``."""
+    """Write paper.csv, scenes.csv, predictions.csv, paper.json, the speed-up PNGs and index.html into ``out``
+    (and today.csv with a platform's today column)."""
     path = check_output_folder(out)
     path.mkdir(parents=True, exist_ok=True)
     order = result.parameters["mappings"]
@@ -153,6 +159,8 @@ def write_paper(result: PaperResult, out="paper") -> Path:
              path / names["predictions"]: csv_text(result.predictions).encode()}
     if boundary is not None:
         files[path / names["crossover_table"]] = csv_text(result.crossover).encode()
+    if result.today is not None:
+        files[path / TODAY_FILES["today_runs"]] = csv_text(result.today["runs"]).encode()
     files[path / names["summary"]] = (json.dumps(summary, indent=2, allow_nan=False) + "\n").encode()
     files.update({path / names[name]: data for name, data in pngs.items()})
     files[path / names["page"]] = paper_html(result, pngs).encode("utf-8")

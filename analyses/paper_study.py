@@ -93,6 +93,11 @@ class PaperResult:
     crossover : DataFrame or None
         With ``reproduce(crossover=True)``: per scene,
         :func:`analyses.crossover.crossover_study`'s rows.
+    today : dict or None
+        With a platform (:mod:`analyses.paper_today`): ``platform`` (its
+        parameters), ``runs`` (its run table, a ``scene`` column first) and
+        ``verdicts`` (:func:`analyses.paper.scene_verdicts` on them); the
+        ``today_*`` columns are then in ``table`` too.
     """
 
     table: pd.DataFrame
@@ -104,6 +109,7 @@ class PaperResult:
     parameters: dict
     info: dict = field(default_factory=dict)
     crossover: pd.DataFrame | None = None
+    today: dict | None = None
 
 
 # --------------------------------------------------------------------------

@@ -5,7 +5,7 @@ import argparse
 
 from analyses.commands.options import (HelpFormatter, cache_options, check_at_least, dask_options,
                                        experiment_from_args, machine_options, mappings_options,
-                                       memory_budget_options, size_options, workload_options)
+                                       memory_budget_options, platform_options, size_options, workload_options)
 
 #: The names of coherence.calibration.FITS, the default first (the parser is built without importing the
 #: fit's dependencies; tests/test_paper.py checks the two agree).
@@ -48,6 +48,7 @@ Output folder (default paper):
   speedup_real.png   speed-up from real time, one panel per scene
   speedup_user.png   speed-up from user time (worst process)
   index.html         one self-contained page with all of it
+  today.csv          with --platform: the runs on that machine of today
 The same inputs give byte-identical files.
 
 examples:
@@ -55,6 +56,7 @@ examples:
   coherence paper --size 128 --out paper-128
   coherence paper --scenes balls tetra --processes 1 2 4 8 16
   coherence paper --dask tcp://scheduler:8786 --cache /shared/cache
+  coherence paper --platform zen4-7950x --size 64   # beside a machine of today
 """
 
 
@@ -71,7 +73,11 @@ def register(subparsers) -> None:
                                    parents=[size_options(), mappings_options(), machine, cache_options(), dask_options(),
                                             memory_budget_options(runs_at_once=2),  # two scenes' runs at once
                                             workload_options("study1997", "the study's tracer, whose test counts "
-                                                             "and memory image the calibration needs")])
+                                                             "and memory image the calibration needs"),
+                                            platform_options("for paper it is opt-in: a 'today' column beside "
+                                                             "the study's machine, the same mappings and process "
+                                                             "counts on the platform with its own cost model, not "
+                                                             "fitted (today_* columns of scenes.csv, today.csv)")])
     parser.add_argument("--out", metavar="DIR", default="paper", help="output folder (default paper)")
     parser.add_argument("--scenes", nargs="+", metavar="SCENE",
                         help="the study's scenes, any of %(paper_scenes)s (default: all of them)")
@@ -93,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from analyses.paper import (PAPER_EXPERIMENT, check_output_folder, check_scenes, paper_summary, reproduce,
                                 write_paper)
     from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
+    from analyses.paper_today import TODAY_FILES
     from coherence.calibration import FITS
     from tracer.scenes.catalog import PAPER_SCENES
 
@@ -112,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     path = write_paper(result, out)
     others = [name for role, name in PAPER_FILES.items() if role != "page"]
     others += list(CROSSOVER_FILES.values()) if result.crossover is not None else []
+    others += list(TODAY_FILES.values()) if result.today is not None else []
     print(f"wrote {path / PAPER_FILES['page']}, {', '.join(others)}", file=sys.stderr)
     if args.json:
         print(json.dumps(paper_summary(result), indent=2, allow_nan=False))
@@ -127,4 +135,7 @@ def run(args: argparse.Namespace) -> int:
             f"{row.scene} {row.unexplained_seconds_at_512:+.1f}" for row in unexplained.itertuples()))
         for text in result.verdicts["text"]:
             print(text)
+        if result.today is not None:
+            for text in result.today["verdicts"]["text"]:
+                print(f"today, on {result.today['platform']['name']}: {text}")
     return 0
