@@ -57,6 +57,29 @@ OPERATIONS = {
 SQUARE_ROOT_CYCLES_21164 = 90.0
 
 
+#: Cycles per key and per pass of the radix sort a ray order sorts rays with
+#: (:func:`ray_sort_cycles`). A least-significant-digit radix sort of 8-bit
+#: digits makes, per key and pass, one histogram increment (a load, an add, a
+#: store: about 2 cycles pipelined) and one scatter of the key and its ray id
+#: (a histogram load and increment, two stores: about 4 cycles). Fixed by
+#: that count, never fitted.
+RADIX_SORT_CYCLES_PER_PASS = 6.0
+#: Bits of a radix sort's digit: one pass per 8 bits of the key.
+RADIX_SORT_DIGIT_BITS = 8
+
+
+def ray_sort_cycles(n_rays: int, key_bits: int) -> float:
+    """Cycles to sort ``n_rays`` rays by keys of ``key_bits`` significant bits.
+
+    ``ceil(key_bits / RADIX_SORT_DIGIT_BITS)`` passes of
+    :data:`RADIX_SORT_CYCLES_PER_PASS` cycles per ray; nothing for fewer than two rays.
+    """
+    if n_rays < 2 or key_bits <= 0:
+        return 0.0
+    passes = -(-int(key_bits) // RADIX_SORT_DIGIT_BITS)
+    return float(n_rays) * passes * RADIX_SORT_CYCLES_PER_PASS
+
+
 @dataclass(frozen=True)
 class CostModel:
     """Cycles per operation and the clock rate.
