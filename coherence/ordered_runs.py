@@ -31,6 +31,16 @@ the existing simulation runs unchanged (:func:`coherence.simulation.simulate_run
 
 So the depth-first order (each unit's segments as they are, no auxiliary
 records) replays exactly the run of the mapping itself.
+
+Auxiliary records live where the order's buffers are (an ``extents``
+function, such as :meth:`coherence.ray_order_base.OrderBuffers.extents`):
+:func:`with_order_buffers` numbers every distinct buffer address as a record
+of the auxiliary kind and places it there, so the simulation reads and
+writes them as it does the scene's records. A static unit uses its
+process's buffers; every dynamic task uses process 0's, which, since every
+CPU of the simulation has caches of its own, is each process reusing its
+own buffers from one block to the next (two processes time-sharing one CPU
+would share them).
 """
 from __future__ import annotations
 
@@ -40,6 +50,7 @@ import numpy as np
 
 from coherence.distribution import Distribution
 from rtcommon.validate import InputError
+from tracer.trace.records import AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG
 from tracer.trace.segments import SegmentColumn
 
 
@@ -76,6 +87,23 @@ def depth_first(segments, rows: np.ndarray, n_records: int) -> OrderedUnit:
     return OrderedUnit(ints[rows, SegmentColumn.FIRST], ints[rows, SegmentColumn.STOP], np.zeros(0, np.uint32), 0.0)
 
 
+def pieces_unit(pieces, n_records: int) -> OrderedUnit:
+    """The :class:`OrderedUnit` of an ``OrderedPieces`` (:mod:`coherence.ray_order_base`).
+
+    Its auxiliary record ``i`` is replayed just before piece ``aux_after[i]``
+    (after the last piece when that is the number of pieces), auxiliary
+    records of one place in their own order.
+    """
+    n_pieces = len(pieces.piece_first)
+    n_aux = len(pieces.aux_records)
+    keys = np.concatenate([2 * np.arange(n_pieces, dtype=np.int64) + 1, 2 * np.asarray(pieces.aux_after, np.int64)])
+    sequence = np.argsort(keys, kind="stable")
+    aux_at = n_records + np.arange(n_aux, dtype=np.int64)
+    starts = np.concatenate([np.asarray(pieces.piece_first, np.int64), aux_at])[sequence]
+    stops = np.concatenate([np.asarray(pieces.piece_stop, np.int64), aux_at + 1])[sequence]
+    return OrderedUnit(starts, stops, np.asarray(pieces.aux_records, np.uint32), float(pieces.sort_cycles))
+
+
 class PieceTrace(NamedTuple):
     """A trace whose pixels are pieces (``width`` pieces, ``height`` 1), as the simulation reads a trace."""
 
@@ -94,6 +122,7 @@ class OrderedWork(NamedTuple):
     compute: np.ndarray         #: (Q,) float64 compute cycles per piece
     n_aux: int                  #: auxiliary records of all units
     sort_cycles: float          #: of all units
+    aux_process: np.ndarray     #: (n_aux,) int64 whose buffers each auxiliary record is in
 
 
 def unit_pixels(distribution: Distribution) -> list:
@@ -151,7 +180,7 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     if np.any(pixel_offsets[1:] == pixel_offsets[:-1]):
         raise InputError("ray orders need every pixel to have records (each path's camera ray reads the root)")
     seg_offsets = np.searchsorted(segments.ints[:, SegmentColumn.PIXEL], np.arange(n_pixels + 1)).astype(np.int64)
-    starts, stops, unit_of, aux_parts, sort = [], [], [], [], []
+    starts, stops, unit_of, aux_parts, sort, aux_process = [], [], [], [], [], []
     aux_base = n_records
     for unit, pixels in enumerate(unit_pixels(distribution)):
         rows = _ranges(seg_offsets[pixels], seg_offsets[pixels + 1])
@@ -162,6 +191,7 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
         stops.append(stop + shift)
         unit_of.append(np.full(len(first), unit, np.int64))
         aux_parts.append(np.asarray(result.aux, np.uint32))
+        aux_process.append(np.full(len(result.aux), 0 if distribution.dynamic else unit, np.int64))
         aux_base += len(result.aux)
         sort.append(float(result.sort_cycles))
     starts, stops, unit_of = (np.concatenate(parts) if parts else np.zeros(0, np.int64)
@@ -189,7 +219,9 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     else:
         pieces = Distribution(distribution.name, n_pieces, 1, distribution.n_processes, task_offsets, piece_id,
                               np.arange(n_units, dtype=np.int64))
-    return OrderedWork(PieceTrace(offsets, records, counters, n_pieces, 1), pieces, compute, len(aux), float(sum(sort)))
+    aux_process = np.concatenate(aux_process) if aux_process else np.zeros(0, np.int64)
+    return OrderedWork(PieceTrace(offsets, records, counters, n_pieces, 1), pieces, compute, len(aux), float(sum(sort)),
+                       aux_process)
 
 
 def _checked_unit(result, segments, rows, n_records: int, name: str) -> tuple:
@@ -240,13 +272,13 @@ def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -
     return compute, piece_counters
 
 
-def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy, placed, cost, machine,
-                     name: str = "order") -> tuple:
+def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy, placed, cost, machine, *,
+                     name: str = "order", extents=None) -> tuple:
     """Simulate ``distribution`` with every unit's rays in ``order`` on ``machine``.
 
-    Parameters are those of :func:`coherence.simulation.simulate_run` (``placed``
-    placed for the trace, with a region for the order's auxiliary records
-    when it adds any) and of :func:`ordered_work`.
+    Parameters are those of :func:`coherence.simulation.simulate_run` and of
+    :func:`ordered_work`; ``extents`` places the order's auxiliary records
+    (:func:`with_order_buffers`), needed when it adds any.
 
     Returns
     -------
@@ -257,4 +289,58 @@ def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy,
     from tracer.trace.access import COUNTER_NAMES
 
     work = ordered_work(trace, distribution, order, cost.compute_cycles(trace.counters, COUNTER_NAMES), name)
-    return simulate_run(work.trace, work.distribution, hierarchy, placed, cost, machine, compute=work.compute), work
+    pieces = work.trace
+    if work.n_aux:
+        if extents is None:
+            raise InputError(f"ray order {name!r} adds buffer records: give extents= to place them")
+        placed, pieces = with_order_buffers(placed, work, int(trace.n_records), extents)
+    return simulate_run(pieces, work.distribution, hierarchy, placed, cost, machine, compute=work.compute), work
+
+
+def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tuple:
+    """``placed`` with a record of the auxiliary kind for every buffer address ``work``'s aux records touch.
+
+    Parameters
+    ----------
+    placed : coherence.layout.PlacedLayout
+        Placed for the trace, virtual addresses (no page placement).
+    work : OrderedWork
+    n_records : int
+        The trace's records (the aux records follow them in ``work.trace.records``).
+    extents : callable
+        ``extents(aux_records, process) -> (start, size)``, int64 arrays:
+        where each auxiliary record of ``process`` lives.
+
+    Returns
+    -------
+    (PlacedLayout, PieceTrace)
+        The layout with its auxiliary rows (kinds between the last
+        :class:`~tracer.trace.records.RecordKind` and the auxiliary kind
+        hold none), and ``work.trace`` with its aux records renumbered to
+        them (write flags kept).
+    """
+    from dataclasses import replace
+
+    if placed.pages.frame.shape[0]:
+        raise InputError("ray orders with buffers need virtual addresses: a machine without page placement")
+    aux = np.asarray(work.trace.records[n_records:], np.uint32)
+    start = np.empty(len(aux), np.int64)
+    size = np.empty(len(aux), np.int64)
+    for process in np.unique(work.aux_process):
+        mine = work.aux_process == process
+        start[mine], size[mine] = extents(aux[mine], int(process))
+    addresses, first, row = np.unique(start, return_index=True, return_inverse=True)
+    if len(addresses) > INDEX_MASK + 1:
+        raise InputError(f"the ray order's buffers span {len(addresses)} records, more than the "
+                         f"{INDEX_MASK + 1} one record kind can index")
+    n_rows = len(placed.record_start)
+    kind_first = np.empty(AUXILIARY_KIND + 2, np.int64)
+    kind_first[:N_KINDS + 1] = placed.kind_first
+    kind_first[N_KINDS + 1:] = n_rows
+    kind_first[AUXILIARY_KIND + 1] = n_rows + len(addresses)
+    buffered = replace(placed, record_start=np.concatenate([placed.record_start, addresses]),
+                       record_size=np.concatenate([placed.record_size, size[first]]), kind_first=kind_first)
+    renumbered = ((np.uint32(AUXILIARY_KIND) << np.uint32(KIND_SHIFT)) | (aux & np.uint32(WRITE_FLAG))
+                  | row.astype(np.uint32))
+    records = np.concatenate([np.asarray(work.trace.records[:n_records]), renumbered])
+    return buffered, work.trace._replace(records=records)

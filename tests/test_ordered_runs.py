@@ -5,7 +5,7 @@ import pytest
 
 from analyses.experiment import Experiment
 from coherence.mappings import DynamicBlock, get_mapping
-from coherence.ordered_runs import OrderedUnit, depth_first, ordered_work, simulate_ordered, unit_pixels
+from coherence.ordered_runs import OrderedUnit, depth_first, ordered_work, pieces_unit, simulate_ordered, unit_pixels
 from coherence.simulation import simulate_run
 from coherence.studies import place_layout
 from tracer.kd.tree import build_kdtree
@@ -13,7 +13,7 @@ from tracer.rendering.pathtrace import path_trace
 from tracer.rendering.render import RenderOptions
 from tracer.scenes.catalog import load
 from tracer.trace.access import COUNTER_NAMES
-from tracer.trace.records import AuxKind, pack_aux
+from tracer.trace.records import AUXILIARY_KIND, AuxKind, pack_aux
 from tracer.trace.segments import SegmentColumn
 
 
@@ -36,7 +36,8 @@ def test_depth_first_replays_the_mapping_itself(setup, mapping):
     chosen = DynamicBlock(block=2, dispatch_cycles=300.0) if mapping == "DB" else get_mapping(mapping)
     distribution = chosen.build(trace.width, trace.height, 3)
     expected = simulate_run(trace, distribution, hierarchy, placed, cost, machine)
-    run, work = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine, "depth-first")
+    run, work = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine,
+                                 name="depth-first")
     assert work.trace.width == trace.width * trace.height and work.n_aux == 0
     assert run.processes.equals(expected.processes)
     assert run.real_cycles == expected.real_cycles
@@ -84,7 +85,8 @@ def test_reordering_keeps_the_work_and_moves_the_misses(setup):
     trace, hierarchy, placed, cost, machine = setup
     distribution = get_mapping("P").build(trace.width, trace.height, 2)
     forward, _ = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine)
-    backward, work = simulate_ordered(trace, distribution, _reversed, hierarchy, placed, cost, machine, "reversed")
+    backward, work = simulate_ordered(trace, distribution, _reversed, hierarchy, placed, cost, machine,
+                                      name="reversed")
     assert work.trace.width == trace.segments.n_segments
     first = hierarchy.levels[0].name
     for column in [*COUNTER_NAMES, f"{first}_accesses"]:
@@ -114,3 +116,55 @@ def test_an_order_that_drops_a_ray_is_refused(setup):
 
     with pytest.raises(ValueError, match="ray order 'dropping'"):
         ordered_work(trace, distribution, dropping, np.zeros(trace.width * trace.height), "dropping")
+
+
+def test_pieces_unit_puts_each_aux_record_before_its_piece():
+    """An OrderedPieces with pieces [0, 3) [5, 9) and aux records a, b, c after 0, 1 and 2 pieces replays
+    a, [0, 3), b, [5, 9), c (aux positions from n_records = 10). Fails if aux records went after their piece
+    (``2 * aux_after + 2``) (checked)."""
+    from types import SimpleNamespace
+
+    aux = pack_aux(AuxKind.QUEUE_ENTRY, np.array([0, 1, 2]))
+    pieces = SimpleNamespace(piece_first=np.array([0, 5]), piece_stop=np.array([3, 9]), aux_records=aux,
+                             aux_after=np.array([0, 1, 2]), sort_cycles=4.0)
+    unit = pieces_unit(pieces, 10)
+    assert unit.starts.tolist() == [10, 0, 11, 5, 12]
+    assert unit.stops.tolist() == [11, 3, 12, 9, 13]
+    assert unit.aux.tolist() == aux.tolist() and unit.sort_cycles == 4.0
+
+
+def _with_state_reads(segments, rows, n_records):
+    """Depth-first, each ray preceded by a read of its process's ray-state slot 0."""
+    ints = segments.ints[rows]
+    n = len(rows)
+    starts = np.empty(2 * n, np.int64)
+    stops = np.empty(2 * n, np.int64)
+    starts[0::2], stops[0::2] = n_records + np.arange(n), n_records + np.arange(n) + 1
+    starts[1::2], stops[1::2] = ints[:, SegmentColumn.FIRST], ints[:, SegmentColumn.STOP]
+    return OrderedUnit(starts, stops, pack_aux(AuxKind.RAY_STATE, np.zeros(n, np.int64)), 0.0)
+
+
+def test_buffer_records_are_placed_and_read(setup):
+    """An order that reads one ray-state line (8 bytes) before every ray: its records become auxiliary-kind rows at the
+    extents' addresses, one per process (static P at 2: two rows, at 2**50 and 2**50 + 2**40), and each
+    process's first-level accesses grow by exactly its rays. Fails if every process's aux records took
+    process 0's extents (``0 if distribution.dynamic else unit`` made 0: one row) (checked)."""
+    from coherence.ordered_runs import with_order_buffers
+
+    trace, hierarchy, placed, cost, machine = setup
+
+    def extents(records, process):
+        return np.full(len(records), (1 << 50) + process * (1 << 40), np.int64), np.full(len(records), 8, np.int64)
+
+    distribution = get_mapping("P").build(trace.width, trace.height, 2)
+    plain, _ = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine)
+    run, work = simulate_ordered(trace, distribution, _with_state_reads, hierarchy, placed, cost, machine,
+                                 name="state reads", extents=extents)
+    buffered, pieces = with_order_buffers(placed, work, trace.n_records, extents)
+    rows = slice(buffered.kind_first[AUXILIARY_KIND], buffered.kind_first[AUXILIARY_KIND + 1])
+    assert buffered.record_start[rows].tolist() == [1 << 50, (1 << 50) + (1 << 40)]
+    assert np.all(pieces.records[trace.n_records:] >> 28 == AUXILIARY_KIND)
+    first = hierarchy.levels[0].name
+    per_process_rays = [int(np.isin(trace.segments.ints[:, SegmentColumn.PIXEL], pixels).sum())
+                        for pixels in unit_pixels(distribution)]
+    assert (run.processes[f"{first}_accesses"] - plain.processes[f"{first}_accesses"]).tolist() == per_process_rays
