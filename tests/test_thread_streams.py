@@ -8,8 +8,10 @@ from cachesim.sharing import SharedHierarchy
 from coherence.layout import get_layout
 from coherence.mappings import get_mapping
 from coherence.studies import place_layout
-from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces, thread_stream
+from coherence.thread_streams import (COUNTER_BYTES, PRIVATE_KINDS, counter_address, private_span, record_pieces,
+                                      thread_stream)
 from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace.records import AUXILIARY_KIND
 
 SCENE_KINDS = [RecordKind.KD_NODE, RecordKind.INDEX_ENTRY, RecordKind.SPHERE, RecordKind.MATERIAL]
 
@@ -34,20 +36,27 @@ def slow_stream(trace, placed, mapping, n_threads, line_size, turn):
     """The stream built by hand: threads take turns of ``turn`` pixels; each record byte by byte."""
     distribution = get_mapping(mapping).build(trace.width, trace.height, n_threads)
     queues = [list(distribution.process_pixels(p)) for p in range(n_threads)]
-    span = private_span(placed)
     accesses = []
     while any(queues):
         for thread, queue in enumerate(queues):
             for pixel in queue[:turn]:
-                for record in trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]:
-                    kind, index, write = int(record) >> 28, int(record) & ((1 << 27) - 1), bool(int(record) >> 27 & 1)
-                    row = placed.kind_first[kind] + index
-                    start = int(placed.record_start[row]) + (span * (thread + 1) if kind in PRIVATE_KINDS else 0)
-                    byte_lines = [(start + b) // line_size for b in range(int(placed.record_size[row]))]
-                    for line in sorted(set(byte_lines)):
-                        first = start + byte_lines.index(line)
-                        accesses.append((first, thread, write, byte_lines.count(line), kind))
+                accesses += slow_pixel(trace, placed, pixel, thread, line_size)
             del queue[:turn]
+    return accesses
+
+
+def slow_pixel(trace, placed, pixel, thread, line_size):
+    """One pixel's accesses by ``thread``, each record byte by byte."""
+    span = private_span(placed)
+    accesses = []
+    for record in trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]:
+        kind, index, write = int(record) >> 28, int(record) & ((1 << 27) - 1), bool(int(record) >> 27 & 1)
+        row = placed.kind_first[kind] + index
+        start = int(placed.record_start[row]) + (span * (thread + 1) if kind in PRIVATE_KINDS else 0)
+        byte_lines = [(start + b) // line_size for b in range(int(placed.record_size[row]))]
+        for line in sorted(set(byte_lines)):
+            first = start + byte_lines.index(line)
+            accesses.append((first, thread, write, byte_lines.count(line), kind))
     return accesses
 
 
@@ -82,12 +91,10 @@ def test_a_record_across_lines_is_split_at_the_line():
     assert pieces.addresses.tolist() == [start] + [first_line + 64 * k for k in range(1, len(expected_sizes))]
 
 
-def test_dynamic_mappings_and_page_placement_are_refused():
-    """Mutation: drop the ``distribution.dynamic`` check in thread_stream."""
+def test_a_bad_turn_is_refused():
+    """Mutation: drop the require_int of pixels_per_turn in thread_stream."""
     trace = synthetic_trace(4, 4)
     placed = place_layout(get_layout("compact"), trace)
-    with pytest.raises(ValueError, match="hands out work at run time"):
-        thread_stream(trace, placed, "DB", 2)
     with pytest.raises(ValueError, match="pixels_per_turn must be"):
         thread_stream(trace, placed, "P", 2, pixels_per_turn=0)
 
@@ -133,3 +140,54 @@ def false_sharing_misses(trace, placed, machine, mapping, n_threads):
     result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes,
                               sizes=stream.sizes, kinds=stream.kinds)
     return int(result.level_counts()[:, FALSE_SHARING_MISSES].sum())
+
+
+def slow_db_stream(trace, placed, n_threads, line_size, turn):
+    """DB's stream built by hand: task k to thread k % n, each task a counter write (its own item) then its
+    pixels; each pixel's records as in slow_stream."""
+    distribution = get_mapping("DB").build(trace.width, trace.height, n_threads)
+    queues = [[] for _ in range(n_threads)]
+    for task in range(distribution.n_tasks):
+        pixels = distribution.task_pixels[distribution.task_offsets[task]:distribution.task_offsets[task + 1]]
+        queues[task % n_threads] += ["counter", *pixels.tolist()]
+    accesses = []
+    while any(queues):
+        for thread, queue in enumerate(queues):
+            for item in queue[:turn]:
+                if item == "counter":
+                    accesses.append((counter_address(placed), thread, True, COUNTER_BYTES, AUXILIARY_KIND))
+                    continue
+                accesses += slow_pixel(trace, placed, item, thread, line_size)
+            del queue[:turn]
+    return accesses
+
+
+@pytest.mark.parametrize("n_threads, turn", [(3, 1), (2, 7)])
+def test_db_stream_matches_a_slow_build(n_threads, turn):
+    """DB on 96x64 (six 32x32 tasks): every access equals the hand-built stream's, counter writes included.
+    Mutation: ``tasks = range(thread, offsets.size - 1, 1)`` in _handed_out (every thread takes every task)."""
+    trace = synthetic_trace(96, 64, reads=1)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    stream = thread_stream(trace, placed, "DB", n_threads, line_size=64, pixels_per_turn=turn)
+    built = list(zip(stream.addresses.tolist(), stream.threads.tolist(), stream.writes.tolist(),
+                     stream.sizes.tolist(), stream.kinds.tolist()))
+    assert built == slow_db_stream(trace, placed, n_threads, 64, turn)
+
+
+def test_db_counter_traffic_hand_checked():
+    """Two threads, four tasks handed out 0, 1, 0, 1, L1 private and large enough to keep every line: the
+    counter's line misses cold for each thread's first hand-out, then is lost to the other's write before
+    each later one: 2 coherence misses and 3 invalidations at L1 on the auxiliary kind.
+    Mutation: ``np.zeros(n, dtype=bool)`` for the counter's writes in thread_stream (reads invalidate nothing)."""
+    from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES
+
+    trace = synthetic_trace(64, 64, reads=1)
+    placed = place_layout(get_layout("compact"), trace)
+    hierarchy = Hierarchy((CacheLevel("L1", 1 << 20, 64, 16), CacheLevel("L2", 1 << 22, 64, 16)))
+    machine = SharedHierarchy(hierarchy, n_cores=2, shared_by=("thread", "machine"))
+    stream = thread_stream(trace, placed, "DB", 2, pixels_per_turn=64)
+    assert (stream.kinds == AUXILIARY_KIND).sum() == 4
+    result = simulate_threads(stream.addresses, stream.threads, machine, writes=stream.writes, sizes=stream.sizes,
+                              kinds=stream.kinds)
+    counter_l1 = result.counts[0, :, AUXILIARY_KIND].sum(axis=0)
+    assert counter_l1[COHERENCE_MISSES] == 2 and counter_l1[COHERENCE_INVALIDATIONS] == 3
