@@ -63,7 +63,7 @@ from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
            "N_KINDS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult", "SharedState",
-           "ThreadStream", "interleave", "interleave_order", "simulate_threads", "simulate_threads_stream"]
+           "ThreadStream", "interleave", "replay_span", "shared_access", "interleave_order", "simulate_threads", "simulate_threads_stream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
 # cachesim.kernels (accesses ... write misses, back-invalidations at 4).
@@ -263,6 +263,159 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     return clock
 
 
+#: The level number :func:`shared_access` returns for an access that memory served is the
+#: number of levels ``L`` (levels are 0 ... L - 1 from the first).
+
+
+@njit(cache=True, inline="always")
+def shared_access(thread, address, is_write, size, kind, geometry, machine, state, clock, scratch):
+    """One access of one hardware thread through the instances that serve it, with coherence.
+
+    The rules are those of this module's docstring: the lookup from the
+    thread's first-level instance down, a hit's LRU stamp, the fills of the
+    levels that missed (levels that do not allocate on writes skip a
+    write's fill), inclusion's back-invalidations, ghosts and their filter,
+    and for a write the invalidation of the line in every instance that does
+    not serve ``thread``. The totals ``ACCESSES`` and ``WRITES`` are not
+    counted here: a caller adds them once at the end (``ACCESSES = HITS +
+    MISSES``, ``WRITES = WRITE_HITS + WRITE_MISSES``), as
+    :func:`simulate_threads_stream` does.
+
+    Parameters
+    ----------
+    thread : int
+        Hardware thread making the access, in [0, T).
+    address : uint64
+        First byte of the access.
+    is_write : bool
+    size : int
+        Bytes the access touches from ``address``; 0: its whole first-level line.
+    kind : int
+        Record kind, in [0, :data:`N_KINDS`).
+    geometry : CacheGeometry
+        As for :func:`simulate_threads_stream`.
+    machine : MachineGeometry
+    state : SharedArrays
+        Updated in place: tags, stamps, ghosts, ghost bytes and filter,
+        ``counts`` (hits, misses, write hits and misses, evictions,
+        back-invalidations, coherence counters) and ``served[thread]``.
+    clock : int
+        The access clock of this access (the previous access's plus one;
+        random replacement draws from it, LRU stamps with it).
+    scratch : ndarray of int64, shape (3, L)
+        Work space (the line, instance and set of each level).
+
+    Returns
+    -------
+    int
+        The level that served the access: 0 for the first level ... ``L``
+        (the number of levels) for memory.
+    """
+    tags = state.tags
+    stamps = state.stamps
+    ghosts = state.ghosts
+    ghost_bytes = state.ghost_bytes
+    ghost_filter = state.ghost_filter
+    counts = state.counts
+    instance_of = machine.instance_of
+    level_ways = machine.level_ways
+    instance_base = machine.instance_base
+    rel_shift = geometry.rel_shift
+    n_sets = geometry.n_sets
+    set_mask = geometry.set_mask
+    ways = geometry.ways
+    offset = geometry.offset
+    policy = geometry.policy
+    n_levels = rel_shift.shape[0]
+    line0 = np.int64(address >> np.uint64(geometry.line_shift))
+    if size > 0:
+        first = np.int64(address)
+        end = first + size
+    else:
+        first = line0 << geometry.line_shift
+        end = first + (np.int64(1) << geometry.line_shift)
+    served = n_levels
+    instance0 = instance_of[0, thread]
+    base0 = _set_of(line0, 0, instance0, n_sets, set_mask, ways, offset, level_ways)
+    slot = _find(tags, base0, ways[0], line0)
+    if slot >= 0:
+        if policy[0] == LRU:
+            stamps[slot] = clock
+        counts[0, instance0, kind, HITS] += 1
+        if is_write:
+            counts[0, instance0, kind, WRITE_HITS] += 1
+        served = 0
+    else:
+        lines = scratch[0]
+        instances = scratch[1]
+        bases = scratch[2]
+        for level in range(n_levels):
+            line = line0 >> rel_shift[level]
+            instance = instance_of[level, thread]
+            base = _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways)
+            lines[level] = line
+            instances[level] = instance
+            bases[level] = base
+            if level > 0:
+                slot = _find(tags, base, ways[level], line)
+                if slot >= 0:
+                    counts[level, instance, kind, HITS] += 1
+                    if is_write:
+                        counts[level, instance, kind, WRITE_HITS] += 1
+                    if policy[level] == LRU:
+                        stamps[slot] = clock
+                    served = level
+                    break
+            counts[level, instance, kind, MISSES] += 1
+            if is_write:
+                counts[level, instance, kind, WRITE_MISSES] += 1
+            if ghost_filter[_filter_slot(line, instance_base[level] + instance, ghost_filter)] > 0:
+                ghost = _find(ghosts, base, ways[level], line)
+                if ghost >= 0:
+                    counts[level, instance, kind, COHERENCE_MISSES] += 1
+                    if end <= ghost_bytes[ghost, 0] or ghost_bytes[ghost, 1] <= first:
+                        counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+        _fill(served, is_write, kind, geometry, machine, state, clock, scratch)
+    state.served[thread, served] += 1
+    if is_write:
+        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+    return served
+
+
+@njit(cache=True, inline="always")
+def _fill(served, is_write, kind, geometry, machine, state, clock, scratch):
+    """Fill the line into the levels above ``served`` that missed, lowest first (``scratch`` as
+    :func:`shared_access` left it)."""
+    tags = state.tags
+    ghosts = state.ghosts
+    ghost_filter = state.ghost_filter
+    ways = geometry.ways
+    inclusive = geometry.inclusion == INCLUSIVE
+    for level in range(served - 1, -1, -1):
+        if is_write and not geometry.write_allocate[level]:
+            continue
+        line = scratch[0, level]
+        instance = scratch[1, level]
+        base = scratch[2, level]
+        number = machine.instance_base[level] + instance
+        entry = _filter_slot(line, number, ghost_filter)
+        if ghost_filter[entry] > 0:
+            ghost = _find(ghosts, base, ways[level], line)
+            if ghost >= 0:  # the line is back: its ghost goes
+                _drop_ghost(ghost, entry, ghosts, ghost_filter)
+        evicted = _insert(tags, state.stamps, geometry.seeds[level], base, ways[level], geometry.policy[level], line,
+                          clock)
+        if evicted >= 0:
+            state.counts[level, instance, kind, EVICTIONS] += 1
+            if inclusive and level > 0:
+                _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
+        else:
+            # The fill took an empty way, which may hold another line's ghost: evicted now.
+            taken = _find(tags, base, ways[level], line)
+            if ghosts[taken] >= 0:
+                _drop_ghost(taken, _filter_slot(ghosts[taken], number, ghost_filter), ghosts, ghost_filter)
+
+
 @njit(cache=True, **NO_REFCOUNTS)
 def _replay(stream, geometry, machine, state, clock, scratch):
     """The loop of :func:`simulate_threads_stream`, which counts hits and misses only;
@@ -275,38 +428,11 @@ def _replay(stream, geometry, machine, state, clock, scratch):
     has_writes = writes.shape[0] > 0
     has_sizes = sizes.shape[0] > 0
     has_kinds = kinds.shape[0] > 0
-    tags = state.tags
-    stamps = state.stamps
-    ghosts = state.ghosts
-    ghost_bytes = state.ghost_bytes
-    ghost_filter = state.ghost_filter
     counts = state.counts
     served_counts = state.served
     instance_of = machine.instance_of
-    level_ways = machine.level_ways
-    instance_base = machine.instance_base
-    rel_shift = geometry.rel_shift
-    n_sets = geometry.n_sets
-    set_mask = geometry.set_mask
-    ways = geometry.ways
-    offset = geometry.offset
-    policy = geometry.policy
-    seeds = geometry.seeds
-    write_allocate = geometry.write_allocate
-    inclusive = geometry.inclusion == INCLUSIVE
-    n_levels = rel_shift.shape[0]
     shift = np.uint64(geometry.line_shift)
-    line_bytes = np.int64(1) << geometry.line_shift
-    lines = scratch[0]
-    instances = scratch[1]
-    bases = scratch[2]
-    # The first level serves most accesses: its geometry in scalars.
-    mask0 = set_mask[0]
-    sets0 = n_sets[0]
-    ways0 = ways[0]
-    per_instance0 = level_ways[0]
-    track0 = policy[0] == LRU and ways0 > 1
-    allocate0 = write_allocate[0]
+    allocate0 = geometry.write_allocate[0]
     previous_line = np.int64(-1)  # a line the previous access left in its thread's first level
     previous_thread = np.int64(-1)
     for i in range(addresses.shape[0]):
@@ -316,83 +442,28 @@ def _replay(stream, geometry, machine, state, clock, scratch):
         line0 = np.int64(address >> shift)
         is_write = has_writes and writes[i]
         kind = np.int64(kinds[i]) if has_kinds else np.int64(0)
-        instance0 = instance_of[0, thread]
-        if has_sizes:
-            first = np.int64(address)
-            end = first + sizes[i]
-        else:
-            first = line0 << geometry.line_shift
-            end = first + line_bytes
+        size = sizes[i] if has_sizes else np.int64(0)
         if line0 == previous_line and thread == previous_thread:
             # The previous access, by the same thread, left the line in its
-            # first level as the set's most recent entry: a hit that changes nothing.
-            slot = np.int64(0)
-        else:
-            base0 = instance0 * per_instance0 + (line0 & mask0 if mask0 >= 0 else line0 % sets0) * ways0
-            slot = _find(tags, base0, ways0, line0)
-            if slot >= 0 and track0:
-                stamps[slot] = clock
-        if slot >= 0:
+            # first level as the set's most recent entry: a hit that changes
+            # no tag or order (a write still invalidates other copies).
+            instance0 = instance_of[0, thread]
             counts[0, instance0, kind, HITS] += 1
+            served_counts[thread, 0] += 1
             if is_write:
                 counts[0, instance0, kind, WRITE_HITS] += 1
-            served_counts[thread, 0] += 1
-        else:
-            served = n_levels
-            for level in range(n_levels):
-                line = line0 >> rel_shift[level]
-                instance = instance_of[level, thread]
-                base = _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways)
-                lines[level] = line
-                instances[level] = instance
-                bases[level] = base
-                if level > 0:
-                    slot = _find(tags, base, ways[level], line)
-                    if slot >= 0:
-                        counts[level, instance, kind, HITS] += 1
-                        if is_write:
-                            counts[level, instance, kind, WRITE_HITS] += 1
-                        if policy[level] == LRU:
-                            stamps[slot] = clock
-                        served = level
-                        break
-                counts[level, instance, kind, MISSES] += 1
-                if is_write:
-                    counts[level, instance, kind, WRITE_MISSES] += 1
-                if ghost_filter[_filter_slot(line, instance_base[level] + instance, ghost_filter)] > 0:
-                    ghost = _find(ghosts, base, ways[level], line)
-                    if ghost >= 0:
-                        counts[level, instance, kind, COHERENCE_MISSES] += 1
-                        if end <= ghost_bytes[ghost, 0] or ghost_bytes[ghost, 1] <= first:
-                            counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
-            served_counts[thread, served] += 1
-            for level in range(served - 1, -1, -1):
-                if is_write and not write_allocate[level]:
-                    continue
-                line = lines[level]
-                instance = instances[level]
-                base = bases[level]
-                number = instance_base[level] + instance
-                entry = _filter_slot(line, number, ghost_filter)
-                if ghost_filter[entry] > 0:
-                    ghost = _find(ghosts, base, ways[level], line)
-                    if ghost >= 0:  # the line is back: its ghost goes
-                        _drop_ghost(ghost, entry, ghosts, ghost_filter)
-                evicted = _insert(tags, stamps, seeds[level], base, ways[level], policy[level], line, clock)
-                if evicted >= 0:
-                    counts[level, instance, kind, EVICTIONS] += 1
-                    if inclusive and level > 0:
-                        _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
+                if size > 0:
+                    first = np.int64(address)
+                    end = first + size
                 else:
-                    # The fill took an empty way, which may hold another line's ghost: evicted now.
-                    taken = _find(tags, base, ways[level], line)
-                    if ghosts[taken] >= 0:
-                        _drop_ghost(taken, _filter_slot(ghosts[taken], number, ghost_filter), ghosts, ghost_filter)
-            slot = np.int64(-1) if (is_write and not allocate0) else np.int64(0)
-        previous_line = line0 if slot >= 0 else np.int64(-1)
+                    first = line0 << geometry.line_shift
+                    end = first + (np.int64(1) << geometry.line_shift)
+                _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+            continue
+        served = shared_access(thread, address, is_write, size, kind, geometry, machine, state, clock, scratch)
+        resident = served == 0 or not (is_write and not allocate0)
+        previous_line = line0 if resident else np.int64(-1)
         previous_thread = thread
-        if is_write:
-            _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
     return clock
 
 
@@ -402,6 +473,7 @@ def _replay(stream, geometry, machine, state, clock, scratch):
 #: such a caller adds once at the end (``ACCESSES = HITS + MISSES``,
 #: ``WRITES = WRITE_HITS + WRITE_MISSES``). Arguments: stream, geometry, machine,
 #: state, clock and a scratch array of int64 (3, L); returns the clock after the stream.
+#: One access at a time: :func:`shared_access`.
 replay_span = _replay
 
 def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tuple[CacheGeometry, MachineGeometry]:
