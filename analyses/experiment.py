@@ -28,6 +28,7 @@ from coherence.cost import DEFAULT_COST_MODEL
 from coherence.layout import DEFAULT_LAYOUT
 from coherence.mappings import DEFAULT_MAPPINGS
 from coherence.page_placement import PAGE_PLACEMENTS
+from coherence.shared_run import DEFAULT_INTERLEAVE_CYCLES
 from coherence.simulation import DEFAULT_BACKGROUND_FOOTPRINT, STUDY_CPUS
 from rtcommon.validate import InputError, require_bool, require_int
 from tracer.rendering.tree_variants import STUDY_TREE_VARIANT
@@ -105,10 +106,13 @@ class Experiment:
         A machine of today (:data:`coherence.platforms.PLATFORMS`): it sets
         the hierarchy, the cost model and the CPUs (one a hardware thread),
         so ``hierarchy``, ``cost`` and ``n_cpus`` must stay at their
-        defaults. Shared levels are not yet interleaved: each hardware
-        thread is simulated with its share of every level
-        (:meth:`coherence.platforms.Platform.thread_view`), and the
-        parameters say so. Its process counts are
+        defaults. The study's runs are simulated on its shared levels,
+        processes on its hardware threads interleaving every
+        ``interleave_cycles`` (:meth:`study_hierarchy`,
+        :mod:`coherence.shared_schedule`); ``page_placement`` must stay
+        ``contiguous``. The miss map, miss-ratio curves and texture section
+        of a report still take one hardware thread's view
+        (:meth:`hierarchy_object`). Its process counts are
         :meth:`~coherence.platforms.Platform.default_processes` when a
         caller takes them from it. Under a platform, the trace logs the
         tracer's per-ray data and frame-buffer writes (:meth:`logs_ray_data`).
@@ -118,6 +122,12 @@ class Experiment:
         :data:`coherence.layout.FRAME_BUFFER_BYTES` (3, 4, 16)
         (:meth:`coherence.layout.MemoryLayout.with_frame_buffer`); None: the
         layout's own (12 in ``compact``, 3 in ``alpha1997``).
+    interleave_cycles : int
+        Under a platform, ``Q`` >= 1: the cycles a hardware thread runs
+        before the thread whose clock is lowest takes over
+        (:mod:`coherence.shared_schedule`); default
+        :data:`coherence.shared_run.DEFAULT_INTERLEAVE_CYCLES`. Without a
+        platform it must stay at its default.
 
     Raises
     ------
@@ -150,6 +160,7 @@ class Experiment:
     progress: bool = True
     platform: object = None
     frame_buffer_bytes: int | None = None
+    interleave_cycles: int = DEFAULT_INTERLEAVE_CYCLES
 
     def __post_init__(self):
         from coherence.mappings import get_mapping
@@ -202,8 +213,12 @@ class Experiment:
             except (ValueError, OSError) as error:
                 raise InputError(f"Experiment.{name}: {error}") from None
         require_int("Experiment.n_cpus", self.n_cpus, 1)
+        require_int("Experiment.interleave_cycles", self.interleave_cycles, 1)
         if self.platform is not None:
             _check_platform(self)
+        elif self.interleave_cycles != DEFAULT_INTERLEAVE_CYCLES:
+            raise InputError(f"Experiment.interleave_cycles={self.interleave_cycles} applies to a platform's shared "
+                             "levels only; give a platform or leave it at its default")
         if self.frame_buffer_bytes is not None:
             from coherence.layout import FRAME_BUFFER_BYTES
 
@@ -243,6 +258,16 @@ class Experiment:
         platform, one hardware thread's view of its levels."""
         platform = self.platform_object()
         return _hierarchy(self.hierarchy) if platform is None else platform.thread_view()
+
+    def study_hierarchy(self):
+        """What :func:`coherence.studies.study` simulates on: :meth:`hierarchy_object`, or under a platform its
+        shared levels (:class:`coherence.shared_run.SharedLevels` with ``interleave_cycles``)."""
+        from coherence.shared_run import SharedLevels
+
+        platform = self.platform_object()
+        if platform is None:
+            return self.hierarchy_object()
+        return SharedLevels(platform.hierarchy, int(self.interleave_cycles))
 
     def layout_object(self):
         """The :class:`coherence.layout.MemoryLayout`, its frame-buffer pixels ``frame_buffer_bytes`` when set."""
@@ -316,7 +341,7 @@ class Experiment:
         ``frame_buffer_bytes`` only when set.
         """
         platform = self.platform_object()
-        extra = {} if platform is None else {"platform": platform_parameters(platform)}
+        extra = {} if platform is None else {"platform": platform_parameters(platform, self.interleave_cycles)}
         if self.frame_buffer_bytes is not None:
             extra["frame_buffer_bytes"] = int(self.frame_buffer_bytes)
         return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
@@ -337,14 +362,16 @@ class Experiment:
         return {"spp": int(self.spp), "seed": int(self.seed)}
 
 
-def platform_parameters(platform) -> dict:
-    """What a run records of its platform: name, machine, clock, source and how shared levels were simulated."""
+def platform_parameters(platform, interleave_cycles: int = DEFAULT_INTERLEAVE_CYCLES) -> dict:
+    """What a run records of its platform: name, machine, clock, source, how shared levels were simulated and
+    the interleaving granularity ``Q`` (``interleave_cycles``)."""
     from coherence.platforms import SHARED_LEVELS_NOTE
 
     machine = platform.hierarchy
     return {"name": platform.name, "n_cores": machine.n_cores, "smt": machine.smt,
             "cores_per_complex": machine.cores_per_complex, "shared_by": list(machine.shared_by),
-            "clock_hz": platform.clock_hz, "source": platform.source, "shared_levels": SHARED_LEVELS_NOTE}
+            "clock_hz": platform.clock_hz, "source": platform.source, "shared_levels": SHARED_LEVELS_NOTE,
+            "interleave_cycles": int(interleave_cycles)}
 
 
 def _check_platform(experiment) -> None:
@@ -357,6 +384,9 @@ def _check_platform(experiment) -> None:
         if getattr(experiment, field) != default:
             raise InputError(f"Experiment.platform {platform.name} sets the hierarchy, the cost and the CPUs: "
                              f"leave Experiment.{field} at its default ({default}), got {getattr(experiment, field)!r}")
+    if experiment.page_placement != "contiguous":
+        raise InputError(f"Experiment.page_placement={experiment.page_placement!r}: runs on platform "
+                         f"{platform.name}'s shared levels take virtual addresses; use contiguous")
 
 
 

@@ -231,7 +231,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     placed = place_layout(layout, trace, scene)
     execution = Execution(n_jobs=setup.n_jobs, executor=executor, trace_folder=Path(info["path"]) / "trace",
                           shared_lines_budget=setup.shares["shared_lines"])
-    result = study(trace, setup.mappings, counts, hierarchy=hierarchy, layout=layout, cost=cost,
+    result = study(trace, setup.mappings, counts, hierarchy=experiment.study_hierarchy(), layout=layout, cost=cost,
                    machine=setup.machine, scene=scene, progress=experiment.progress, execution=execution)
     runs = result.runs
 

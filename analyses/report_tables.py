@@ -246,6 +246,7 @@ def summary(inputs: ReportInputs) -> dict:
         at_n = runs[runs["n_processes"] == n].set_index("mapping")
         headline[str(n)] = {name: {column: at_n.loc[name, column] for column in DECOMPOSITION_COLUMNS}
                             for name in names}
+    shared = shared_levels_summary(runs, inputs.hierarchy.level_names, sorted({verdict_n, inputs.top_n}), names)
     return _clean({
         "report": "coherence report",
         "parameters": inputs.parameters,
@@ -259,4 +260,25 @@ def summary(inputs: ReportInputs) -> dict:
                     "numbers": verdict.numbers.to_dict(orient="records")},
         "miss_map": miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
         "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
+        **shared,
     })
+
+
+def shared_levels_summary(runs, level_names, counts, names) -> dict:
+    """Under a platform, ``{"shared_levels": {n: {mapping: {level: counts}}}}``: each level's misses (the
+    processes', summed) and the machine's coherence invalidations, coherence misses and false-sharing misses
+    at each process count of ``counts``; empty for runs on private caches (no such columns)."""
+    from coherence.shared_run import SHARED_RUN_COLUMNS
+
+    if f"{level_names[0]}_{SHARED_RUN_COLUMNS[0][0]}" not in runs:
+        return {}
+    table = {}
+    for n in counts:
+        at_n = runs[runs["n_processes"] == n].set_index("mapping")
+        table[str(n)] = {name: {level: {"accesses": at_n.loc[name, f"{level}_accesses"],
+                                        "hit_rate": at_n.loc[name, f"{level}_hit_rate"],
+                                        **{column: at_n.loc[name, f"{level}_{column}"]
+                                           for column, _ in SHARED_RUN_COLUMNS}}
+                                for level in level_names}
+                         for name in names}
+    return {"shared_levels": table}

@@ -12,14 +12,13 @@ assumption made, and the derivation of the cost models are in
 ``docs/platforms.md``; a test reads that page's tables back and compares
 them with these presets, so page and code cannot drift.
 
-The schedule simulation of :mod:`coherence.simulation` gives every CPU a
-private hierarchy; it does not yet interleave threads at shared levels.
-:meth:`Platform.thread_view` is what a run under a platform simulates until
-it does: each hardware thread with its own copy of every level, a shared
-level cut to the thread's share of its capacity (its size divided by the
-threads sharing it). Exact shared levels, with coherence between private
-caches, are :func:`cachesim.multicore.simulate_threads` on
-:attr:`Platform.hierarchy`.
+A run under a platform simulates its processes on the hardware threads of
+:attr:`Platform.hierarchy`, interleaved at the shared levels
+(:mod:`coherence.shared_schedule`). :meth:`Platform.thread_view` is one
+hardware thread with its own copy of every level, a shared level cut to the
+thread's share of its capacity (its size divided by the threads sharing
+it): what the analyses that take one private hierarchy (miss maps,
+miss-ratio curves) see of the platform.
 """
 from __future__ import annotations
 
@@ -37,9 +36,10 @@ __all__ = ["MAX_DEFAULT_PROCESSES", "PLATFORMS", "PREFETCHERS_ON", "Platform", "
 MAX_DEFAULT_PROCESSES = 32
 
 #: What runs under a platform say about their shared levels, in their parameters.
-SHARED_LEVELS_NOTE = ("shared levels not yet interleaved: each hardware thread is simulated with its own copy of "
-                      "every level, a shared level cut to the thread's share of its capacity (size / threads "
-                      "sharing it), which overstates misses and shows no coherence miss: a pessimistic bound; see "
+SHARED_LEVELS_NOTE = ("shared levels interleaved: processes run on the hardware threads and every access goes "
+                      "through the one state of the machine's caches (write-invalidate coherence on), the thread "
+                      "whose clock is lowest running interleave_cycles at a time; the report's miss map, "
+                      "miss-ratio curves and texture section take one thread's share of every level; see "
                       "docs/platforms.md")
 
 #: The prefetchers of a platform variant with prefetching on (:meth:`Platform.variant`), for its first

@@ -26,16 +26,63 @@ from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HI
                               fixed_schedule)
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
-from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, run_shared_schedule
+from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, schedule_of
 from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces
 from rtcommon.validate import InputError, require_bool, require_number
 
-__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SharedRun", "pixel_pieces", "simulate_shared_run"]
+__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun", "pixel_pieces",
+           "shared_run_row", "simulate_shared_run"]
 
 #: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
 DEFAULT_INTERLEAVE_CYCLES = 1000
+
+
+@dataclass(frozen=True)
+class SharedLevels:
+    """A study's caches when hardware threads share levels: the machine and how finely its threads interleave.
+
+    Given as ``hierarchy`` to :func:`coherence.studies.study`, every run is
+    simulated by :func:`simulate_shared_run`.
+
+    Parameters
+    ----------
+    machine : SharedHierarchy
+    interleave_cycles : float
+        ``Q`` >= 1 (see :mod:`coherence.shared_schedule`).
+    """
+
+    machine: SharedHierarchy
+    interleave_cycles: float = DEFAULT_INTERLEAVE_CYCLES
+
+    def __post_init__(self):
+        if not isinstance(self.machine, SharedHierarchy):
+            raise InputError(f"SharedLevels.machine must be a SharedHierarchy, got {type(self.machine).__name__}")
+        require_number("SharedLevels.interleave_cycles", self.interleave_cycles, 1)
+
+    @property
+    def hierarchy(self):
+        """The levels one hardware thread sees (a :class:`cachesim.Hierarchy`: names, sizes, latencies)."""
+        return self.machine.hierarchy
+
+    def to_dict(self) -> dict:
+        """The machine's table and Q (JSON-ready)."""
+        return {"machine": self.machine.to_dict(), "interleave_cycles": float(self.interleave_cycles)}
+
+
+#: Per level, the machine's counts a study's row of a run on shared levels gets, as ``<level>_<name>``
+#: (``machine_misses``: all the level's instances' misses, background reads included).
+SHARED_RUN_COLUMNS = (("machine_misses", MC.MISSES), ("coherence_invalidations", MC.COHERENCE_INVALIDATIONS),
+                      ("coherence_misses", MC.COHERENCE_MISSES), ("false_sharing_misses", MC.FALSE_SHARING_MISSES))
+
+
+def shared_run_row(shared: SharedResult) -> dict:
+    """``<level>_machine_misses``, ``_coherence_invalidations``, ``_coherence_misses`` and
+    ``_false_sharing_misses`` of a run, summed over the level's instances and record kinds."""
+    totals = shared.level_counts()
+    return {f"{name}_{column}": int(totals[level, index])
+            for level, name in enumerate(shared.machine.hierarchy.level_names) for column, index in SHARED_RUN_COLUMNS}
 
 
 @dataclass(frozen=True)
@@ -175,7 +222,8 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
                         np.zeros(n_logged, dtype=np.uint64), np.zeros(n_logged, dtype=np.int64),
                         np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
     state.clock = int(run_shared_schedule(
-        pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift),
+        pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift,
+                      cpu_threads(hierarchy.n_cores, hierarchy.smt)),
         PixelCost(compute, latency),
         schedule_of(distribution),
         queues, background, out, float(q)))

@@ -4,7 +4,10 @@
 (run queues, time slices, dynamic hand-outs, take-ahead, context switches,
 background slices: the same rules, in the same order) on the hardware
 threads of a :class:`cachesim.sharing.SharedHierarchy`. A CPU of the
-scheduler is a hardware thread. Every access goes through the shared
+scheduler is a hardware thread (:func:`cpu_threads`: free CPUs are taken
+in CPU order, and the CPUs go over the cores before their SMT siblings, so
+the first ``n_cores`` processes get a core each, as an operating system
+spreads work over idle cores before it pairs SMT threads). Every access goes through the shared
 machine's one state (:func:`cachesim.multicore.replay_span`): the instances
 of each level that serve the thread, write-invalidate coherence between
 instances on, so processes running on different cores at the same time warm
@@ -97,12 +100,15 @@ class SharedMachine(NamedTuple):
         Updated in place; ``state.served`` (T, L + 1) tells the level that served each access.
     line_shift : int
         log2 of the first level's line size.
+    thread_of : ndarray of int64, shape (C,)
+        The hardware thread that is the scheduler's CPU ``c``.
     """
 
     geometry: object
     machine: object
     state: object
     line_shift: int
+    thread_of: np.ndarray
 
 
 class SharedOutputs(NamedTuple):
@@ -140,6 +146,13 @@ class SharedOutputs(NamedTuple):
     log_threads: np.ndarray
     log_pieces: np.ndarray
     log_length: np.ndarray
+
+
+def cpu_threads(n_cores: int, smt: int) -> np.ndarray:
+    """The hardware thread (``core * smt + sibling``) of each scheduler CPU: the first sibling of every core,
+    then the second of every core, and so on; int64 (n_cores * smt,)."""
+    cpus = np.arange(n_cores * smt, dtype=np.int64)
+    return (cpus % n_cores) * smt + cpus // n_cores
 
 
 @njit(cache=True, inline="always")
@@ -208,7 +221,8 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     logging = log_addresses.shape[0] > 0
     n_ours = out_cycles.shape[0]
     n_all = process_queue.shape[0]
-    n_cpus = served.shape[0]
+    thread_of = shared.thread_of
+    n_cpus = thread_of.shape[0]
     n_queues = queues.n_queues
     n_levels = latency.shape[0] - 1
     line_shift = shared.line_shift
@@ -291,11 +305,11 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
                 background_slices[b] += 1
                 for i in range(footprint_lines):
                     background_addresses[i] = np.uint64((start + i) << line_shift)
-                    background_threads[i] = cpu
+                    background_threads[i] = thread_of[cpu]
                 if logging:
                     for i in range(footprint_lines):
                         log_addresses[logged + i] = background_addresses[i]
-                        log_threads[logged + i] = cpu
+                        log_threads[logged + i] = thread_of[cpu]
                         log_pieces[logged + i] = -1
                     logged += footprint_lines
                 access_clock = replay_span(
@@ -314,6 +328,7 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
 
         finished = False
         offset = np.uint64((process + 1)) * span
+        thread = thread_of[cpu]
         while True:
             if next_piece[cpu] < 0:  # the next pixel
                 task = current_task[process]
@@ -349,17 +364,17 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
                     address += offset
                 is_write = piece_writes[k]
                 one_address[0] = address
-                one_thread[0] = cpu
+                one_thread[0] = thread
                 one_write[0] = is_write
                 one_size[0] = piece_sizes[k]
                 one_kind[0] = piece_kinds[k]
                 for level in range(n_levels + 1):
-                    before[level] = served[cpu, level]
+                    before[level] = served[thread, level]
                 access_clock = replay_span(one, shared.geometry, shared.machine, state, access_clock, scratch)
-                level_served = _served_level(served[cpu], before)
+                level_served = _served_level(served[thread], before)
                 if logging:
                     log_addresses[logged] = address
-                    log_threads[logged] = cpu
+                    log_threads[logged] = thread
                     log_pieces[logged] = k
                     logged += 1
                 hit_column = WRITE_HITS if is_write else READ_HITS
@@ -400,4 +415,4 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     return access_clock
 
 
-__all__ = ["PixelPieces", "SharedMachine", "SharedOutputs", "run_shared_schedule"]
+__all__ = ["PixelPieces", "SharedMachine", "SharedOutputs", "cpu_threads", "run_shared_schedule"]

@@ -22,6 +22,7 @@ from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
 from coherence.recost import RunStore
+from coherence.shared_run import SharedLevels, pixel_pieces, shared_run_row, simulate_shared_run
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import InputError, require_int
 from tracer.trace.access import COUNTER_NAMES, RecordKind
@@ -137,6 +138,12 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     n_processes : sequence of int
         Process counts; 1 is always added (speed-ups need it).
     hierarchy, layout, cost : object or preset name
+        ``hierarchy`` may be a :class:`coherence.shared_run.SharedLevels`:
+        every run is then simulated on its shared levels
+        (:func:`coherence.shared_run.simulate_shared_run`), locally (an
+        executor or a store in ``execution`` is not used), and each row of
+        ``runs`` gets the machine's coherence counts per level
+        (:func:`coherence.shared_run.shared_run_row`).
     machine : Machine, optional
         CPUs, time slice, scheduler and background load (default: 8 idle
         CPUs sharing one run queue; see :class:`~coherence.simulation.Machine`).
@@ -152,7 +159,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     -------
     StudyResult
     """
-    hierarchy = get_hierarchy(hierarchy)
+    shared = hierarchy if isinstance(hierarchy, SharedLevels) else None
+    hierarchy = get_hierarchy(hierarchy) if shared is None else shared.hierarchy
     layout = get_layout(layout)
     cost = get_cost_model(cost)
     machine = machine or Machine()
@@ -191,10 +199,24 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         first_of.setdefault(key, index)
     distinct = sorted(first_of.values())
 
-    simulated = _from_store(execution.store, trace, distinct, keys, (hierarchy, layout, machine, cost, compute))
+    store = execution.store if shared is None else None  # a store keeps private-cache runs only
+    simulated = _from_store(store, trace, distinct, keys, (hierarchy, layout, machine, cost, compute))
     distinct = [index for index in distinct if index not in simulated]  # the runs to simulate
     bar = _progress(len(distinct), progress)
-    if executor is not None:
+    shared_rows = {}
+    if shared is not None:  # on this machine, every run on the shared levels
+        pieces = pixel_pieces(trace, placed, hierarchy.levels[0].line_size)
+
+        def simulate_shared(index):
+            return simulate_shared_run(trace, distribution_of(index), shared.machine, placed, cost, machine,
+                                       interleave_cycles=shared.interleave_cycles, compute=compute, pieces=pieces)
+
+        with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
+            for index, run in zip(distinct, pool.map(simulate_shared, distinct)):
+                simulated[index] = run.run
+                shared_rows[index] = shared_run_row(run.shared)
+                bar.update(1)
+    elif executor is not None:
         futures = [executor.submit(simulate_stored, str(trace_folder), distribution_of(index), hierarchy, placed,
                                    cost, machine, compute) for index in distinct]
         for index, future in zip(distinct, futures):
@@ -218,9 +240,9 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
                 simulated[index] = run
                 bar.update(1)
     bar.close()
-    if execution.store is not None:
+    if store is not None:
         for index in distinct:
-            execution.store.add(execution.store.keys(keys[index], hierarchy, layout, machine, cost, compute),
+            store.add(store.keys(keys[index], hierarchy, layout, machine, cost, compute),
                                 simulated[index])
     results = []
     for (mapping, _), key, tasks, n in zip(jobs, keys, task_counts, process_counts):
@@ -231,6 +253,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
         row = {"mapping": mapping.name, **run_summary(processes, hierarchy.level_names, cost.clock_hz,
                                                         run.real_cycles)}
         row["n_cpus"] = machine.n_cpus
+        row.update(shared_rows.get(first_of[key], {}))
         results.append((row, processes.assign(mapping=mapping.name, n_processes=n)))
     runs = add_speedups(pd.DataFrame([row for row, _ in results]))
     front = ["mapping", "n_processes", "n_cpus"]
@@ -240,6 +263,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
                                                         if c not in ("mapping", "n_processes")]]
     parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
                   "machine": asdict(machine), "mappings": names, "n_processes": counts}
+    if shared is not None:
+        parameters["shared_levels"] = shared.to_dict()
     return StudyResult(runs, processes, parameters)
 
 

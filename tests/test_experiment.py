@@ -45,7 +45,7 @@ def test_parameters_are_plain_data_and_follow_replace():
     # platform and frame_buffer_bytes are recorded only when set (tests/test_platforms.py), so outputs without one are unchanged;
     # spp and seed only for a path-traced workload (the others' records stay as they were)
     left_out = {"cache_dir", "dask", "memory_budget", "progress", "background", "platform", "spp", "seed",
-                "frame_buffer_bytes"}
+                "frame_buffer_bytes", "interleave_cycles"}  # interleave_cycles: in the platform record
     assert set(recorded) == {field.name for field in fields(Experiment)} - left_out | {"background_load"}
     traced = replace(base, workload="pathtrace", spp=4, seed=9).as_parameters()
     assert (traced["spp"], traced["seed"]) == (4, 9)

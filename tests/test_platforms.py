@@ -107,10 +107,12 @@ def test_bad_platforms_are_refused_by_name():
 
 def test_experiment_under_a_platform_takes_its_machine():
     """The Experiment's hierarchy, cost and CPUs are the platform's (a thread's share of each level, one CPU a
-    hardware thread) and its parameters say that shared levels are not interleaved; without a platform the
-    parameters have no platform key, so every output is as before.
+    hardware thread), its study runs on the platform's shared levels at Q = interleave_cycles, and its
+    parameters say so; without a platform the parameters have no platform key, so every output is as before,
+    and a Q other than the default is refused.
     Mutation: return ``_hierarchy(self.hierarchy)`` in hierarchy_object whatever the platform."""
     from analyses.experiment import Experiment
+    from coherence.shared_run import DEFAULT_INTERLEAVE_CYCLES, SharedLevels
 
     zen = get_platform("zen4-7950x")
     experiment = Experiment(scene="tetra", size=8, platform="zen4-7950x")
@@ -119,8 +121,16 @@ def test_experiment_under_a_platform_takes_its_machine():
     parameters = experiment.as_parameters()
     assert parameters["n_cpus"] == 32 and parameters["hierarchy"]["name"] == "zen4-7950x-thread"
     assert parameters["platform"]["name"] == "zen4-7950x" and parameters["platform"]["smt"] == 2
-    assert "shared levels not yet interleaved" in parameters["platform"]["shared_levels"]
+    assert "shared levels interleaved" in parameters["platform"]["shared_levels"]
+    assert parameters["platform"]["interleave_cycles"] == DEFAULT_INTERLEAVE_CYCLES
+    assert experiment.study_hierarchy() == SharedLevels(zen.hierarchy, DEFAULT_INTERLEAVE_CYCLES)
+    finer = Experiment(scene="tetra", size=8, platform="zen4-7950x", interleave_cycles=10)
+    assert finer.study_hierarchy().interleave_cycles == 10 and finer.as_parameters()["platform"]["interleave_cycles"] == 10
     assert "platform" not in Experiment(scene="tetra", size=8).as_parameters()
+    with pytest.raises(ValueError, match="Experiment.interleave_cycles=10 applies to a platform"):
+        Experiment(scene="tetra", size=8, interleave_cycles=10)
+    with pytest.raises(ValueError, match="Experiment.page_placement='random'"):
+        Experiment(scene="tetra", size=8, platform="zen4-7950x", page_placement="random")
 
 
 @pytest.mark.parametrize("field, value", [("hierarchy", "modern"), ("cost", "modern"), ("n_cpus", 4)])
@@ -136,25 +146,33 @@ def test_experiment_refuses_a_platform_beside_what_it_sets(field, value):
 
 def test_simulate_under_a_platform(saved, capsys):
     """``coherence simulate --platform``: process counts 1..2 x hardware threads, the platform's CPUs,
-    thread view and costs, the same runs as study() given them; with --hierarchy, --cost or --cpus a
-    one-line error naming the option.
+    shared levels (Q from --interleave-cycles) and costs, the same runs as study() given them; with
+    --hierarchy, --cost or --cpus a one-line error naming the option, and --interleave-cycles without
+    --platform one too.
     Mutation: drop ``args.processes = list(platform.default_processes())`` in simulate.run."""
     import json
 
     from analyses.cli import main
+    from coherence.shared_run import SharedLevels
     from coherence.simulation import Machine
     from coherence.studies import study
 
     trace, folder = saved
     m1 = get_platform("apple-m1")
-    assert main(["simulate", str(folder), "--mapping", "S", "--platform", "apple-m1", "--json"]) == 0
+    assert main(["simulate", str(folder), "--mapping", "S", "--platform", "apple-m1", "--interleave-cycles", "50",
+                 "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert [run["n_processes"] for run in report["runs"]] == list(range(1, 9))
-    expected = study(trace, ["S"], list(range(1, 9)), hierarchy=m1.thread_view(), cost=m1.cost,
+    expected = study(trace, ["S"], list(range(1, 9)), hierarchy=SharedLevels(m1.hierarchy, 50), cost=m1.cost,
                      machine=Machine(n_cpus=4), progress=False).runs
     assert [run["speedup_user"] for run in report["runs"]] == pytest.approx(expected["speedup_user"].tolist())
+    assert [run["L1_coherence_misses"] for run in report["runs"]] == expected["L1_coherence_misses"].tolist()
     assert report["parameters"]["platform"]["name"] == "apple-m1"
+    assert report["parameters"]["platform"]["interleave_cycles"] == 50
+    assert report["parameters"]["shared_levels"]["interleave_cycles"] == 50
     assert report["parameters"]["machine"]["n_cpus"] == 4
+    assert main(["simulate", str(folder), "--interleave-cycles", "50"]) == 2
+    assert "--interleave-cycles applies to a platform's shared levels" in capsys.readouterr().err
     for option, value in (("--hierarchy", "modern"), ("--cost", "modern"), ("--cpus", "4")):
         assert main(["simulate", str(folder), "--platform", "apple-m1", option, value]) == 2
         err = capsys.readouterr().err
@@ -192,5 +210,11 @@ def test_report_under_a_platform_takes_its_process_counts(tmp_path, capsys):
     parameters = json.loads(capsys.readouterr().out)["parameters"]
     assert parameters["n_processes"] == list(range(1, 9)) and parameters["n_cpus"] == 4
     assert parameters["platform"]["name"] == "apple-m1"
+    # summary.json carries the shared levels' counts per mapping at the verdict's count (mutation: drop
+    # ``**shared`` in report_tables.summary)
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    shared = summary["shared_levels"]["8"]["S"]
+    assert set(shared) == {"L1", "L2"} and shared["L1"]["accesses"] > 0
+    assert {"machine_misses", "coherence_misses", "false_sharing_misses", "coherence_invalidations"} <= set(shared["L2"])
     assert main([*common, "--platform", "apple-m1", "--max-processes", "3", "--out", str(tmp_path / "b")]) == 0
     assert json.loads(capsys.readouterr().out)["parameters"]["n_processes"] == [1, 2, 3]

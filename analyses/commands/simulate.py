@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from coherence.page_placement import PagePlacement
     from coherence.metrics import EFFICIENCY_FACTORS
     from coherence.provenance import provenance, write_csv_atomic
+    from coherence.shared_run import DEFAULT_INTERLEAVE_CYCLES, SharedLevels
     from coherence.simulation import Machine
     from coherence.studies import study
     from tracer.trace.access import AccessTrace
@@ -84,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     checks.check_range("--background-footprint", args.background_footprint, 0)
     checks.check_range("--page-seed", args.page_seed, 0)
     check_platform_options(args)
+    interleave = DEFAULT_INTERLEAVE_CYCLES if args.interleave_cycles is None else args.interleave_cycles
     if args.placement != "round-robin" and args.scheduler != "static":
         raise InputError(f"--placement {args.placement} needs --scheduler static (the {args.scheduler} "
                          "scheduler moves processes between CPUs)")
@@ -91,11 +93,12 @@ def run(args: argparse.Namespace) -> int:
         checks.check_input_file("--hierarchy", args.hierarchy)
     platform = None if args.platform is None else get_platform(args.platform)
     if platform is not None:
-        # the platform's machine: one CPU a hardware thread, each with its share of every level
+        # the platform's machine: one CPU a hardware thread, the threads interleaving at its shared levels
         args.cpus, args.cost = platform.n_threads, platform.cost.name
         if not given(args, "processes"):
             args.processes = list(platform.default_processes())
-    hierarchy = get_hierarchy(args.hierarchy) if platform is None else platform.thread_view()
+    hierarchy = get_hierarchy(args.hierarchy) if platform is None else platform.hierarchy.hierarchy
+    caches = hierarchy if platform is None else SharedLevels(platform.hierarchy, interleave)
     mappings = [get_mapping(name) for name in (args.mapping or DEFAULT_MAPPINGS)]
     footprint = {} if args.background_footprint is None else {"background_footprint": args.background_footprint}
     machine = Machine(n_cpus=args.cpus, quantum_cycles=args.quantum, scheduler=args.scheduler,
@@ -112,9 +115,9 @@ def run(args: argparse.Namespace) -> int:
         raise NotADirectoryError(f"TRACE {args.trace!r} is a file; expected a folder written by "
                                  "'coherence render --trace'")
     trace = AccessTrace.load(args.trace)
-    result = study(trace, mappings, args.processes, hierarchy=hierarchy, layout=args.layout, cost=args.cost,
+    result = study(trace, mappings, args.processes, hierarchy=caches, layout=args.layout, cost=args.cost,
                    machine=machine, progress=sys.stderr.isatty())
-    extra = {} if platform is None else {"platform": platform_parameters(platform)}
+    extra = {} if platform is None else {"platform": platform_parameters(platform, interleave)}
     meta = provenance(trace=str(args.trace), scene=trace.metadata.get("scene"), **result.parameters, **extra)
     if args.csv:
         write_csv_atomic(result.runs, args.csv, meta)
@@ -131,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
           f"{hierarchy.name or 'hierarchy'} caches, {args.layout} layout, {args.cost} costs, "
           f"{machine.n_cpus} CPUs")
     if platform is not None:
-        print(f"platform {platform.name}: {platform.n_threads} hardware threads; {SHARED_LEVELS_NOTE}")
+        print(f"platform {platform.name}: {platform.n_threads} hardware threads, Q = {interleave} cycles; "
+              f"{SHARED_LEVELS_NOTE}")
     print(result.runs[columns].to_string(index=False, float_format=lambda value: f"{value:.3f}"))
     return 0
