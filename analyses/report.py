@@ -253,6 +253,13 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
         from analyses.report_texture import texture_section
 
         texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost)
+    ray_orders = None
+    if trace.segments is not None and not setup.machine.page_placement.translates:
+        from analyses.report_orders import order_section
+
+        worst = next(m for m in setup.mappings if m.name == verdict.worst["coherence_loss"][0])
+        ray_orders = order_section(trace, runs, {"mappings": [worst], "hierarchy": hierarchy, "placed": placed,
+                                                 "cost": cost, "machine": setup.machine}, verdict_n)
     cost_map = cost.compute_cycles(trace.counters, COUNTER_NAMES).reshape(trace.height, trace.width)
     region = placed.region_bytes()
     scene_bytes = pd.DataFrame({"kind": [k for k, v in region.items() if v > 0] + ["total"],
@@ -284,7 +291,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
                                                                               hierarchy, experiment.progress),
         cost_map=cost_map, scene_bytes=scene_bytes, caches=caches, misses=misses, miss_totals=misses.totals(),
         scene_summary=scene.summary(), tree={k: v for k, v in info["tree"].items() if not k.endswith("_seconds")},
-        totals=dict(info["totals"]), parameters=parameters, texture=texture)
+        totals=dict(info["totals"]), parameters=parameters, texture=texture, ray_orders=ray_orders)
     miss_png = miss_map_png(misses)
     return Report(results=results_table(inputs), summary=summary(inputs), html=report_html(inputs, miss_png),
                   runs=runs, processes=result.processes, curves=inputs.curves, scene_bytes=scene_bytes,

@@ -166,7 +166,12 @@ def report_html(inputs, miss_png: bytes) -> str:
             "texel_reads": "texel reads", "texel_misses": "texel misses",
             "misses_per_texel_read": "misses per texel read", "texture_miss_share": "texel share of misses"})
 
-    return render_page("report.html.j2", texture_share=texture_share, miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
+    ray_orders = None
+    if inputs.ray_orders is not None:
+        from analyses.report_orders import order_table_html
+
+        ray_orders = order_table_html(inputs.ray_orders)
+    return render_page("report.html.j2", ray_orders=ray_orders, texture_share=texture_share, miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
                        hierarchy_name=hierarchy.name, verdict=verdict, verdict_n=verdict_n, top_n=top_n,
                        scene_summary=scene_summary, image=image, figures=figures, counts_table=counts_table,
                        totals_table=totals_table, tree_table=tree_table, bytes_table=bytes_table,

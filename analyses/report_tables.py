@@ -62,6 +62,9 @@ class ReportInputs:
     texture : dict or None
         :func:`analyses.report_texture.texture_section`'s tables of a
         textured scene.
+    ray_orders : DataFrame or None
+        :func:`analyses.report_orders.order_section`'s table of a
+        path-traced trace.
     """
 
     experiment: object
@@ -88,6 +91,7 @@ class ReportInputs:
     totals: dict
     parameters: dict
     texture: dict | None = None
+    ray_orders: pd.DataFrame | None = None
 
 
 #: Columns of ``results.csv``.
@@ -113,6 +117,10 @@ SECTIONS = {
     "texture_layouts": "textured scenes only; mapping, item = '<texel order> <level>': texel_hit_rate",
     "texture_miss_ratio": "textured scenes only; mapping = texel order (the texel reads alone, scan order), "
                           "item = cache size in bytes: metric 'miss_ratio_<line>B' (fully associative LRU)",
+    "ray_orders": "path-traced traces only; the mapping that loses most to coherence at the verdict's process "
+                  "count, item = ray order: misses per ray per level, modelled times, speed-up, efficiency and its "
+                  "five factors (load balance, coherence, reordering gain and overhead, dispatch), the order's "
+                  "ray-state and queue records and sorting cycles (analyses.report_orders)",
     "miss_map": "mapping and n_processes of the miss map's run, item = cache level: misses per pixel summed "
                 "('total'), their mean and largest, and the share of the total made by the 1% of pixels "
                 "that miss most ('top_1pct_share')",
@@ -218,10 +226,14 @@ def results_table(inputs: ReportInputs) -> pd.DataFrame:
             add("miss_map", metric, level[metric], mapping=misses.mapping, n=misses.n_processes, item=level["level"])
     for _, number in inputs.verdict.numbers.iterrows():
         add("verdict", number["metric"], number["value"], mapping=number["mapping"], n=int(number["n_processes"]))
-    table = _rows_table(rows)
-    if inputs.texture is None:
-        return table
-    return pd.concat([table, texture_rows(inputs.texture, verdict_n)], ignore_index=True)
+    tables = [_rows_table(rows)]
+    if inputs.texture is not None:
+        tables.append(texture_rows(inputs.texture, verdict_n))
+    if inputs.ray_orders is not None:
+        from analyses.report_orders import order_rows
+
+        tables.append(_rows_table(order_rows(inputs.ray_orders, _round)))
+    return tables[0] if len(tables) == 1 else pd.concat(tables, ignore_index=True)
 
 
 def _rows_table(rows) -> pd.DataFrame:
@@ -259,6 +271,7 @@ def summary(inputs: ReportInputs) -> dict:
                     "sentences": verdict.sentences, "text": verdict.text,
                     "numbers": verdict.numbers.to_dict(orient="records")},
         "miss_map": miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
+        **({} if inputs.ray_orders is None else {"ray_orders": inputs.ray_orders.to_dict(orient="records")}),
         "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
         **shared,
     })

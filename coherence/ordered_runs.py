@@ -50,7 +50,7 @@ import numpy as np
 
 from coherence.distribution import Distribution
 from rtcommon.validate import InputError
-from tracer.trace.records import AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG
+from tracer.trace.records import AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, pack_aux, unpack_aux
 from tracer.trace.segments import SegmentColumn
 
 
@@ -267,8 +267,8 @@ def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -
     compute[in_trace] = np.where(length == pixel_length, cycles, cycles * length / pixel_length)
     counters = np.asarray(trace.counters)
     piece_counters = np.zeros((len(starts), counters.shape[1]), np.int64)
-    # the piece holding each pixel's first record takes its counters
-    np.add.at(piece_counters, np.searchsorted(offsets, pixel_offsets[:-1], side="right") - 1, counters)
+    # the piece holding each pixel's first record takes its counters (pieces hold one pixel's records)
+    piece_counters[np.searchsorted(offsets, pixel_offsets[:-1], side="right") - 1] = counters
     return compute, piece_counters
 
 
@@ -291,6 +291,9 @@ def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy,
     work = ordered_work(trace, distribution, order, cost.compute_cycles(trace.counters, COUNTER_NAMES), name)
     pieces = work.trace
     if work.n_aux:
+        if machine.page_placement.translates:
+            raise InputError(f"ray order {name!r} adds buffer records, which have no page frames: simulate it on "
+                             "a machine without page placement")
         if extents is None:
             raise InputError(f"ray order {name!r} adds buffer records: give extents= to place them")
         placed, pieces = with_order_buffers(placed, work, int(trace.n_records), extents)
@@ -298,7 +301,7 @@ def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy,
 
 
 def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tuple:
-    """``placed`` with a record of the auxiliary kind for every buffer address ``work``'s aux records touch.
+    """``placed`` with a record of the auxiliary kind for every buffer slot ``work``'s aux records may touch.
 
     Parameters
     ----------
@@ -309,7 +312,8 @@ def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tu
         The trace's records (the aux records follow them in ``work.trace.records``).
     extents : callable
         ``extents(aux_records, process) -> (start, size)``, int64 arrays:
-        where each auxiliary record of ``process`` lives.
+        where each auxiliary record of ``process`` lives. Each process has
+        a row for every slot of each sub-kind up to the largest it uses.
 
     Returns
     -------
@@ -324,22 +328,33 @@ def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tu
     if placed.pages.frame.shape[0]:
         raise InputError("ray orders with buffers need virtual addresses: a machine without page placement")
     aux = np.asarray(work.trace.records[n_records:], np.uint32)
-    start = np.empty(len(aux), np.int64)
-    size = np.empty(len(aux), np.int64)
+    sub, slot = (part.astype(np.int64) for part in unpack_aux(aux))
+    row = np.empty(len(aux), np.int64)
+    starts, sizes = [], []
+    n_rows = 0
     for process in np.unique(work.aux_process):
+        # rows of this process: each aux sub-kind's slots 0 .. its largest, sub-kinds one after another
         mine = work.aux_process == process
-        start[mine], size[mine] = extents(aux[mine], int(process))
-    addresses, first, row = np.unique(start, return_index=True, return_inverse=True)
-    if len(addresses) > INDEX_MASK + 1:
-        raise InputError(f"the ray order's buffers span {len(addresses)} records, more than the "
+        for kind in np.unique(sub[mine]):
+            these = mine & (sub == kind)
+            n_slots = int(slot[these].max()) + 1
+            row[these] = n_rows + slot[these]
+            start, size = extents(pack_aux(int(kind), np.arange(n_slots)), int(process))
+            starts.append(np.asarray(start, np.int64))
+            sizes.append(np.asarray(size, np.int64))
+            n_rows += n_slots
+    if n_rows > INDEX_MASK + 1:
+        raise InputError(f"the ray order's buffers span {n_rows} records, more than the "
                          f"{INDEX_MASK + 1} one record kind can index")
-    n_rows = len(placed.record_start)
+    addresses = np.concatenate(starts) if starts else np.zeros(0, np.int64)
+    buffer_sizes = np.concatenate(sizes) if sizes else np.zeros(0, np.int64)
+    n_scene = len(placed.record_start)
     kind_first = np.empty(AUXILIARY_KIND + 2, np.int64)
     kind_first[:N_KINDS + 1] = placed.kind_first
-    kind_first[N_KINDS + 1:] = n_rows
-    kind_first[AUXILIARY_KIND + 1] = n_rows + len(addresses)
+    kind_first[N_KINDS + 1:] = n_scene
+    kind_first[AUXILIARY_KIND + 1] = n_scene + n_rows
     buffered = replace(placed, record_start=np.concatenate([placed.record_start, addresses]),
-                       record_size=np.concatenate([placed.record_size, size[first]]), kind_first=kind_first)
+                       record_size=np.concatenate([placed.record_size, buffer_sizes]), kind_first=kind_first)
     renumbered = ((np.uint32(AUXILIARY_KIND) << np.uint32(KIND_SHIFT)) | (aux & np.uint32(WRITE_FLAG))
                   | row.astype(np.uint32))
     records = np.concatenate([np.asarray(work.trace.records[:n_records]), renumbered])

@@ -115,7 +115,8 @@ def test_results_table_is_tidy_and_complete(reports):
     table = pd.read_csv(reports[0] / "results.csv")
     assert tuple(table.columns) == RESULT_COLUMNS
     textured_only = {"texture", "texture_layouts", "texture_miss_ratio"}  # balls has no textures
-    assert set(table["section"]) == set(SECTIONS) - textured_only
+    path_traced_only = {"ray_orders"}  # a Whitted trace has no ray segments
+    assert set(table["section"]) == set(SECTIONS) - textured_only - path_traced_only
     runs = table[table["section"] == "runs"]
     assert set(runs["mapping"]) == {"S", "P", "B", "DB"}
     assert set(runs["n_processes"]) == {1, 2, 8}

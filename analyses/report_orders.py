@@ -1,0 +1,160 @@
+"""The report's ray-order section, for path-traced traces: when does the order of rays matter?
+
+Every process owns rays by the pixel mapping, then traces them in a ray order
+of :data:`coherence.ray_orders.RAY_ORDERS` (:mod:`coherence.ordered_runs`:
+static mappings order each process's rays together, DB the rays of each
+handed-out block). For every compared mapping and order at the section's
+process count, one table row holds misses per ray by cache level, the
+modelled time, and the efficiency split into five factors whose product is
+the efficiency (speed-up over ``n``), with ``T1`` and ``D1`` the mapping's
+one-process user and dispatch cycles (depth-first), ``W0`` the run's work
+without dispatch, ``W0_df`` the same for the depth-first order and ``W0'``
+for the order without its own costs (its buffer and queue records and its
+sorting cycles left out; a second run):
+
+* ``load_balance`` = ``W / (n max u)``, as the study's;
+* ``coherence_factor`` = ``(T1 - D1) / W0_df``: the mapping's, as the study's;
+* ``reordering_gain`` = ``W0_df / W0'``: above 1 when the order made the
+  caches work less;
+* ``reordering_overhead`` = ``W0' / W0``: below 1 by what the order's own
+  memory traffic and sorting cost;
+* ``dispatch_factor`` = ``(W0 / W) / ((T1 - D1) / T1)``, as the study's.
+
+The depth-first order is the study's run itself (gain and overhead 1).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tracer.trace.records import AuxKind, unpack_aux
+
+#: The section's columns besides mapping, order and the per-level misses per ray.
+ORDER_COLUMNS = ("n_processes", "rays", "user_seconds_max", "real_seconds", "speedup_user", "efficiency",
+                 "load_balance", "coherence_factor", "reordering_gain", "reordering_overhead", "dispatch_factor",
+                 "ray_state_records", "queue_records", "sort_cycles")
+
+
+def registry_orders(order, *, scene_bounds, tree=None) -> tuple:
+    """Two :data:`coherence.ordered_runs.Order` of an order of :data:`coherence.ray_orders.RAY_ORDERS`: the
+    order itself, and the same without its own costs (its buffer and queue records and its sorting cycles
+    left out: the ``W0'`` run of the module docstring). Both share the pieces of every unit either ordered
+    (held as long as the pair is)."""
+    from coherence.ordered_runs import OrderedUnit, pieces_unit
+    from coherence.ray_orders import order_pieces
+
+    made = {}
+
+    def pieces_of(segments, rows):
+        key = hash(rows.tobytes())
+        if key not in made:
+            made[key] = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree)
+        return made[key]
+
+    def ordered(segments, rows, n_records):
+        return pieces_unit(pieces_of(segments, rows), n_records)
+
+    def bare(segments, rows, n_records):
+        pieces = pieces_of(segments, rows)
+        return OrderedUnit(pieces.piece_first, pieces.piece_stop, np.zeros(0, np.uint32), 0.0)
+
+    return ordered, bare
+
+
+def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int, orders=None) -> pd.DataFrame:
+    """The section's table (module docstring), one row per (mapping, order).
+
+    Parameters
+    ----------
+    trace : tracer.trace.access.AccessTrace
+        Path-traced (with segments).
+    study_runs : DataFrame
+        The study's runs of the same mappings, at 1 and ``n_processes``
+        (:func:`coherence.studies.study`).
+    setup : dict
+        ``mappings`` (Mapping objects), ``hierarchy``, ``placed``, ``cost``,
+        ``machine`` and, for orders that need it, ``tree``.
+    n_processes : int
+    orders : sequence of str, optional
+        Names of :data:`~coherence.ray_orders.RAY_ORDERS`; default all.
+
+    Returns
+    -------
+    DataFrame
+        Columns mapping, order, ``<level>_misses_per_ray`` per level, then :data:`ORDER_COLUMNS`.
+    """
+    from coherence.ray_orders import RAY_ORDERS, scene_bounds_of
+
+    levels = [level.name for level in setup["hierarchy"].levels]
+    bounds = scene_bounds_of(trace.segments)
+    rows = []
+    for mapping in setup["mappings"]:
+        mine = study_runs[study_runs["mapping"] == mapping.name].set_index("n_processes")
+        one, depth_first = mine.loc[1], mine.loc[n_processes]
+        t1, d1 = float(one["user_cycles_max"]), float(one["dispatch_cycles"])
+        w0_df = float(depth_first["work_cycles_without_dispatch"])
+        distribution = mapping.build(trace.width, trace.height, n_processes)
+        for name in orders or RAY_ORDERS:
+            if name == "depth-first":  # the study's run itself
+                summary, aux, sort_cycles, w0_bare = depth_first, np.zeros(0, np.uint32), 0.0, w0_df
+            else:
+                summary, aux, sort_cycles, w0_bare = _ordered_run(trace, distribution, name, setup, bounds)
+            w = float(summary["work_cycles"])
+            w0 = float(summary["work_cycles_without_dispatch"])
+            aux_kind = unpack_aux(aux)[0]
+            row = {"mapping": mapping.name, "order": name}
+            row.update({f"{level}_misses_per_ray": float(summary[f"{level}_misses_per_ray"]) for level in levels})
+            row.update({
+                "n_processes": n_processes, "rays": int(summary["rays"]),
+                "user_seconds_max": float(summary["user_seconds_max"]), "real_seconds": float(summary["real_seconds"]),
+                "speedup_user": t1 / float(summary["user_cycles_max"]),
+                "efficiency": t1 / float(summary["user_cycles_max"]) / n_processes,
+                "load_balance": float(summary["load_balance"]),
+                "coherence_factor": (t1 - d1) / w0_df,
+                "reordering_gain": w0_df / w0_bare,
+                "reordering_overhead": w0_bare / w0,
+                "dispatch_factor": (w0 / w) / ((t1 - d1) / t1),
+                "ray_state_records": int(np.count_nonzero(aux_kind == AuxKind.RAY_STATE)),
+                "queue_records": int(np.count_nonzero(aux_kind == AuxKind.QUEUE_ENTRY)),
+                "sort_cycles": float(sort_cycles),
+            })
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def order_rows(table: pd.DataFrame, rounded) -> list:
+    """``results.csv``'s ``ray_orders`` rows of the section's ``table``: (section, mapping, n_processes, item =
+    order, metric, ``rounded(value)``)."""
+    rows = []
+    for record in table.to_dict(orient="records"):
+        for metric, value in record.items():
+            if metric not in ("mapping", "order", "n_processes"):
+                rows.append(("ray_orders", record["mapping"], int(record["n_processes"]), record["order"], metric,
+                             rounded(value)))
+    return rows
+
+
+def order_table_html(table: pd.DataFrame) -> pd.DataFrame:
+    """The section's table as the page shows it: one row per order, fewer and shorter columns."""
+    shown = table.drop(columns=["n_processes", "rays", "real_seconds"]).copy()
+    shown.columns = [c.replace("_misses_per_ray", " misses/ray").replace("_", " ") for c in shown.columns]
+    return shown
+
+
+def _ordered_run(trace, distribution, name: str, setup: dict, bounds) -> tuple:
+    """One order's run: its summary (:func:`coherence.metrics.run_summary`), aux records, sorting cycles, and
+    the work without dispatch of the same order without its own costs."""
+    from coherence.metrics import run_summary
+    from coherence.ordered_runs import simulate_ordered
+    from coherence.ray_order_base import OrderBuffers
+
+    hierarchy, placed, cost, machine = (setup[key] for key in ("hierarchy", "placed", "cost", "machine"))
+    ordered, bare = registry_orders(name, scene_bounds=bounds, tree=setup.get("tree"))
+    run, work = simulate_ordered(trace, distribution, ordered, hierarchy, placed, cost, machine, name=name,
+                                 extents=OrderBuffers().extents)
+    summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)
+    w0_bare = summary["work_cycles_without_dispatch"]
+    if work.n_aux or work.sort_cycles:
+        plain, _ = simulate_ordered(trace, distribution, bare, hierarchy, placed, cost, machine, name=name)
+        w0_bare = float((plain.processes["user_cycles"] - plain.processes["dispatch_cycles"]).sum())
+    return summary, np.asarray(work.trace.records[trace.n_records:]), work.sort_cycles, w0_bare

@@ -1,0 +1,91 @@
+"""The report's ray-order section (analyses.report_orders) and its place in the report of a path-traced trace."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analyses.cli import main
+from analyses.experiment import Experiment
+from analyses.report_orders import order_section
+from coherence.mappings import DynamicBlock, get_mapping
+from coherence.studies import place_layout, study
+from tracer.kd.tree import build_kdtree
+from tracer.rendering.pathtrace import path_trace
+from tracer.rendering.render import RenderOptions
+from tracer.scenes.catalog import load
+
+FACTORS = ("load_balance", "coherence_factor", "reordering_gain", "reordering_overhead", "dispatch_factor")
+
+
+@pytest.fixture(scope="module")
+def section():
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=12, workload="pathtrace", spp=2)).trace
+    experiment = Experiment(scene="balls", size=12)
+    hierarchy, layout, cost, machine = (experiment.hierarchy_object(), experiment.layout_object(),
+                                        experiment.cost_model(), experiment.machine())
+    mappings = [get_mapping("P"), DynamicBlock(block=3)]
+    runs = study(trace, mappings, [1, 4], hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
+                 scene=scene, progress=False).runs
+    setup = {"mappings": mappings, "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
+             "cost": cost, "machine": machine}
+    return order_section(trace, runs, setup, 4), runs
+
+
+def test_depth_first_rows_are_the_study_runs(section):
+    """The depth-first rows repeat the study's runs at the section's process count (misses per ray, times,
+    speed-up, load balance and coherence) with gain and overhead 1. Fails if T1 were read at the section's
+    process count instead of at 1 (``mine.loc[1]`` made ``mine.loc[n_processes]``) (checked)."""
+    table, runs = section
+    for mapping in ("P", "DB"):
+        row = table[(table["mapping"] == mapping) & (table["order"] == "depth-first")].iloc[0]
+        run = runs[(runs["mapping"] == mapping) & (runs["n_processes"] == 4)].iloc[0]
+        for column in ("L1_misses_per_ray", "L2_misses_per_ray", "user_seconds_max", "real_seconds",
+                       "speedup_user", "load_balance", "coherence_factor", "dispatch_factor"):
+            assert row[column] == pytest.approx(run[column], rel=1e-12), (mapping, column)
+        assert (row["reordering_gain"], row["reordering_overhead"], row["queue_records"]) == (1.0, 1.0, 0)
+
+
+def test_factors_multiply_to_the_efficiency(section):
+    """For every mapping and order, load balance x coherence x gain x overhead x dispatch = efficiency =
+    speed-up / n. Fails if the overhead were the order's work over the bare order's (``w0 / w0_bare``)
+    (checked)."""
+    table, _ = section
+    product = np.prod(table[list(FACTORS)].to_numpy(), axis=1)
+    np.testing.assert_allclose(product, table["efficiency"], rtol=1e-12)
+    np.testing.assert_allclose(table["efficiency"], table["speedup_user"] / 4, rtol=1e-12)
+
+
+def test_wavefront_pays_for_its_queues(section):
+    """The wavefront order writes and reads ray states and queue entries (> 0, the same under both mappings:
+    every ray queued once either way), and they cost: overhead < 1. Fails if the buffer records were left out
+    of the run (``pieces_unit`` replaced by the bare order in ``registry_orders``) (checked)."""
+    table, _ = section
+    wavefront = table[table["order"] == "wavefront"]
+    assert len(wavefront) == 2
+    assert (wavefront["queue_records"] > 0).all() and (wavefront["ray_state_records"] > 0).all()
+    assert wavefront["queue_records"].nunique() == 1
+    assert (wavefront["reordering_overhead"] < 1).all()
+
+
+def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
+    """``coherence report --workload pathtrace`` writes the section: every registered order in results.csv and
+    summary.json, under the mapping the miss map shows, and the page's table; a Whitted report has none. Fails
+    if results_table leaves out the order rows (checked)."""
+    from coherence.ray_orders import RAY_ORDERS
+
+    out = tmp_path / "out"
+    assert main(["report", "balls", "--size", "12", "--processes", "4", "--mappings", "S", "P", "--workload",
+                 "pathtrace", "--spp", "2", "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
+    results = pd.read_csv(out / "results.csv")
+    orders = results[results["section"] == "ray_orders"]
+    assert set(orders["item"]) == set(RAY_ORDERS)
+    summary = json.loads((out / "summary.json").read_text())
+    assert {row["order"] for row in summary["ray_orders"]} == set(RAY_ORDERS)
+    assert set(orders["mapping"]) == {summary["parameters"]["miss_map"]["mapping"]}
+    assert "<h2>Ray orders:" in (out / "index.html").read_text()
+    whitted = tmp_path / "whitted"
+    assert main(["report", "balls", "--size", "12", "--processes", "4", "--mappings", "S", "--out", str(whitted),
+                 "--cache", str(tmp_path / "cache")]) == 0
+    assert "ray_orders" not in set(pd.read_csv(whitted / "results.csv")["section"])
