@@ -63,7 +63,7 @@ from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
            "N_KINDS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult", "SharedState",
-           "ThreadStream", "interleave", "replay_span", "shared_access", "interleave_order", "simulate_threads", "simulate_threads_stream"]
+           "ThreadStream", "interleave", "shared_access", "interleave_order", "simulate_threads", "simulate_threads_stream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
 # cachesim.kernels (accesses ... write misses, back-invalidations at 4).
@@ -466,15 +466,6 @@ def _replay(stream, geometry, machine, state, clock, scratch):
         previous_thread = thread
     return clock
 
-
-#: The replay loop for callers that feed a stream piece by piece (a schedule that
-#: interleaves hardware threads as it runs them, :mod:`coherence.shared_schedule`):
-#: :func:`simulate_threads_stream` without its totals of accesses and writes, which
-#: such a caller adds once at the end (``ACCESSES = HITS + MISSES``,
-#: ``WRITES = WRITE_HITS + WRITE_MISSES``). Arguments: stream, geometry, machine,
-#: state, clock and a scratch array of int64 (3, L); returns the clock after the stream.
-#: One access at a time: :func:`shared_access`.
-replay_span = _replay
 
 def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tuple[CacheGeometry, MachineGeometry]:
     """The kernel's view: one thread's geometry with offsets over all instances, and the machine."""

@@ -8,7 +8,7 @@ scheduler is a hardware thread (:func:`cpu_threads`: free CPUs are taken
 in CPU order, and the CPUs go over the cores before their SMT siblings, so
 the first ``n_cores`` processes get a core each, as an operating system
 spreads work over idle cores before it pairs SMT threads). Every access goes through the shared
-machine's one state (:func:`cachesim.multicore.replay_span`): the instances
+machine's one state (:func:`cachesim.multicore.shared_access`): the instances
 of each level that serve the thread, write-invalidate coherence between
 instances on, so processes running on different cores at the same time warm
 and evict each other's lines at the levels they share and take lines from
@@ -52,11 +52,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import ThreadStream, replay_span
+from cachesim.multicore import shared_access
 from coherence.recost import READ_HITS, WRITE_HITS
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, NO_PROCESS, _has_pixels, _lowest_clock_cpu, _next_task, _pop,
                                  _push)
+from rtcommon.jit import NO_REFCOUNTS
 
 
 
@@ -97,7 +98,7 @@ class SharedMachine(NamedTuple):
     geometry : cachesim.sets.CacheGeometry
     machine : cachesim.multicore.MachineGeometry
     state : cachesim.multicore.SharedArrays
-        Updated in place; ``state.served`` (T, L + 1) tells the level that served each access.
+        Updated in place.
     line_shift : int
         log2 of the first level's line size.
     thread_of : ndarray of int64, shape (C,)
@@ -155,13 +156,52 @@ def cpu_threads(n_cores: int, smt: int) -> np.ndarray:
     return (cpus % n_cores) * smt + cpus // n_cores
 
 
-@njit(cache=True, inline="always")
-def _served_level(served_row, before):
-    """The level whose count in ``served_row`` (L + 1,) went up since ``before`` (L + 1,) (L: memory)."""
-    for level in range(served_row.shape[0]):
-        if served_row[level] != before[level]:
-            return level
-    return served_row.shape[0] - 1
+class _LoopState(NamedTuple):
+    """The event loop's own arrays, allocated by :func:`run_shared_schedule` (the loop allocates nothing).
+
+    Attributes
+    ----------
+    queue_items : ndarray of int64, shape (Q, n + B)
+        Run queues as FIFO rings, one row per queue; ``queue_head``,
+        ``queue_length``, ``ours_waiting`` (Q,) their heads, lengths and how
+        many of ours wait in each.
+    cpu_clock, slice_used, compute_share : ndarray of float64, shape (C,)
+        Each CPU's clock, cycles of its current slice, and compute cycles each access of its pixel carries.
+    running, last_ran, cpu_pixel, next_piece : ndarray of int64, shape (C,)
+        Each CPU's process, the process it ran last, its pixel and the pixel's next access (-1: between pixels).
+    active : ndarray of bool, shape (C,)
+    previous_cpu, own_next, current_task, position, held_count : ndarray of int64, shape (n,)
+        Per process of ours: last CPU, next own task (static), task rendered (-1: none), next pixel of it,
+        take-ahead tasks held.
+    held : ndarray of int64, shape (n, max(take_ahead, 1))
+    next_task : ndarray of int64, shape (1,)
+        The dynamic queue's next task.
+    background_slices : ndarray of int64, shape (B,)
+    scratch : ndarray of int64, shape (3, L)
+        Work space of :func:`cachesim.multicore.shared_access`.
+    """
+
+    queue_items: np.ndarray
+    queue_head: np.ndarray
+    queue_length: np.ndarray
+    ours_waiting: np.ndarray
+    cpu_clock: np.ndarray
+    slice_used: np.ndarray
+    compute_share: np.ndarray
+    running: np.ndarray
+    last_ran: np.ndarray
+    cpu_pixel: np.ndarray
+    next_piece: np.ndarray
+    active: np.ndarray
+    previous_cpu: np.ndarray
+    own_next: np.ndarray
+    current_task: np.ndarray
+    position: np.ndarray
+    held_count: np.ndarray
+    held: np.ndarray
+    next_task: np.ndarray
+    background_slices: np.ndarray
+    scratch: np.ndarray
 
 
 @njit(cache=True, nogil=True)
@@ -177,7 +217,7 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
         ``latency`` (L + 1,): cycles of an access served by each level, memory last.
     schedule : coherence.simulation.Schedule
     queues : coherence.scheduler.RunQueues
-        ``n_queues`` 1 (shared queue) or one per hardware thread (static).
+        ``n_queues`` 1 (shared queue) or one per CPU (static).
     background : coherence.scheduler.BackgroundLoad
         ``skip`` and page placement are not used: every background read is made.
     out : SharedOutputs
@@ -189,8 +229,31 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     int
         The access clock after the run (accesses made, ours and the background's).
     """
+    n_ours = out.cycles.shape[0]
+    n_all = queues.process_queue.shape[0]
+    n_cpus = shared.thread_of.shape[0]
+    n_queues = queues.n_queues
+    loop = _LoopState(
+        np.empty((n_queues, n_all), dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
+        np.zeros(n_queues, dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
+        np.zeros(n_cpus), np.zeros(n_cpus), np.zeros(n_cpus),
+        np.full(n_cpus, NO_PROCESS, dtype=np.int64), np.full(n_cpus, NO_PROCESS, dtype=np.int64),
+        np.zeros(n_cpus, dtype=np.int64), np.full(n_cpus, -1, dtype=np.int64), np.ones(n_cpus, dtype=np.bool_),
+        np.full(n_ours, -1, dtype=np.int64), schedule.own_offsets[:n_ours].copy(), np.full(n_ours, -1, dtype=np.int64),
+        np.zeros(n_ours, dtype=np.int64), np.zeros(n_ours, dtype=np.int64),
+        np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+        np.zeros(n_all - n_ours, dtype=np.int64), np.empty((3, cost.latency.shape[0] - 1), dtype=np.int64))
+    return _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop)
+
+
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
+def _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop):
+    """:func:`run_shared_schedule`'s loop, on the arrays of ``loop`` (a :class:`_LoopState`)."""
+    geometry = shared.geometry
+    machine = shared.machine
     state = shared.state
-    served = state.served
+    thread_of = shared.thread_of
+    line_shift = shared.line_shift
     piece_offsets = pieces.piece_offsets
     piece_addresses = pieces.addresses
     piece_sizes = pieces.sizes
@@ -219,65 +282,43 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     log_threads = out.log_threads
     log_pieces = out.log_pieces
     logging = log_addresses.shape[0] > 0
+    queue_items = loop.queue_items
+    queue_head = loop.queue_head
+    queue_length = loop.queue_length
+    ours_waiting = loop.ours_waiting
+    cpu_clock = loop.cpu_clock
+    slice_used = loop.slice_used
+    compute_share = loop.compute_share
+    running = loop.running
+    last_ran = loop.last_ran
+    cpu_pixel = loop.cpu_pixel
+    next_piece = loop.next_piece
+    active = loop.active
+    previous_cpu = loop.previous_cpu
+    own_next = loop.own_next
+    current_task = loop.current_task
+    position = loop.position
+    held_count = loop.held_count
+    held = loop.held
+    next_task = loop.next_task
+    background_slices = loop.background_slices
+    scratch = loop.scratch
     n_ours = out_cycles.shape[0]
-    n_all = process_queue.shape[0]
-    thread_of = shared.thread_of
-    n_cpus = thread_of.shape[0]
     n_queues = queues.n_queues
     n_levels = latency.shape[0] - 1
-    line_shift = shared.line_shift
 
-    queue_items = np.empty((n_queues, n_all), dtype=np.int64)
-    queue_head = np.zeros(n_queues, dtype=np.int64)
-    queue_length = np.zeros(n_queues, dtype=np.int64)
-    ours_waiting = np.zeros(n_queues, dtype=np.int64)
     for process in queues.start_order:
         _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
-
-    cpu_clock = np.zeros(n_cpus)
-    running = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
-    last_ran = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
-    slice_used = np.zeros(n_cpus)
-    active = np.ones(n_cpus, dtype=np.bool_)
-    # The pixel each hardware thread is in, its next access (-1: between pixels)
-    # and the compute cycles each of its accesses carries.
-    cpu_pixel = np.zeros(n_cpus, dtype=np.int64)
-    next_piece = np.full(n_cpus, -1, dtype=np.int64)
-    compute_share = np.zeros(n_cpus)
-    previous_cpu = np.full(n_ours, -1, dtype=np.int64)
-    background_slices = np.zeros(n_all - n_ours, dtype=np.int64)
     ours_left = n_ours
-
-    own_next = own_offsets[:n_ours].copy()
-    current_task = np.full(n_ours, -1, dtype=np.int64)
-    position = np.zeros(n_ours, dtype=np.int64)
-    held = np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
-    held_count = np.zeros(n_ours, dtype=np.int64)
-    next_task = np.zeros(1, dtype=np.int64)
-
-    # One access at a time goes through the machine as a stream of one, in these arrays.
-    one_address = np.zeros(1, dtype=np.uint64)
-    one_thread = np.zeros(1, dtype=np.int64)
-    one_write = np.zeros(1, dtype=np.bool_)
-    one_size = np.ones(1, dtype=np.int64)
-    one_kind = np.zeros(1, dtype=np.uint8)
-    one = ThreadStream(one_address, one_thread, one_write, one_size, one_kind)
-    background_addresses = np.empty(max(footprint_lines, 1), dtype=np.uint64)
-    background_threads = np.empty(max(footprint_lines, 1), dtype=np.int64)
-    no_flags = np.zeros(0, dtype=np.bool_)
-    no_sizes = np.zeros(0, dtype=np.int64)
-    no_kinds = np.zeros(0, dtype=np.uint8)
-    scratch = np.empty((3, n_levels), dtype=np.int64)
-    before = np.zeros(n_levels + 1, dtype=np.int64)
     access_clock = 0
     logged = 0
-
     while ours_left > 0:
         cpu = _lowest_clock_cpu(cpu_clock, active)
         if cpu < 0:
             break
         clock = cpu_clock[cpu]
         turn_start = clock
+        thread = thread_of[cpu]
         queue = cpu if n_queues > 1 else 0
         process = running[cpu]
         if next_piece[cpu] < 0:  # between pixels: the operating system decides
@@ -303,19 +344,15 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
                 b = process - n_ours
                 start = first_line[b] + background_slices[b] * footprint_lines
                 background_slices[b] += 1
-                for i in range(footprint_lines):
-                    background_addresses[i] = np.uint64((start + i) << line_shift)
-                    background_threads[i] = thread_of[cpu]
-                if logging:
-                    for i in range(footprint_lines):
-                        log_addresses[logged + i] = background_addresses[i]
-                        log_threads[logged + i] = thread_of[cpu]
-                        log_pieces[logged + i] = -1
-                    logged += footprint_lines
-                access_clock = replay_span(
-                    ThreadStream(background_addresses[:footprint_lines], background_threads[:footprint_lines],
-                                 no_flags, no_sizes, no_kinds),
-                    shared.geometry, shared.machine, state, access_clock, scratch)
+                for i in range(footprint_lines):  # one turn: the slice's reads at once
+                    address = np.uint64((start + i) << line_shift)
+                    access_clock += 1
+                    shared_access(thread, address, False, 0, 0, geometry, machine, state, access_clock, scratch)
+                    if logging:
+                        log_addresses[logged] = address
+                        log_threads[logged] = thread
+                        log_pieces[logged] = -1
+                        logged += 1
                 clock += quantum
                 slice_used[cpu] = quantum
                 cpu_clock[cpu] = clock
@@ -327,8 +364,7 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
             previous_cpu[process] = cpu
 
         finished = False
-        offset = np.uint64((process + 1)) * span
-        thread = thread_of[cpu]
+        offset = np.uint64(process + 1) * span
         while True:
             if next_piece[cpu] < 0:  # the next pixel
                 task = current_task[process]
@@ -358,20 +394,16 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
             stop = piece_offsets[pixel + 1]
             k = next_piece[cpu]
             share = compute_share[cpu]
-            while k < stop and clock - turn_start < interleave_cycles:
+            memory = 0.0
+            advance = 0.0
+            while k < stop and clock + advance - turn_start < interleave_cycles:
                 address = piece_addresses[k]
                 if piece_private[k]:
                     address += offset
                 is_write = piece_writes[k]
-                one_address[0] = address
-                one_thread[0] = thread
-                one_write[0] = is_write
-                one_size[0] = piece_sizes[k]
-                one_kind[0] = piece_kinds[k]
-                for level in range(n_levels + 1):
-                    before[level] = served[thread, level]
-                access_clock = replay_span(one, shared.geometry, shared.machine, state, access_clock, scratch)
-                level_served = _served_level(served[thread], before)
+                access_clock += 1
+                level_served = shared_access(thread, address, is_write, piece_sizes[k], np.int64(piece_kinds[k]),
+                                             geometry, machine, state, access_clock, scratch)
                 if logging:
                     log_addresses[logged] = address
                     log_threads[logged] = thread
@@ -384,11 +416,13 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
                         pixel_misses[pixel, level] += 1
                 if level_served < n_levels:
                     accesses[process, level_served, hit_column] += 1
-                memory = latency[0] if is_write else latency[level_served]
-                out_cycles[process, MEMORY_CYCLES] += memory
-                clock += share + memory
-                slice_used[cpu] += share + memory
+                cycles = latency[0] if is_write else latency[level_served]
+                memory += cycles
+                advance += share + cycles
                 k += 1
+            out_cycles[process, MEMORY_CYCLES] += memory
+            clock += advance
+            slice_used[cpu] += advance
             next_piece[cpu] = k
             if k < stop:
                 break  # the turn is over inside the pixel

@@ -44,7 +44,8 @@ def replay_log(run, machine, pieces):
 def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processes, smt, shared_by, scheduler):
     """At Q = 1 every count of every instance (and the accesses each thread had served by each level) equals
     simulate_threads replaying the order the kernel served the accesses in; each process's per-level counts
-    sum to the machine's. Mutation: ``one_thread[0] = cpu`` -> ``one_thread[0] = 0`` in run_shared_schedule."""
+    sum to the machine's. Mutation: ``shared_access(thread, address, is_write, ...`` ->
+    ``shared_access(0, address, is_write, ...`` in _event_loop."""
     trace = synthetic_trace(7, 5, seed=seed)
     placed = place_layout(get_layout("alpha1997"), trace)
     machine = tiny_machine(smt, shared_by, seed)
@@ -67,8 +68,8 @@ def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processe
 
 def test_larger_q_still_replays_exactly_and_keeps_each_process_in_order():
     """At Q = 200 the logged order still replays to the same counts, and each process's accesses come in
-    its pixels' order (a turn splits a pixel but never reorders it). Mutation: ``one_thread[0] = cpu`` ->
-    ``one_thread[0] = 0`` in run_shared_schedule."""
+    its pixels' order (a turn splits a pixel but never reorders it). Mutation: ``shared_access(thread, address,
+    is_write, ...`` -> ``shared_access(0, address, is_write, ...`` in _event_loop."""
     trace = synthetic_trace(6, 6, seed=7)
     placed = place_layout(get_layout("alpha1997"), trace)
     machine = tiny_machine(2, ("thread", "machine"), 7)
@@ -101,7 +102,7 @@ def test_hand_checked_false_sharing_needs_fine_interleaving(q, false_sharing):
     pixel 0 (memory; a write costs 1, clock 1), thread 1 writes pixel 1 (L2 hit; invalidates thread 0's line),
     thread 0 reads pixel 0: a coherence miss on disjoint bytes (false sharing) served by L2 (clock 1 + 6),
     thread 1 reads pixel 1 (L1 hit). At Q = 1000 each thread does its pixel in one turn: thread 0's read hits
-    before thread 1 writes, no false sharing. Mutation: ``clock - turn_start < interleave_cycles`` ->
+    before thread 1 writes, no false sharing. Mutation: ``clock + advance - turn_start < interleave_cycles`` ->
     ``True`` in the access loop (turns never end inside a pixel)."""
     trace = two_pixel_trace()
     placed = place_layout(get_layout("alpha1997"), trace)
