@@ -173,6 +173,9 @@ def write_pages(work: Path, pages: Path) -> list[str]:
     if (pages / "faithfulness.md").exists():
         written.append("faithfulness")
     written = [name for name in written if name]
+    # anchors.md is written by anchors.py from anchors.json beside it; it is listed, not rewritten
+    if (pages / "anchors.md").exists():
+        written.append("anchors")
     if (pages / "performance.json").exists():
         from performance import write_performance_page  # noqa: PLC0415 (beside this script)
         write_performance_page(pages)

@@ -1,0 +1,354 @@
+"""Measure the published ray-reordering findings of ``anchors.toml`` and write ``anchors.md``.
+
+``python docs/results/anchors.py run --work DIR [--size N] [--only ID ...]``
+    measures each anchor on a path-traced trace of the data file's scene at
+    ``N`` x ``N`` pixels and writes ``DIR/anchors.json``: per anchor the
+    values at each level, the misses per ray behind them and the command that
+    reproduces it, with the commit, machine, date and wall time.
+``python docs/results/anchors.py page --work DIR``
+    copies that JSON beside this script (``anchors.json``) and writes
+    ``anchors.md`` from it and the data file; ``page`` without ``--work``
+    rewrites the page from the stored JSON.
+
+What each quantity is and how a rule decides "confirmed" is stated at the top
+of ``anchors.toml``. An anchor whose order is not registered in
+:data:`coherence.ray_orders.RAY_ORDERS` at the commit run is "not measured",
+with the reason.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import operator
+import shlex
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+sys.path.insert(0, str(HERE))
+from generate import git_commit, machine  # noqa: E402
+from pages import STAMP_PREFIX, markdown_table  # noqa: E402
+
+DATA = HERE / "anchors.toml"
+MEASURES = ("bounce_ratio", "order_gain", "submission_change")
+RULES = {">=": operator.ge, "<=": operator.le}
+ANCHOR_FIELDS = ("id", "reference", "finding", "published", "citation", "claim", "measure", "order", "levels",
+                 "rule", "threshold")
+RUN_FIELDS = ("scene", "spp", "seed", "max_depth", "hierarchy", "layout", "submission_seed")
+CONFIRMED, NOT_CONFIRMED, NOT_MEASURED = "confirmed", "not confirmed", "not measured"
+
+
+def load_anchors(path: Path = DATA) -> tuple[dict, list[dict]]:
+    """The run settings and the anchors of the data file, checked.
+
+    Raises
+    ------
+    ValueError
+        Naming the file, the anchor and the field that is missing or wrong.
+    """
+    with open(path, "rb") as handle:
+        data = tomllib.load(handle)
+    run = data.get("run", {})
+    for field in RUN_FIELDS:
+        if field not in run:
+            raise ValueError(f"{path.name}: [run] needs {field!r}")
+    anchors = data.get("anchor", [])
+    seen = set()
+    for number, anchor in enumerate(anchors, 1):
+        where = f"{path.name}: anchor {anchor.get('id', number)!r}"
+        for field in ANCHOR_FIELDS:
+            if field not in anchor:
+                raise ValueError(f"{where} needs {field!r}")
+        if anchor["id"] in seen:
+            raise ValueError(f"{where} repeats an id")
+        seen.add(anchor["id"])
+        if anchor["measure"] not in MEASURES:
+            raise ValueError(f"{where}: measure must be one of {', '.join(MEASURES)}, got {anchor['measure']!r}")
+        if anchor["rule"] not in RULES:
+            raise ValueError(f"{where}: rule must be one of {', '.join(RULES)}, got {anchor['rule']!r}")
+        if not anchor["levels"] or not all(isinstance(level, str) for level in anchor["levels"]):
+            raise ValueError(f"{where}: levels must be a non-empty list of level names such as \"L2\"")
+        if anchor["measure"] == "bounce_ratio" and "bounce" not in anchor:
+            raise ValueError(f"{where}: bounce_ratio needs 'bounce'")
+    if not anchors:
+        raise ValueError(f"{path.name} holds no [[anchor]]")
+    return run, anchors
+
+
+def verdict(values: dict, rule: str, threshold: float) -> str:
+    """``confirmed`` when every level's value satisfies ``value rule threshold``; ``not measured`` without values.
+
+    Parameters
+    ----------
+    values : dict
+        Level name -> measured value (None when not measured).
+    """
+    if not values or any(value is None for value in values.values()):
+        return NOT_MEASURED
+    holds = all(RULES[rule](float(value), float(threshold)) for value in values.values())
+    return CONFIRMED if holds else NOT_CONFIRMED
+
+
+def line_counts(records: np.ndarray, placed, line_size: int) -> np.ndarray:
+    """Lines of ``line_size`` bytes each record spans (int64, (R,)), as ``placed.addresses`` lists them."""
+    from tracer.trace.records import INDEX_MASK, KIND_SHIFT
+
+    records = np.asarray(records, dtype=np.uint32)
+    kinds = (records >> np.uint32(KIND_SHIFT)).astype(np.int64)
+    rows = placed.kind_first[kinds] + (records & np.uint32(INDEX_MASK)).astype(np.int64)
+    shift = line_size.bit_length() - 1
+    start = placed.record_start[rows]
+    return ((start + placed.record_size[rows] - 1) >> shift) - (start >> shift) + 1
+
+
+def misses_by_segment(trace, placed, hierarchy) -> np.ndarray:
+    """Misses of every segment at every level, the trace replayed as traced (depth-first) on empty caches.
+
+    Returns
+    -------
+    ndarray of int64, shape (S, n_levels)
+        An access misses level ``k`` when a level below ``k`` or memory
+        served it; the columns sum to the replay's misses per level.
+    """
+    from cachesim import simulate
+
+    line_size = min(level.line_size for level in hierarchy.levels)
+    records = np.asarray(trace.records)
+    addresses = placed.addresses(records, line_size)
+    result = simulate(addresses, hierarchy, return_levels=True)
+    ints = trace.segments.ints
+    record_segment = np.repeat(np.arange(len(ints)), ints[:, 5] - ints[:, 4])
+    access_segment = np.repeat(record_segment, line_counts(records, placed, line_size))
+    n_levels = len(hierarchy.levels)
+    out = np.zeros((len(ints), n_levels), dtype=np.int64)
+    for level in range(n_levels):
+        out[:, level] = np.bincount(access_segment, weights=result.served_by > level, minlength=len(ints))
+    if not np.array_equal(out.sum(axis=0), np.asarray(result.misses, dtype=np.int64)):
+        raise ValueError("misses per segment do not add up to the replay's misses: the record-to-line "
+                         "counts disagree with the layout's addresses")
+    return out
+
+
+class Workload:
+    """One path-traced trace of the data file's scene, placed, with its machine and tree."""
+
+    def __init__(self, run: dict, size: int, max_depth: int):
+        from analyses.traces import cached_trace
+        from cachesim.config import get_hierarchy
+        from coherence.layout import get_layout
+        from coherence.studies import place_layout
+
+        self.scene, self.trace, _ = cached_trace(run["scene"], size, workload="pathtrace", max_depth=max_depth,
+                                                 path_samples=(run["spp"], run["seed"]), progress=False)
+        self.placed = place_layout(get_layout(run["layout"]), self.trace, self.scene)
+        self.hierarchy = get_hierarchy(run["hierarchy"])
+        self.size, self._tree = size, None
+
+    @property
+    def n_rays(self) -> int:
+        return self.trace.segments.n_segments
+
+    def level(self, name: str) -> int:
+        names = [level.name for level in self.hierarchy.levels]
+        if name not in names:
+            raise ValueError(f"anchors.toml: level {name!r} is not a level of {names}")
+        return names.index(name)
+
+    def tree(self):
+        if self._tree is None:
+            from tracer.kd.tree import build_kdtree
+            from tracer.rendering.workload import get_workload
+
+            self._tree = build_kdtree(self.scene, get_workload("pathtrace").kd_config)
+        return self._tree
+
+    def pixel_rows(self, pixel_order: np.ndarray) -> np.ndarray:
+        """Segment rows with pixels in ``pixel_order``, each pixel's rows as traced."""
+        pixels = self.trace.segments.ints[:, 0]
+        starts = np.searchsorted(pixels, pixel_order, side="left")
+        stops = np.searchsorted(pixels, pixel_order, side="right")
+        return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)]).astype(np.int64)
+
+    def order_misses(self, order: str, rows: np.ndarray) -> np.ndarray:
+        """Misses per level (int64, (n_levels,)) of one process tracing ``rows`` in ``order``."""
+        from coherence.ray_orders import get_ray_order, order_pieces, replay_order
+
+        recipe = get_ray_order(order)
+        tree = self.tree() if getattr(recipe, "needs_tree", False) else None
+        pieces = order_pieces(self.trace.segments, rows, recipe, tree=tree)
+        return np.asarray(replay_order(self.trace.records, pieces, self.placed, self.hierarchy).misses,
+                          dtype=np.int64)
+
+
+def registered_orders() -> list[str]:
+    try:
+        from coherence.ray_orders import RAY_ORDERS
+    except ImportError:
+        return []
+    return list(RAY_ORDERS)
+
+
+def measure(anchor: dict, work: Workload, run: dict) -> dict:
+    """One anchor's values per level and the misses per ray behind them."""
+    levels = {name: work.level(name) for name in anchor["levels"]}
+    if anchor["measure"] == "bounce_ratio":
+        misses = misses_by_segment(work.trace, work.placed, work.hierarchy)
+        ints = work.trace.segments.ints
+        extension = ints[:, 3] != 2  # camera and bounce rays; shadow rays excluded
+        camera = extension & (ints[:, 2] == 0)
+        later = extension & (ints[:, 2] >= anchor["bounce"])
+        per_ray = {"camera": misses[camera].sum(axis=0) / max(camera.sum(), 1),
+                   f"bounce>={anchor['bounce']}": misses[later].sum(axis=0) / max(later.sum(), 1)}
+        values = {name: (float(per_ray[f"bounce>={anchor['bounce']}"][k] / per_ray["camera"][k])
+                         if later.any() and per_ray["camera"][k] > 0 else None) for name, k in levels.items()}
+        rays = {"camera": int(camera.sum()), f"bounce>={anchor['bounce']}": int(later.sum())}
+        return {"values": values, "misses_per_ray": {key: {name: float(v[k]) for name, k in levels.items()}
+                                                     for key, v in per_ray.items()}, "rays": rays}
+    if anchor["order"] not in registered_orders():
+        return {"values": {name: None for name in levels},
+                "reason": f"order {anchor['order']!r} is not registered in coherence.ray_orders "
+                          f"(registered: {', '.join(registered_orders()) or 'none'})"}
+    row_major = np.arange(work.n_rays, dtype=np.int64)
+    if anchor["measure"] == "order_gain":
+        base, other = work.order_misses("depth-first", row_major), work.order_misses(anchor["order"], row_major)
+        values = {name: float(1 - other[k] / base[k]) if base[k] else None for name, k in levels.items()}
+        labels = ("depth-first", anchor["order"])
+    else:
+        shuffled = np.random.default_rng(run["submission_seed"]).permutation(work.trace.n_pixels)
+        base = work.order_misses(anchor["order"], row_major)
+        other = work.order_misses(anchor["order"], work.pixel_rows(shuffled))
+        values = {name: float(other[k] / base[k] - 1) if base[k] else None for name, k in levels.items()}
+        labels = (f"{anchor['order']}, row-major", f"{anchor['order']}, random pixel order")
+    return {"values": values, "rays": {"all": work.n_rays},
+            "misses_per_ray": {label: {name: float(m[k] / work.n_rays) for name, k in levels.items()}
+                               for label, m in zip(labels, (base, other))}}
+
+
+def run_anchors(work_dir: Path, size: int, only=None, data: Path = DATA) -> dict:
+    """Measure the anchors (``only``: their ids) and write ``work_dir/anchors.json``."""
+    run, anchors = load_anchors(data)
+    chosen = [a for a in anchors if only is None or a["id"] in only]
+    unknown = set(only or ()) - {a["id"] for a in anchors}
+    if unknown:
+        raise ValueError(f"--only: no anchor {', '.join(sorted(unknown))} in {data.name}")
+    record = {"size": size, "commit": git_commit(), "machine": machine(),
+              "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "run": run, "anchors": {}}
+    workloads = {}
+    begun = time.perf_counter()
+    for anchor in chosen:
+        depth = int(anchor.get("max_depth", run["max_depth"]))
+        started = time.perf_counter()
+        if depth not in workloads:
+            workloads[depth] = Workload(run, size, depth)
+        result = measure(anchor, workloads[depth], run)
+        result["max_depth"] = depth
+        result["seconds"] = round(time.perf_counter() - started, 1)
+        result["command"] = ("python docs/results/anchors.py run --work OUT "
+                             f"--size {size} --only {shlex.quote(anchor['id'])}")
+        record["anchors"][anchor["id"]] = result
+        print(f"{anchor['id']}: {result['values']} ({result['seconds']} s)", flush=True)
+    record["seconds"] = round(time.perf_counter() - begun, 1)
+    record["scene_bytes"] = {str(depth): work.placed.scene_bytes for depth, work in workloads.items()}
+    work_dir.mkdir(parents=True, exist_ok=True)
+    target = work_dir / "anchors.json"
+    temporary = target.with_suffix(".json.tmp")
+    temporary.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    temporary.replace(target)
+    return record
+
+
+def _number(value) -> str:
+    return "—" if value is None else f"{value:.3g}"
+
+
+def page_text(record: dict, data: Path = DATA) -> str:
+    """The page ``anchors.md``: the data file's anchors, the measurements of ``record``, stamps."""
+    run, anchors = load_anchors(data)
+    size = record["size"]
+    stamp = (f"{STAMP_PREFIX} `python docs/results/anchors.py run --work OUT --size {size}` at commit "
+             f"`{record['commit']}` ({record['date']}, "
+             f"{record['seconds']:.0f} s on {record['machine']}).")
+    blocks = ["# Anchors: published findings on reordering incoherent rays",
+              f"""Each published finding is stated as a claim our path-traced traces can test,
+with the rule that decides it, in `docs/results/anchors.toml` (committed before
+anything was measured). Ours: {run['scene']} at {size}×{size} pixels, {run['spp']} samples per
+pixel, seed {run['seed']}, bounce limit {run['max_depth']} unless the anchor says otherwise;
+one process owns every ray; the {run['hierarchy']} hierarchy on empty caches;
+the {run['layout']} layout, whose records of the scene and its tree take
+{max(record['scene_bytes'].values()):,} bytes. A "miss" at a level is an access that level could not
+serve. Citations name where the figure was read; "body not checked" means only
+the abstract was seen. A small image on a scene that fits in the L3 tests the
+direction of each finding, not its size.""",
+              "## Verdicts"]
+    rows = []
+    for anchor in anchors:
+        result = record["anchors"].get(anchor["id"])
+        values = result["values"] if result else {}
+        measured = ", ".join(f"{level} {_number(values.get(level))}" for level in anchor["levels"]) if result \
+            else "not run"
+        rows.append({"anchor": anchor["id"], "published": anchor["published"], "citation": anchor["citation"],
+                     "order": anchor["order"], "quantity": anchor["measure"],
+                     "rule": f"{anchor['rule']} {anchor['threshold']:g}", "ours": measured,
+                     "verdict": verdict(values, anchor["rule"], anchor["threshold"]) if result else NOT_MEASURED})
+    import pandas as pd
+
+    blocks += [markdown_table(pd.DataFrame(rows)), stamp]
+    blocks.append("## Each anchor")
+    for anchor in anchors:
+        result = record["anchors"].get(anchor["id"])
+        blocks.append(f"### `{anchor['id']}`")
+        blocks.append(f"{anchor['reference']}.\n\n- Finding: {anchor['finding']}\n"
+                      f"- Published: {anchor['published']} ({anchor['citation']}).\n"
+                      f"- Our claim: {anchor['claim']}")
+        if result is None:
+            blocks.append("Not run in this record.")
+            continue
+        if "reason" in result:
+            blocks.append(f"Not measured: {result['reason']}. Reproduce: `{result['command']}`.")
+            continue
+        table = pd.DataFrame([{"rays": key, **{level: value for level, value in per_level.items()}}
+                              for key, per_level in result["misses_per_ray"].items()])
+        blocks.append(f"Misses per ray (bounce limit {result['max_depth']}; rays counted: "
+                      + ", ".join(f"{key} {count}" for key, count in result["rays"].items()) + "):")
+        blocks += [markdown_table(table), stamp]
+        blocks.append(f"{anchor['measure']}: " + ", ".join(f"{level} {_number(value)}"
+                                                           for level, value in result["values"].items())
+                      + f" (rule {anchor['rule']} {anchor['threshold']:g}): "
+                      f"**{verdict(result['values'], anchor['rule'], anchor['threshold'])}**. "
+                      f"Reproduce: `{result['command']}`.")
+    return "\n\n".join(blocks) + "\n"
+
+
+def write_page(record: dict, pages: Path = HERE) -> Path:
+    """Store ``record`` as ``anchors.json`` and write ``anchors.md`` beside this script."""
+    (pages / "anchors.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    path = pages / "anchors.md"
+    path.write_text(page_text(record), encoding="utf-8")
+    return path
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="step", required=True)
+    run = sub.add_parser("run", help="measure the anchors into --work/anchors.json")
+    run.add_argument("--work", type=Path, required=True)
+    run.add_argument("--size", type=int, default=64, help="image width and height (default 64)")
+    run.add_argument("--only", nargs="+", metavar="ID")
+    page = sub.add_parser("page", help="write anchors.md from --work/anchors.json (default: the stored one)")
+    page.add_argument("--work", type=Path)
+    args = parser.parse_args(argv)
+    if args.step == "run":
+        run_anchors(args.work, args.size, args.only)
+        return
+    source = (args.work / "anchors.json") if args.work else HERE / "anchors.json"
+    record = json.loads(source.read_text(encoding="utf-8"))
+    print(write_page(record))
+
+
+if __name__ == "__main__":
+    main()
