@@ -14,6 +14,8 @@ Built-in orders, by name in :data:`RAY_ORDERS`:
   its own; replaying it equals replaying the pixels in order.
 * ``wavefront``: breadth-first by bounce, first in, first out
   (:func:`~coherence.ray_order_base.wavefront_pieces`).
+* ``morton-origin``, ``octant-origin``, ``hit-point``: the wavefront with
+  each phase sorted by a spatial key (:mod:`coherence.sorted_ray_orders`).
 """
 from __future__ import annotations
 
@@ -25,10 +27,11 @@ from rtcommon.validate import InputError
 from tracer.trace.segments import RaySegments
 
 from .ray_order_base import (OrderBuffers, OrderedPieces, RayOrder, depth_first_pieces, order_stream, replay_order,
-                             wavefront_pieces)
+                             slots_needed, wavefront_pieces)
+from .sorted_ray_orders import HitPoint, MortonOrigin, OctantOrigin
 
-__all__ = ["RAY_ORDERS", "DepthFirst", "OrderBuffers", "OrderedPieces", "RayOrder", "Wavefront", "get_ray_order",
-           "order_pieces", "order_stream", "replay_order", "scene_bounds_of"]
+__all__ = ["RAY_ORDERS", "DepthFirst", "HitPoint", "MortonOrigin", "OctantOrigin", "OrderBuffers", "OrderedPieces", "RayOrder", "Wavefront", "get_ray_order",
+           "order_pieces", "order_stream", "replay_order", "scene_bounds_of", "slots_needed"]
 
 
 @dataclass(frozen=True)
@@ -56,7 +59,8 @@ class Wavefront(RayOrder):
         return wavefront_pieces(segments, rows)
 
 
-RAY_ORDERS: dict[str, RayOrder] = {order.name: order for order in (DepthFirst(), Wavefront())}
+RAY_ORDERS: dict[str, RayOrder] = {
+    order.name: order for order in (DepthFirst(), Wavefront(), MortonOrigin(), OctantOrigin(), HitPoint())}
 
 
 def get_ray_order(name_or_order) -> RayOrder:

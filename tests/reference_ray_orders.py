@@ -101,3 +101,35 @@ def events_of(pieces):
         if q < pieces.n_pieces:
             events.append(("piece", int(pieces.piece_first[q]), int(pieces.piece_stop[q])))
     return events
+
+
+def morton_key(point, lo, hi, bits):
+    """Morton key of one point, bit by bit: axis a's bit i at bit 3 i + 2 - a (x most significant)."""
+    key = 0
+    for axis in range(3):
+        extent = hi[axis] - lo[axis]
+        cell = 0
+        if extent > 0:
+            cell = min(max(int(np.floor((point[axis] - lo[axis]) / extent * 2**bits)), 0), 2**bits - 1)
+        for i in range(bits):
+            if cell >> i & 1:
+                key |= 1 << (3 * i + 2 - axis)
+    return key
+
+
+def order_keys(order_name, rays, lo, hi):
+    """The sort key of each ray (rows of RaySegments.rays) for a sorted wavefront, one ray at a time."""
+    keys = []
+    diagonal = float(np.sqrt(((np.asarray(hi) - np.asarray(lo)) ** 2).sum()))
+    for ray in rays:
+        origin, direction, hit = ray[0:3], ray[3:6], ray[6:9]
+        if order_name == "morton-origin":
+            keys.append(morton_key(origin, lo, hi, 21))
+        elif order_name == "octant-origin":
+            octant = sum(1 << (2 - a) for a in range(3) if direction[a] < 0)
+            keys.append(octant << 60 | morton_key(origin, lo, hi, 20))
+        else:
+            if not np.isfinite(hit).all():
+                hit = [min(max(origin[a] + diagonal * direction[a], lo[a]), hi[a]) for a in range(3)]
+            keys.append(morton_key(hit, lo, hi, 21))
+    return keys
