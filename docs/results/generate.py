@@ -32,9 +32,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = Path(__file__).resolve().parent
 
-#: Job name -> the ``coherence`` arguments it runs (``--out`` is added).
+#: Job name -> the ``coherence`` arguments it runs (``--out`` is added), or a
+#: ``python`` script of the repository and its arguments.
 #: ``{size}`` is the image size chosen with ``--size``; whatif studies keep
-#: their own default size.
+#: their own default size; the today jobs take ``--today-size``.
 JOBS = {
     "paper": ["paper", "--size", "{size}"],
     "report-balls": ["report", "balls", "--size", "{size}"],
@@ -42,6 +43,10 @@ JOBS = {
     "whatif-texture": ["whatif", "texture"],
     "robustness": ["robustness", "--size", "{robustness_size}", "--trajectories", "{trajectories}",
                    "--faithfulness-md", "{out}/faithfulness.md"],
+    "today-report": ["report", "balls", "--platform", "zen4-7950x", "--size", "{today_size}",
+                     "--processes", "8", "16", "32"],
+    "today-sharing": ["python", "docs/results/today_sharing.py", "--size", "{today_size}", "--platform",
+                      "zen4-7950x"],
 }
 
 
@@ -83,11 +88,15 @@ def run_job(name: str, work: Path, values: dict) -> dict:
     out.mkdir(parents=True)
     arguments = [part.format(out=out, **values) for part in JOBS[name]] + ["--out", str(out)]
     shown = [part.replace(str(out), "OUT") for part in arguments]
-    stamp = {"command": "coherence " + shlex.join(shown), "commit": git_commit(),
+    if arguments[0] == "python":
+        command, shown = [sys.executable, *arguments[1:]], shlex.join(shown)
+    else:
+        command, shown = [sys.executable, "-m", "analyses", *arguments], "coherence " + shlex.join(shown)
+    stamp = {"command": shown, "commit": git_commit(),
              "machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     started = time.perf_counter()
     with open(out / "log.txt", "w", encoding="utf-8") as log:
-        subprocess.run([sys.executable, "-m", "analyses", *arguments], cwd=ROOT, check=True,
+        subprocess.run(command, cwd=ROOT, check=True,
                        stdout=log, stderr=subprocess.STDOUT)
     stamp["seconds"] = round(time.perf_counter() - started, 1)
     (out / "stamp.json").write_text(json.dumps(stamp, indent=1) + "\n", encoding="utf-8")
@@ -102,13 +111,14 @@ def main(argv: list[str] | None = None) -> None:
     run.add_argument("--size", type=int, default=512, help="image size of paper and report (default 512)")
     run.add_argument("--robustness-size", type=int, default=256)
     run.add_argument("--trajectories", type=int, default=10)
+    run.add_argument("--today-size", type=int, default=256, help="image size of the today jobs (default 256)")
     run.add_argument("--only", nargs="+", choices=sorted(JOBS), default=sorted(JOBS))
     pages = sub.add_parser("pages", help="write docs/results/*.md from --work")
     pages.add_argument("--work", type=Path, required=True)
     args = parser.parse_args(argv)
     if args.step == "run":
         values = {"size": args.size, "robustness_size": args.robustness_size,
-                  "trajectories": args.trajectories}
+                  "trajectories": args.trajectories, "today_size": args.today_size}
         for name in args.only:
             stamp = run_job(name, args.work, values)
             print(f"{name}: {stamp['command']} ({stamp['seconds']} s)", flush=True)

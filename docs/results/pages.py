@@ -156,6 +156,76 @@ lost more efficiency than imbalance at that point.""")
     return "whatif"
 
 
+def today_page(work: Path, pages: Path) -> str | None:
+    """``today.md``: the study's question asked of a machine of today (jobs today-report and today-sharing)."""
+    report = _job(work, "today-report", "summary.json")
+    sharing_folder = work / "today-sharing"
+    if report is None or not (sharing_folder / "stamp.json").exists():
+        return None
+    folder, stamp, summary, size = report
+    platform = summary["parameters"]["platform"]
+    sharing_stamp = _stamp(sharing_folder)
+    sharing = pd.read_csv(sharing_folder / "sharing.csv")
+    page = _Page("Today's machine: does load balance still decide?", f"""
+The study's question asked of `{platform['name']}` ({platform['n_cores']} cores, SMT{platform['smt']},
+levels shared by {', '.join(platform['shared_by'])}; `docs/platforms.md`), on balls at
+{size}×{size} pixels rendered by today's tracer with its per-ray data and frame-buffer
+writes logged. Small images: every figure here is at {size}×{size}, not the study's
+512×512, and DB's 32×32 blocks number {(size // 32) ** 2}.
+
+How the schedule's runs simulate the shared levels is recorded in the report's
+parameters: *{platform['shared_levels']}*. The sharing tables below replay one
+interleaved stream exactly through the shared levels instead
+(`docs/results/today_sharing.py`).""")
+    results = pd.read_csv(folder / "results.csv")
+    runs = results[(results["section"] == "runs") & (results["n_processes"] > 1)]
+    wide = runs.pivot_table(index=["n_processes", "mapping"], columns="metric", values="value",
+                            sort=False).reset_index()
+    wide["n_processes"] = wide["n_processes"].astype(int)
+    page.text("## Load balance or coherence, at 8, 16 and 32 threads")
+    page.text(f"The report's verdict at {summary['verdict']['n_processes']} processes: "
+              f"*{summary['verdict']['headline']}*")
+    page.table(wide[["n_processes", "mapping", "speedup_user", "speedup_real", "imbalance_loss",
+                     "coherence_loss", "dispatch_loss"]], stamp)
+    lines = []
+    for count, rows in wide.groupby("n_processes", sort=True):
+        rows = rows.set_index("mapping")
+        imbalance, coherence = rows["imbalance_loss"].astype(float), rows["coherence_loss"].astype(float)
+        larger = "load balance" if imbalance.max() > coherence.max() else "coherence"
+        lines.append(f"- {count} processes: {larger} costs more (imbalance up to {imbalance.max():.1%} "
+                     f"({imbalance.idxmax()}), coherence up to {coherence.max():.1%} ({coherence.idxmax()})); "
+                     f"best user speed-up {rows['speedup_user'].astype(float).max():.2f} "
+                     f"({rows['speedup_user'].astype(float).idxmax()}).")
+    page.text("\n".join(lines))
+    three = sharing[sharing["frame_buffer_bytes"] == 3]
+    page.text("## False sharing of 3-byte pixels, and DB's counter")
+    page.table(three[["mapping", "threads", "smt", "L1_misses", "L2_misses", "L3_misses", "coherence_misses",
+                      "false_sharing_misses", "counter_accesses", "counter_coherence_misses"]], sharing_stamp)
+    page.text("""A false-sharing miss is a miss on a line this cache lost to another thread's
+write of other bytes, counted when the thread comes back to the line. P's
+threads write pixels `n` apart: with 3-byte pixels a 64-byte line holds 21,
+so at 8 threads a thread returns to a line it shared, at 32 its next pixel
+lies on another line and it never returns. DB's counter is written once per
+task; a copy evicted before another thread's write is a capacity miss, not a
+coherence miss.""")
+    page.text("## Frame-buffer pixel size (S and P)")
+    page.table(sharing[sharing["mapping"].isin(["S", "P"])][["frame_buffer_bytes", "mapping", "threads", "smt",
+                                                             "false_sharing_misses", "memory_cycles"]]
+               .sort_values(["mapping", "threads", "smt", "frame_buffer_bytes"], kind="stable"), sharing_stamp)
+    smt = three.pivot_table(index=["mapping", "threads"], columns="smt", values="memory_cycles",
+                            sort=False).dropna().reset_index()
+    smt.columns = ["mapping", "threads", "memory_cycles_smt_on", "memory_cycles_smt_off"]
+    smt["on_over_off"] = smt["memory_cycles_smt_on"] / smt["memory_cycles_smt_off"]
+    page.text("## SMT: two threads a core or one")
+    page.table(smt, sharing_stamp)
+    page.text("""`memory_cycles` sums each access's latency at the level that served it. SMT on
+packs thread pairs onto half the cores, sharing their L1 and L2; off, every
+thread has a core. Below 1, neighbouring threads sharing a core's caches
+gained more than the halved capacity cost.""")
+    page.write(pages / "today.md")
+    return "today"
+
+
 def write_pages(work: Path, pages: Path) -> list[str]:
     """Write every page whose job's outputs are in ``work``, and the index.
 
@@ -167,7 +237,7 @@ def write_pages(work: Path, pages: Path) -> list[str]:
     paper = _job(work, "paper", "paper.json")
     report = _job(work, "report-balls", "summary.json")
     written = [paper_page(paper, pages) if paper else None, report_page(report, pages) if report else None,
-               whatif_page(work, pages)]
+               whatif_page(work, pages), today_page(work, pages)]
     # faithfulness.md is written by analyses.faithfulness from faithfulness.json beside it
     # (its command and commit head the page); it is listed, not rewritten
     if (pages / "faithfulness.md").exists():
