@@ -52,7 +52,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import shared_access
+from cachesim.multicore import HITS, shared_access
 from coherence.recost import READ_HITS, WRITE_HITS
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, NO_PROCESS, _has_pixels, _lowest_clock_cpu, _next_task, _pop,
@@ -306,6 +306,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     n_ours = out_cycles.shape[0]
     n_queues = queues.n_queues
     n_levels = latency.shape[0] - 1
+    counts = state.counts
+    served = state.served
+    first_instance = machine.instance_of[0]
+    allocate0 = geometry.write_allocate[0]
+    first_shift = np.uint64(geometry.line_shift)
 
     for process in queues.start_order:
         _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
@@ -365,6 +370,10 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
 
         finished = False
         offset = np.uint64(process + 1) * span
+        instance0 = first_instance[thread]
+        # A line this thread's previous access of the turn left in its first
+        # level, as its set's most recent entry (-1: none).
+        previous_line = np.int64(-1)
         while True:
             if next_piece[cpu] < 0:  # the next pixel
                 task = current_task[process]
@@ -401,9 +410,18 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 if piece_private[k]:
                     address += offset
                 is_write = piece_writes[k]
+                kind = np.int64(piece_kinds[k])
+                line0 = np.int64(address >> first_shift)
                 access_clock += 1
-                level_served = shared_access(thread, address, is_write, piece_sizes[k], np.int64(piece_kinds[k]),
-                                             geometry, machine, state, access_clock, scratch)
+                if line0 == previous_line and not is_write:
+                    # a read hit that changes nothing but the counts (nothing else ran since)
+                    counts[0, instance0, kind, HITS] += 1
+                    served[thread, 0] += 1
+                    level_served = 0
+                else:
+                    level_served = shared_access(thread, address, is_write, piece_sizes[k], kind, geometry, machine,
+                                                 state, access_clock, scratch)
+                previous_line = line0 if (allocate0 or not is_write) else np.int64(-1)
                 if logging:
                     log_addresses[logged] = address
                     log_threads[logged] = thread
