@@ -37,7 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from analyses.traces import cached_trace  # noqa: E402
 from bench_cachesim import ray_tracer_like_stream  # noqa: E402
 from cachesim import modern, simulate  # noqa: E402
-from cachesim.multicore import interleave_order, simulate_threads  # noqa: E402
+from cachesim.interleave import interleave_order  # noqa: E402
+from cachesim.multicore import simulate_threads  # noqa: E402
 from cachesim.sharing import SharedHierarchy  # noqa: E402
 from coherence.layout import get_layout  # noqa: E402
 from coherence.studies import place_layout  # noqa: E402

@@ -24,7 +24,8 @@ import numpy as np
 
 from bench_cachesim import ray_tracer_like_stream
 from cachesim import Hierarchy, Prefetcher, SharedHierarchy, get_hierarchy, simulate
-from cachesim.multicore import interleave, simulate_threads
+from cachesim.interleave import interleave
+from cachesim.multicore import simulate_threads
 from timing import best_of
 
 

@@ -23,7 +23,8 @@ from cachesim.io import read_addresses
 from cachesim.prefetch_config import Prefetcher
 from cachesim.kernels import CacheArrays, CacheGeometry
 from cachesim.reuse import ReuseCounter, ReuseProfile, reuse_distances, reuse_profile
-from cachesim.multicore import SharedState, simulate_threads
+from cachesim.multicore import simulate_threads
+from cachesim.multicore_state import SharedState
 from cachesim.sharing import SharedHierarchy
 from cachesim.simulate import CacheState, SimulationResult, as_addresses, simulate, simulate_many
 from cachesim.tlb_config import Tlb, alpha21164_dtb

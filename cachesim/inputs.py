@@ -77,3 +77,18 @@ def as_pcs(pcs, n_accesses: int, name: str = "pcs") -> np.ndarray:
     if array.size and (array.min() < 0 or (array.dtype.kind == "u" and array.max() >= 2**63)):
         raise InputError(f"{name} must be non-negative integers below 2**63")
     return np.ascontiguousarray(array, dtype=np.int64)
+
+
+def small_integers(values, n: int, name: str, limit: int, what: str, lowest: int = 0) -> np.ndarray:
+    """``values`` as int64 (N,), each in [lowest, limit), or a one-line error naming the first bad one."""
+    array = np.asarray(values)
+    if array.ndim != 1 or array.size != n:
+        raise InputError(f"{name} must have shape ({n},), one per address; got {array.shape}")
+    if n and array.dtype.kind not in "iu":
+        raise InputError(f"{name} must be integers, got dtype {array.dtype}")
+    array = np.ascontiguousarray(array, dtype=np.int64) if n else np.zeros(0, dtype=np.int64)
+    bad = np.flatnonzero((array < lowest) | (array >= limit))
+    if bad.size:
+        raise InputError(f"{name}[{int(bad[0])}] is {int(array[bad[0]])}; expected an integer in "
+                         f"[{lowest}, {limit}) ({what})")
+    return array

@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import (COHERENCE_MISSES, FALSE_SHARING_MISSES, _back_invalidate, _drop_ghost,
-                                _filter_slot, _invalidate_others, _set_of)
+from cachesim.multicore import _back_invalidate, _drop_ghost, _filter_slot, _invalidate_others, _set_of
+from cachesim.multicore_state import COHERENCE_MISSES, FALSE_SHARING_MISSES
 from cachesim.prefetch import ISSUED, NO_PREFETCH, USEFUL, _candidates
 from cachesim.prefetch_config import MAX_DEGREE
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,

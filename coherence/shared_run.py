@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from cachesim import multicore as MC
-from cachesim.multicore import SharedResult, SharedState
+from cachesim.multicore_state import SharedResult, SharedState
 from cachesim.sharing import SharedHierarchy
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
@@ -95,7 +95,7 @@ class SharedRun:
         Per process: the same columns as a private-cache run (hits and
         misses per level are the process's accesses, wherever they were
         served).
-    shared : cachesim.multicore.SharedResult
+    shared : cachesim.multicore_state.SharedResult
         Counts per level, instance and record kind of the machine's
         instances (background reads included, as kind 0), with coherence
         invalidations, coherence misses and false-sharing misses.

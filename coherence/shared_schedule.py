@@ -91,13 +91,13 @@ class PixelPieces(NamedTuple):
 
 
 class SharedMachine(NamedTuple):
-    """The shared machine's kernel view and state (:class:`cachesim.multicore.SharedState`).
+    """The shared machine's kernel view and state (:class:`cachesim.multicore_state.SharedState`).
 
     Attributes
     ----------
     geometry : cachesim.sets.CacheGeometry
-    machine : cachesim.multicore.MachineGeometry
-    state : cachesim.multicore.SharedArrays
+    machine : cachesim.multicore_state.MachineGeometry
+    state : cachesim.multicore_state.SharedArrays
         Updated in place.
     line_shift : int
         log2 of the first level's line size.

@@ -32,7 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from cachesim.multicore import ThreadStream, interleave
+from cachesim.interleave import interleave
+from cachesim.multicore_state import ThreadStream
 from coherence.layout import PlacedLayout
 from coherence.mappings import get_mapping
 from rtcommon.validate import InputError, require_int, require_power_of_two

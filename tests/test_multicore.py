@@ -3,9 +3,11 @@ import numpy as np
 import pytest
 
 from cachesim import CacheLevel, Hierarchy, alpha21164, alpha21164_with_dtb, simulate
-from cachesim.multicore import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
-                                FALSE_SHARING_MISSES, HITS, MISSES, SharedState, interleave, interleave_order,
-                                simulate_threads)
+from cachesim.interleave import interleave, interleave_order
+from cachesim.multicore import simulate_threads
+from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
+                                      FALSE_SHARING_MISSES, SharedState)
+from cachesim.sets import HITS, MISSES
 from cachesim.sharing import SHARING, SharedHierarchy, private
 from reference_multicore import reference_threads
 
@@ -253,7 +255,7 @@ def test_interleave_by_time_takes_windows_of_quantum():
     ({"thread_ids": [0.0, 1.0]}, "thread_ids must be integers"),
 ])
 def test_bad_streams_name_the_argument(kwargs, message):
-    """Mutation: drop the range check in _small_integers."""
+    """Mutation: drop the range check in cachesim.inputs.small_integers."""
     arguments = {"thread_ids": [0, 1], **kwargs}
     thread_ids = arguments.pop("thread_ids")
     with pytest.raises(ValueError, match=message):

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from cachesim import CacheLevel, Hierarchy, Prefetcher, simulate
-from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, SharedState, simulate_threads
+from cachesim.multicore import simulate_threads
+from cachesim.multicore_state import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, SharedState
 from cachesim.sharing import SharedHierarchy, private
 from reference_multicore_prefetch import reference_threads_prefetching
 from test_multicore import random_machine, random_stream

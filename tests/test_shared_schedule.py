@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from cachesim import CacheLevel, Hierarchy
-from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, FALSE_SHARING_MISSES, simulate_threads
+from cachesim.multicore import simulate_threads
+from cachesim.multicore_state import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, FALSE_SHARING_MISSES
 from cachesim.sharing import SharedHierarchy
 from coherence.cost import get_cost_model
 from coherence.layout import get_layout

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from cachesim import CacheLevel, Hierarchy
-from cachesim.multicore import FALSE_SHARING_MISSES, simulate_threads
+from cachesim.multicore import simulate_threads
+from cachesim.multicore_state import FALSE_SHARING_MISSES
 from cachesim.sharing import SharedHierarchy
 from coherence.layout import get_layout
 from coherence.mappings import get_mapping
@@ -179,7 +180,7 @@ def test_db_counter_traffic_hand_checked():
     counter's line misses cold for each thread's first hand-out, then is lost to the other's write before
     each later one: 2 coherence misses and 3 invalidations at L1 on the auxiliary kind.
     Mutation: ``np.zeros(n, dtype=bool)`` for the counter's writes in thread_stream (reads invalidate nothing)."""
-    from cachesim.multicore import COHERENCE_INVALIDATIONS, COHERENCE_MISSES
+    from cachesim.multicore_state import COHERENCE_INVALIDATIONS, COHERENCE_MISSES
 
     trace = synthetic_trace(64, 64, reads=1)
     placed = place_layout(get_layout("compact"), trace)
