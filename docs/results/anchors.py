@@ -174,15 +174,24 @@ class Workload:
         stops = np.searchsorted(pixels, pixel_order, side="right")
         return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)]).astype(np.int64)
 
-    def order_misses(self, order: str, rows: np.ndarray) -> np.ndarray:
-        """Misses per level (int64, (n_levels,)) of one process tracing ``rows`` in ``order``."""
+    def order_misses(self, order: str, rows: np.ndarray, own_records: bool = True) -> np.ndarray:
+        """Misses per level (int64, (n_levels,)) of one process tracing ``rows`` in ``order``.
+
+        ``own_records=False`` replays the order's pieces without its ray-state
+        and queue records: what the order would give if its buffers were free.
+        """
+        from coherence.ray_order_base import OrderBuffers, OrderedPieces, slots_needed
         from coherence.ray_orders import get_ray_order, order_pieces, replay_order
 
         recipe = get_ray_order(order)
         tree = self.tree() if getattr(recipe, "needs_tree", False) else None
         pieces = order_pieces(self.trace.segments, rows, recipe, tree=tree)
-        return np.asarray(replay_order(self.trace.records, pieces, self.placed, self.hierarchy).misses,
-                          dtype=np.int64)
+        if not own_records:
+            pieces = OrderedPieces(pieces.piece_first, pieces.piece_stop, pieces.piece_segment,
+                                   pieces.aux_records[:0], pieces.aux_after[:0], pieces.sort_cycles)
+        # the order's ray states and queue entries get a region of their own after the scene's records
+        placed = OrderBuffers().place(self.placed, slots_needed(pieces))
+        return np.asarray(replay_order(self.trace.records, pieces, placed, self.hierarchy).misses, dtype=np.int64)
 
 
 def registered_orders() -> list[str]:
@@ -193,40 +202,66 @@ def registered_orders() -> list[str]:
     return list(RAY_ORDERS)
 
 
+def _per_ray(misses: dict, rays: int, levels: dict) -> dict:
+    """Label -> level name -> misses per ray, from label -> misses per level (int64, (n_levels,))."""
+    return {label: {name: float(m[k] / rays) for name, k in levels.items()} for label, m in misses.items()}
+
+
+def _quotients(numerator, denominator, levels: dict, shift: float = 0.0, sign: float = 1.0) -> dict:
+    """Level name -> ``shift + sign * numerator / denominator`` at that level (None where the denominator is 0)."""
+    return {name: float(shift + sign * numerator[k] / denominator[k]) if denominator[k] else None
+            for name, k in levels.items()}
+
+
+def bounce_ratio(anchor: dict, work: Workload, levels: dict) -> dict:
+    """Misses per extension ray at bounce >= ``anchor["bounce"]`` over misses per camera ray, as traced."""
+    misses = misses_by_segment(work.trace, work.placed, work.hierarchy)
+    ints = work.trace.segments.ints
+    extension = ints[:, 3] != 2  # camera and bounce rays; shadow rays excluded
+    groups = {"camera": extension & (ints[:, 2] == 0),
+              f"bounce>={anchor['bounce']}": extension & (ints[:, 2] >= anchor["bounce"])}
+    rays = {label: int(rows.sum()) for label, rows in groups.items()}
+    per_ray = {label: misses[rows].sum(axis=0) / max(rays[label], 1) for label, rows in groups.items()}
+    camera, later = per_ray.values()
+    values = _quotients(later, camera, levels) if all(rays.values()) else {name: None for name in levels}
+    return {"values": values, "rays": rays, "misses_per_ray": _per_ray(per_ray, 1, levels)}
+
+
+def order_gain(anchor: dict, work: Workload, levels: dict) -> dict:
+    """1 - misses(order) / misses(depth-first), and the same without the order's own records."""
+    rows = np.arange(work.n_rays, dtype=np.int64)
+    order = anchor["order"]
+    misses = {"depth-first": work.order_misses("depth-first", rows), order: work.order_misses(order, rows),
+              f"{order} without its own records": work.order_misses(order, rows, own_records=False)}
+    base, with_own, bare = misses.values()
+    return {"values": _quotients(with_own, base, levels, 1.0, -1.0),
+            "gain_without_own_records": _quotients(bare, base, levels, 1.0, -1.0),
+            "rays": {"all": work.n_rays}, "misses_per_ray": _per_ray(misses, work.n_rays, levels)}
+
+
+def submission_change(anchor: dict, work: Workload, levels: dict, seed: int) -> dict:
+    """misses(order, pixels in a seeded random order) / misses(order, row-major pixels) - 1."""
+    shuffled = np.random.default_rng(seed).permutation(work.trace.n_pixels)
+    order = anchor["order"]
+    misses = {f"{order}, row-major": work.order_misses(order, np.arange(work.n_rays, dtype=np.int64)),
+              f"{order}, random pixel order": work.order_misses(order, work.pixel_rows(shuffled))}
+    row_major, random = misses.values()
+    return {"values": _quotients(random, row_major, levels, -1.0), "rays": {"all": work.n_rays},
+            "misses_per_ray": _per_ray(misses, work.n_rays, levels)}
+
+
 def measure(anchor: dict, work: Workload, run: dict) -> dict:
     """One anchor's values per level and the misses per ray behind them."""
     levels = {name: work.level(name) for name in anchor["levels"]}
     if anchor["measure"] == "bounce_ratio":
-        misses = misses_by_segment(work.trace, work.placed, work.hierarchy)
-        ints = work.trace.segments.ints
-        extension = ints[:, 3] != 2  # camera and bounce rays; shadow rays excluded
-        camera = extension & (ints[:, 2] == 0)
-        later = extension & (ints[:, 2] >= anchor["bounce"])
-        per_ray = {"camera": misses[camera].sum(axis=0) / max(camera.sum(), 1),
-                   f"bounce>={anchor['bounce']}": misses[later].sum(axis=0) / max(later.sum(), 1)}
-        values = {name: (float(per_ray[f"bounce>={anchor['bounce']}"][k] / per_ray["camera"][k])
-                         if later.any() and per_ray["camera"][k] > 0 else None) for name, k in levels.items()}
-        rays = {"camera": int(camera.sum()), f"bounce>={anchor['bounce']}": int(later.sum())}
-        return {"values": values, "misses_per_ray": {key: {name: float(v[k]) for name, k in levels.items()}
-                                                     for key, v in per_ray.items()}, "rays": rays}
+        return bounce_ratio(anchor, work, levels)
     if anchor["order"] not in registered_orders():
         return {"values": {name: None for name in levels},
                 "reason": f"order {anchor['order']!r} is not registered in coherence.ray_orders "
                           f"(registered: {', '.join(registered_orders()) or 'none'})"}
-    row_major = np.arange(work.n_rays, dtype=np.int64)
     if anchor["measure"] == "order_gain":
-        base, other = work.order_misses("depth-first", row_major), work.order_misses(anchor["order"], row_major)
-        values = {name: float(1 - other[k] / base[k]) if base[k] else None for name, k in levels.items()}
-        labels = ("depth-first", anchor["order"])
-    else:
-        shuffled = np.random.default_rng(run["submission_seed"]).permutation(work.trace.n_pixels)
-        base = work.order_misses(anchor["order"], row_major)
-        other = work.order_misses(anchor["order"], work.pixel_rows(shuffled))
-        values = {name: float(other[k] / base[k] - 1) if base[k] else None for name, k in levels.items()}
-        labels = (f"{anchor['order']}, row-major", f"{anchor['order']}, random pixel order")
-    return {"values": values, "rays": {"all": work.n_rays},
-            "misses_per_ray": {label: {name: float(m[k] / work.n_rays) for name, k in levels.items()}
-                               for label, m in zip(labels, (base, other))}}
+        return order_gain(anchor, work, levels)
+    return submission_change(anchor, work, levels, run["submission_seed"])
 
 
 def run_anchors(work_dir: Path, size: int, only=None, data: Path = DATA) -> dict:
@@ -321,6 +356,10 @@ direction of each finding, not its size.""",
                       + f" (rule {anchor['rule']} {anchor['threshold']:g}): "
                       f"**{verdict(result['values'], anchor['rule'], anchor['threshold'])}**. "
                       f"Reproduce: `{result['command']}`.")
+        if "gain_without_own_records" in result:
+            blocks.append("Not part of the rule: the gain if the order's ray states and queues cost nothing, "
+                          + ", ".join(f"{level} {_number(value)}"
+                                      for level, value in result["gain_without_own_records"].items()) + ".")
     return "\n\n".join(blocks) + "\n"
 
 
