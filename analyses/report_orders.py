@@ -151,7 +151,7 @@ def _ordered_run(trace, distribution, name: str, setup: dict, bounds) -> tuple:
     hierarchy, placed, cost, machine = (setup[key] for key in ("hierarchy", "placed", "cost", "machine"))
     ordered, bare = registry_orders(name, scene_bounds=bounds, tree=setup.get("tree"))
     run, work = simulate_ordered(trace, distribution, ordered, hierarchy, placed, cost, machine, name=name,
-                                 buffers=OrderBuffers())
+                                 extents=OrderBuffers().extents)
     summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)
     w0_bare = summary["work_cycles_without_dispatch"]
     if work.n_aux or work.sort_cycles:

@@ -32,14 +32,15 @@ the existing simulation runs unchanged (:func:`coherence.simulation.simulate_run
 So the depth-first order (each unit's segments as they are, no auxiliary
 records) replays exactly the run of the mapping itself.
 
-Auxiliary records live in the layout's auxiliary region
-(:meth:`coherence.ray_order_base.OrderBuffers.place`), which the simulation
-reads and writes as it does the scene's records: :func:`with_order_buffers`
-gives each process slots of its own there. A static unit uses its process's
-slots; every dynamic task uses process 0's, which, since every CPU of the
-simulation has caches of its own, is each process reusing its own buffers
-from one block to the next (two processes time-sharing one CPU would share
-them).
+Auxiliary records live where the order's buffers are (an ``extents``
+function, such as :meth:`coherence.ray_order_base.OrderBuffers.extents`):
+:func:`with_order_buffers` numbers every distinct buffer address as a record
+of the auxiliary kind and places it there, so the simulation reads and
+writes them as it does the scene's records. A static unit uses its
+process's buffers; every dynamic task uses process 0's, which, since every
+CPU of the simulation has caches of its own, is each process reusing its
+own buffers from one block to the next (two processes time-sharing one CPU
+would share them).
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ import numpy as np
 
 from coherence.distribution import Distribution
 from rtcommon.validate import InputError
-from tracer.trace.records import AUX_INDEX_MASK, WRITE_FLAG, pack_aux, unpack_aux
+from tracer.trace.records import AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, N_KINDS, WRITE_FLAG, pack_aux, unpack_aux
 from tracer.trace.segments import SegmentColumn
 
 
@@ -272,12 +273,12 @@ def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -
 
 
 def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy, placed, cost, machine, *,
-                     name: str = "order", buffers=None) -> tuple:
+                     name: str = "order", extents=None) -> tuple:
     """Simulate ``distribution`` with every unit's rays in ``order`` on ``machine``.
 
     Parameters are those of :func:`coherence.simulation.simulate_run` and of
-    :func:`ordered_work`; ``buffers`` (a :class:`coherence.ray_order_base.OrderBuffers`)
-    places the order's auxiliary records (:func:`with_order_buffers`), needed when it adds any.
+    :func:`ordered_work`; ``extents`` places the order's auxiliary records
+    (:func:`with_order_buffers`), needed when it adds any.
 
     Returns
     -------
@@ -293,45 +294,68 @@ def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy,
         if machine.page_placement.translates:
             raise InputError(f"ray order {name!r} adds buffer records, which have no page frames: simulate it on "
                              "a machine without page placement")
-        if buffers is None:
-            raise InputError(f"ray order {name!r} adds buffer records: give buffers= to place them")
-        placed, pieces = with_order_buffers(placed, work, int(trace.n_records), buffers)
+        if extents is None:
+            raise InputError(f"ray order {name!r} adds buffer records: give extents= to place them")
+        placed, pieces = with_order_buffers(placed, work, int(trace.n_records), extents)
     return simulate_run(pieces, work.distribution, hierarchy, placed, cost, machine, compute=work.compute), work
 
 
-def with_order_buffers(placed, work: OrderedWork, n_records: int, buffers) -> tuple:
-    """``placed`` with an auxiliary region holding every process's buffers, and ``work``'s trace renumbered to it.
-
-    Each process's slots (of every sub-kind) follow the previous process's:
-    process ``p``'s slot ``s`` becomes ``s`` plus the slots processes
-    ``0 .. p - 1`` use, so no two processes share a buffer entry.
+def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tuple:
+    """``placed`` with a record of the auxiliary kind for every buffer slot ``work``'s aux records may touch.
 
     Parameters
     ----------
     placed : coherence.layout.PlacedLayout
-        Placed for the trace, virtual addresses, without an auxiliary region.
+        Placed for the trace, virtual addresses (no page placement).
     work : OrderedWork
     n_records : int
         The trace's records (the aux records follow them in ``work.trace.records``).
-    buffers : coherence.ray_order_base.OrderBuffers
-        Entry sizes; places the region (:meth:`~coherence.ray_order_base.OrderBuffers.place`).
+    extents : callable
+        ``extents(aux_records, process) -> (start, size)``, int64 arrays:
+        where each auxiliary record of ``process`` lives. Each process has
+        a row for every slot of each sub-kind up to the largest it uses.
 
     Returns
     -------
     (PlacedLayout, PieceTrace)
-        The layout with its auxiliary region, and ``work.trace`` with its
-        aux records' slots renumbered (sub-kinds and write flags kept).
+        The layout with its auxiliary rows (kinds between the last
+        :class:`~tracer.trace.records.RecordKind` and the auxiliary kind
+        hold none), and ``work.trace`` with its aux records renumbered to
+        them (write flags kept).
     """
+    from dataclasses import replace
+
+    if placed.pages.frame.shape[0]:
+        raise InputError("ray orders with buffers need virtual addresses: a machine without page placement")
     aux = np.asarray(work.trace.records[n_records:], np.uint32)
     sub, slot = (part.astype(np.int64) for part in unpack_aux(aux))
-    first_slot = np.zeros(int(work.aux_process.max(initial=-1)) + 2, np.int64)
-    if len(aux):
-        np.maximum.at(first_slot, work.aux_process + 1, slot + 1)
-    first_slot = np.cumsum(first_slot)
-    slot = slot + first_slot[work.aux_process]
-    if int(first_slot[-1]) > AUX_INDEX_MASK + 1:
-        raise InputError(f"the ray order's buffers need {int(first_slot[-1])} slots for all processes, more than "
-                         f"the {AUX_INDEX_MASK + 1} an auxiliary record indexes: give it fewer rays")
-    renumbered = pack_aux(sub, slot, (aux & np.uint32(WRITE_FLAG)) != 0)
+    row = np.empty(len(aux), np.int64)
+    starts, sizes = [], []
+    n_rows = 0
+    for process in np.unique(work.aux_process):
+        # rows of this process: each aux sub-kind's slots 0 .. its largest, sub-kinds one after another
+        mine = work.aux_process == process
+        for kind in np.unique(sub[mine]):
+            these = mine & (sub == kind)
+            n_slots = int(slot[these].max()) + 1
+            row[these] = n_rows + slot[these]
+            start, size = extents(pack_aux(int(kind), np.arange(n_slots)), int(process))
+            starts.append(np.asarray(start, np.int64))
+            sizes.append(np.asarray(size, np.int64))
+            n_rows += n_slots
+    if n_rows > INDEX_MASK + 1:
+        raise InputError(f"the ray order's buffers span {n_rows} records, more than the "
+                         f"{INDEX_MASK + 1} one record kind can index")
+    addresses = np.concatenate(starts) if starts else np.zeros(0, np.int64)
+    buffer_sizes = np.concatenate(sizes) if sizes else np.zeros(0, np.int64)
+    n_scene = len(placed.record_start)
+    kind_first = np.empty(AUXILIARY_KIND + 2, np.int64)
+    kind_first[:N_KINDS + 1] = placed.kind_first
+    kind_first[N_KINDS + 1:] = n_scene
+    kind_first[AUXILIARY_KIND + 1] = n_scene + n_rows
+    buffered = replace(placed, record_start=np.concatenate([placed.record_start, addresses]),
+                       record_size=np.concatenate([placed.record_size, buffer_sizes]), kind_first=kind_first)
+    renumbered = ((np.uint32(AUXILIARY_KIND) << np.uint32(KIND_SHIFT)) | (aux & np.uint32(WRITE_FLAG))
+                  | row.astype(np.uint32))
     records = np.concatenate([np.asarray(work.trace.records[:n_records]), renumbered])
-    return buffers.place(placed, max(1, int(first_slot[-1]))), work.trace._replace(records=records)
+    return buffered, work.trace._replace(records=records)

@@ -13,7 +13,7 @@ from tracer.rendering.pathtrace import path_trace
 from tracer.rendering.render import RenderOptions
 from tracer.scenes.catalog import load
 from tracer.trace.access import COUNTER_NAMES
-from tracer.trace.records import AuxKind, pack_aux, unpack_aux
+from tracer.trace.records import AUXILIARY_KIND, AuxKind, pack_aux
 from tracer.trace.segments import SegmentColumn
 
 
@@ -145,24 +145,25 @@ def _with_state_reads(segments, rows, n_records):
 
 
 def test_buffer_records_are_placed_and_read(setup):
-    """An order that reads its process's ray-state slot 0 (8-byte entries) before every ray: under P at 2, the
-    records keep their sub-kind, process 0's stay in slot 0 and process 1's move to slot 1 (its own entry of
-    the layout's auxiliary region), and each process's first-level accesses grow by exactly its rays. Fails if
-    processes shared slots (``slot = slot + first_slot[...]`` made ``slot = slot``) (checked)."""
+    """An order that reads one ray-state line (8 bytes) before every ray: its records become auxiliary-kind rows at the
+    extents' addresses, one per process (static P at 2: two rows, at 2**50 and 2**50 + 2**40), and each
+    process's first-level accesses grow by exactly its rays. Fails if every process's aux records took
+    process 0's extents (``0 if distribution.dynamic else unit`` made 0: one row) (checked)."""
     from coherence.ordered_runs import with_order_buffers
-    from coherence.ray_order_base import OrderBuffers
 
     trace, hierarchy, placed, cost, machine = setup
-    buffers = OrderBuffers(ray_state_bytes=8)
+
+    def extents(records, process):
+        return np.full(len(records), (1 << 50) + process * (1 << 40), np.int64), np.full(len(records), 8, np.int64)
+
     distribution = get_mapping("P").build(trace.width, trace.height, 2)
     plain, _ = simulate_ordered(trace, distribution, depth_first, hierarchy, placed, cost, machine)
     run, work = simulate_ordered(trace, distribution, _with_state_reads, hierarchy, placed, cost, machine,
-                                 name="state reads", buffers=buffers)
-    buffered, pieces = with_order_buffers(placed, work, trace.n_records, buffers)
-    assert buffered.aux_slots == 2
-    sub, slot = unpack_aux(pieces.records[trace.n_records:])
-    assert set(sub.tolist()) == {AuxKind.RAY_STATE}
-    assert slot.tolist() == work.aux_process.tolist() and set(slot.tolist()) == {0, 1}
+                                 name="state reads", extents=extents)
+    buffered, pieces = with_order_buffers(placed, work, trace.n_records, extents)
+    rows = slice(buffered.kind_first[AUXILIARY_KIND], buffered.kind_first[AUXILIARY_KIND + 1])
+    assert buffered.record_start[rows].tolist() == [1 << 50, (1 << 50) + (1 << 40)]
+    assert np.all(pieces.records[trace.n_records:] >> 28 == AUXILIARY_KIND)
     first = hierarchy.levels[0].name
     per_process_rays = [int(np.isin(trace.segments.ints[:, SegmentColumn.PIXEL], pixels).sum())
                         for pixels in unit_pixels(distribution)]
