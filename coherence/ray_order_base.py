@@ -202,19 +202,21 @@ class RayOrder:
     """Base of ray orders.
 
     Subclasses are frozen dataclasses with a ``name`` that implement
-    ``_order(segments, rows, scene_bounds, tree) -> OrderedPieces`` on
-    validated arguments (:func:`coherence.ray_orders.order_pieces` calls it):
-    ``segments`` a RaySegments, ``rows`` int64 (S,), ``scene_bounds``
-    float64 (2, 3) (lowest and highest corner of the scene) and ``tree`` the
-    kd-tree or None.
+    ``_order(segments, rows, scene_bounds, tree, records) -> OrderedPieces``
+    on validated arguments (:func:`coherence.ray_orders.order_pieces` calls
+    it): ``segments`` a RaySegments, ``rows`` int64 (S,), ``scene_bounds``
+    float64 (2, 3) (lowest and highest corner of the scene), ``tree`` the
+    kd-tree or None and ``records`` the trace's records (uint32 (R,)) or None.
     """
 
     name: str  # provided by each subclass
     #: Whether the order needs the kd-tree (treelet orders).
     needs_tree: bool = False
+    #: Whether the order reads the trace's records (treelet orders).
+    needs_records: bool = False
 
-    def _order(self, segments: RaySegments, rows: np.ndarray, scene_bounds: np.ndarray,
-               tree) -> OrderedPieces:  # pragma: no cover
+    def _order(self, segments: RaySegments, rows: np.ndarray, scene_bounds: np.ndarray, tree,
+               records) -> OrderedPieces:  # pragma: no cover
         raise NotImplementedError
 
 

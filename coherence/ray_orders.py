@@ -16,6 +16,10 @@ Built-in orders, by name in :data:`RAY_ORDERS`:
   (:func:`~coherence.ray_order_base.wavefront_pieces`).
 * ``morton-origin``, ``octant-origin``, ``hit-point``: the wavefront with
   each phase sorted by a spatial key (:mod:`coherence.sorted_ray_orders`).
+
+:class:`~coherence.treelet_orders.TreeletQueues` (treelet queues) needs the
+trace's kd-tree and records (``tree=``, ``records=``); it joins
+:data:`RAY_ORDERS` once the report passes them.
 """
 from __future__ import annotations
 
@@ -29,9 +33,11 @@ from tracer.trace.segments import RaySegments
 from .ray_order_base import (OrderBuffers, OrderedPieces, RayOrder, depth_first_pieces, order_stream, replay_order,
                              wavefront_pieces)
 from .sorted_ray_orders import HitPoint, MortonOrigin, OctantOrigin
+from .treelet_orders import TreeletQueues
 
-__all__ = ["RAY_ORDERS", "DepthFirst", "HitPoint", "MortonOrigin", "OctantOrigin", "OrderBuffers", "OrderedPieces", "RayOrder", "Wavefront", "get_ray_order",
-           "order_pieces", "order_stream", "replay_order", "scene_bounds_of"]
+__all__ = ["RAY_ORDERS", "DepthFirst", "HitPoint", "MortonOrigin", "OctantOrigin", "OrderBuffers", "OrderedPieces",
+           "RayOrder", "TreeletQueues", "Wavefront", "get_ray_order", "order_pieces", "order_stream", "replay_order",
+           "scene_bounds_of"]
 
 
 @dataclass(frozen=True)
@@ -40,7 +46,7 @@ class DepthFirst(RayOrder):
 
     name = "depth-first"
 
-    def _order(self, segments, rows, scene_bounds, tree) -> OrderedPieces:
+    def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         return depth_first_pieces(segments, rows)
 
 
@@ -55,7 +61,7 @@ class Wavefront(RayOrder):
 
     name = "wavefront"
 
-    def _order(self, segments, rows, scene_bounds, tree) -> OrderedPieces:
+    def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         return wavefront_pieces(segments, rows)
 
 
@@ -88,7 +94,8 @@ def scene_bounds_of(segments: RaySegments) -> np.ndarray:
     return np.stack((points.min(axis=0), points.max(axis=0)))
 
 
-def order_pieces(trace_segments: RaySegments, segment_rows, order, *, scene_bounds=None, tree=None) -> OrderedPieces:
+def order_pieces(trace_segments: RaySegments, segment_rows, order, *, scene_bounds=None, tree=None,
+                 records=None) -> OrderedPieces:
     """The pieces one process replays when it traces its segments in ``order``.
 
     Parameters
@@ -105,7 +112,9 @@ def order_pieces(trace_segments: RaySegments, segment_rows, order, *, scene_boun
         The box orders quantise positions in; default :func:`scene_bounds_of`
         the whole trace's segments.
     tree : KdTree, optional
-        The trace's kd-tree, for orders that need it (``needs_tree``).
+        The trace's kd-tree, for orders that need it (``needs_tree``: ``treelet``).
+    records : ndarray of uint32, shape (R,), optional
+        The trace's records, for orders that read them (``needs_records``: ``treelet``).
 
     Returns
     -------
@@ -137,4 +146,6 @@ def order_pieces(trace_segments: RaySegments, segment_rows, order, *, scene_boun
         raise InputError("scene_bounds must be finite, shape (2, 3): the lowest corner, then the highest")
     if order.needs_tree and tree is None:
         raise InputError(f"ray order {order.name!r} needs the trace's kd-tree (tree=...)")
-    return order._order(trace_segments, rows, scene_bounds, tree)
+    if order.needs_records and records is None:
+        raise InputError(f"ray order {order.name!r} needs the trace's records (records=...)")
+    return order._order(trace_segments, rows, scene_bounds, tree, records)

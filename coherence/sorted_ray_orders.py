@@ -120,7 +120,7 @@ class MortonOrigin(RayOrder):
 
     name = "morton-origin"
 
-    def _order(self, segments, rows, scene_bounds, tree) -> OrderedPieces:
+    def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         keys = morton_keys(_origins(segments, rows), scene_bounds)
         return wavefront_pieces(segments, rows, keys, 3 * MORTON_BITS)
 
@@ -131,9 +131,10 @@ class OctantOrigin(RayOrder):
 
     name = "octant-origin"
 
-    def _order(self, segments, rows, scene_bounds, tree) -> OrderedPieces:
+    def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         bits = MORTON_BITS - 1
-        directions = np.ascontiguousarray(segments.rays[rows, SegmentRayColumn.DIRECTION:SegmentRayColumn.DIRECTION + 3])
+        column = SegmentRayColumn.DIRECTION
+        directions = np.ascontiguousarray(segments.rays[rows, column:column + 3])
         keys = (_octants(directions) << np.uint64(3 * bits)) | morton_keys(_origins(segments, rows), scene_bounds,
                                                                                bits)
         return wavefront_pieces(segments, rows, keys, 3 + 3 * bits)
@@ -145,7 +146,7 @@ class HitPoint(RayOrder):
 
     name = "hit-point"
 
-    def _order(self, segments, rows, scene_bounds, tree) -> OrderedPieces:
+    def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         lo, hi = scene_bounds[0].copy(), scene_bounds[1].copy()
         proxies = _proxy_hits(np.ascontiguousarray(segments.rays[rows]), lo, hi)
         return wavefront_pieces(segments, rows, morton_keys(proxies, scene_bounds), 3 * MORTON_BITS)

@@ -36,12 +36,8 @@ def random_segments(n_pixels=6, spp=2, seed=0, max_depth=4, max_shadows=2):
     return RaySegments(ints, rays), position
 
 
-def wavefront_events(ints, keys=None):
-    """The wavefront walk, ray by ray with explicit queues: phases in order, FIFO or stable-sorted by ``keys``.
-
-    ``ints`` are a process's segment rows in depth-first order; returns the
-    list of events.
-    """
+def path_walk(ints):
+    """Each ray's path rank, whether it is an extension ray, its phase, and a function giving its children."""
     n = len(ints)
     path_of, paths, extension, phase = [], {}, [], []
     for row in ints:
@@ -61,6 +57,18 @@ def wavefront_events(ints, keys=None):
             if extension[j]:
                 break
         return found
+
+    return path_of, extension, phase, children
+
+
+def wavefront_events(ints, keys=None):
+    """The wavefront walk, ray by ray with explicit queues: phases in order, FIFO or stable-sorted by ``keys``.
+
+    ``ints`` are a process's segment rows in depth-first order; returns the
+    list of events.
+    """
+    n = len(ints)
+    path_of, extension, phase, children = path_walk(ints)
 
     capacity = max(phase.count(p) for p in set(phase))
     queues = {p: [] for p in range(max(phase) + 1)}

@@ -171,8 +171,8 @@ def test_registry_names():
 
 def test_morton_keys_equal_bitwise_reference():
     """Morton keys equal a bit-by-bit interleaving on seeded random points (some outside the box) and by hand:
-    the low corner is 0, the high corner 2**63 - 1, the middle of x (cell 2**20) alone is bit 62. Fails if _spread's last
-    mask is 0x1249249249249249 >> 1 (checked)."""
+    the low corner is 0, the high corner 2**63 - 1, the middle of x (cell 2**20) alone is bit 62. Fails if
+    _spread's last mask is 0x1249249249249249 >> 1 (checked)."""
     rng = np.random.default_rng(7)
     lo, hi = np.array([-1.0, 0.0, 2.0]), np.array([3.0, 5.0, 2.5])
     points = rng.uniform(-2.0, 6.0, (200, 3))
