@@ -39,8 +39,7 @@ from coherence.malloc_image import HEAP_KINDS, CreationOrder, HeapModel, heap_bl
 from coherence.page_placement import PagePlacement, PageTable, identity_pages
 from coherence.texture_layout import TextureLayout
 from rtcommon.validate import InputError, require_int, require_power_of_two
-from tracer.trace.records import (AUX_INDEX_MASK, AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, N_AUX_KINDS, N_KINDS,
-                                  RecordKind, aux_index, record_id, record_kind)
+from tracer.trace.records import INDEX_MASK, KIND_SHIFT, N_KINDS, RecordKind, record_id, record_kind
 
 _VARIABLE = (RecordKind.POLYGON, RecordKind.PATCH)
 
@@ -391,52 +390,6 @@ class PlacedLayout:
         return {kind.name.lower(): int(self.record_size[self.kind_first[kind]:self.kind_first[kind + 1]].sum())
                 for kind in RecordKind}
 
-    @property
-    def aux_slots(self) -> int:
-        """Slots per sub-kind of the auxiliary region (0 without one: :meth:`with_aux_region`)."""
-        if self.kind_first.shape[0] <= AUXILIARY_KIND + 1:
-            return 0
-        return int(self.kind_first[AUXILIARY_KIND + 1] - self.kind_first[AUXILIARY_KIND]) // N_AUX_KINDS
-
-    def with_aux_region(self, slots: int, entry_bytes) -> "PlacedLayout":
-        """This layout with a region for records of the auxiliary kind (a ray order's buffers and queues).
-
-        The region starts on the first ``region_align`` boundary after
-        :attr:`end`: one block per :class:`~tracer.trace.records.AuxKind`
-        sub-kind, in order, each on a ``region_align`` boundary, holding
-        ``slots`` entries of its ``entry_bytes`` packed one after another.
-        Its rows follow every kind's (:func:`coherence.record_lines.aux_row`).
-
-        Parameters
-        ----------
-        slots : int
-            Entries per sub-kind (1 .. 2**24).
-        entry_bytes : sequence of int, length N_AUX_KINDS
-            Bytes of an entry of each sub-kind (>= 1).
-
-        Raises
-        ------
-        ValueError
-            If the layout already has the region or its pages are placed, or
-            an argument is out of range.
-        """
-        slots = require_int("with_aux_region: slots", slots, 1, AUX_INDEX_MASK + 1)
-        sizes = [require_int("with_aux_region: entry_bytes", size, 1) for size in entry_bytes]
-        if len(sizes) != N_AUX_KINDS:
-            raise InputError(f"with_aux_region: entry_bytes must give {N_AUX_KINDS} sizes, got {len(sizes)}")
-        if self.aux_slots or self.pages.frame.size:
-            raise InputError("with_aux_region: give a layout without an auxiliary region and without placed pages")
-        align = self.layout.region_align
-        address = _round_up(int(self.end), align)
-        starts = []
-        for size in sizes:
-            starts.append(address + size * np.arange(slots, dtype=np.int64))
-            address = _round_up(address + size * slots, align)
-        kind_first = np.append(self.kind_first, self.kind_first[-1] + N_AUX_KINDS * slots)
-        return PlacedLayout(self.layout, np.concatenate([self.record_start, *starts]),
-                            np.concatenate([self.record_size, np.repeat(np.array(sizes, dtype=np.int64), slots)]),
-                            kind_first, address)
-
     def check_records(self, records: np.ndarray) -> None:
         """Raise ValueError if a record names a kind or index outside this layout."""
         records = np.ascontiguousarray(records, dtype=np.uint32)
@@ -445,12 +398,6 @@ class PlacedLayout:
         if first < 0:
             return
         kind = int(records[first]) >> KIND_SHIFT
-        if kind == AUXILIARY_KIND:
-            raise InputError(f"record {first} has kind {kind}, which is not a RecordKind: an auxiliary record "
-                             "(a ray order's buffer or queue) "
-                             + (f"of slot {int(records[first]) & AUX_INDEX_MASK}, but the layout's auxiliary "
-                                f"region holds {self.aux_slots} slots" if self.aux_slots else
-                                "but the layout has no region for them (PlacedLayout.with_aux_region)"))
         if kind >= N_KINDS:
             raise InputError(f"record {first} has kind {kind}, which is not a RecordKind")
         raise InputError(f"record {first} is {RecordKind(kind).name.lower()} {int(records[first]) & INDEX_MASK}, "
@@ -508,17 +455,11 @@ def _round_up(value: int, align: int) -> int:
 @njit(cache=True, nogil=True)
 def _first_bad_record(records, kind_counts):
     """Index of the first record whose kind is not below ``kind_counts.size``
-    or whose index is not below its kind's count (for the auxiliary kind:
-    whose slot is not below its sub-kind's share); -1 when all are good."""
+    or whose index is not below its kind's count; -1 when all are good."""
     n_kinds = kind_counts.shape[0]
     for i in range(records.shape[0]):
         kind = record_kind(records[i])
-        if kind >= n_kinds:
-            return i
-        if kind == AUXILIARY_KIND:
-            if aux_index(records[i]) >= kind_counts[kind] // N_AUX_KINDS:
-                return i
-        elif record_id(records[i]) >= kind_counts[kind]:
+        if kind >= n_kinds or record_id(records[i]) >= kind_counts[kind]:
             return i
     return -1
 

@@ -23,11 +23,11 @@ Auxiliary records
   (:data:`QUEUE_ENTRY_BYTES`), written when a ray is queued and read when
   it is taken off the queue.
 
-They live in a region of their own after the scene's records
-(:meth:`OrderBuffers.place`, :meth:`coherence.layout.PlacedLayout.with_aux_region`),
-so they never share a line with the scene. An order numbers its slots from
-0 for the rays it is given; :func:`coherence.ordered_runs.with_order_buffers`
-gives each process slots of its own.
+They live in a region of their own per process (:class:`OrderBuffers`),
+far above every scene layout, like the private kinds' per-thread copies:
+one process's buffers never share a line with the scene or with another
+process's buffers. :func:`coherence.ordered_runs.with_order_buffers` places
+them for the schedule simulation at the same addresses.
 
 Wavefronts
 ----------
@@ -64,9 +64,9 @@ import numpy as np
 from cachesim import CacheState, Hierarchy, SimulationResult, simulate
 from coherence.cost import ray_sort_cycles
 from coherence.layout import PlacedLayout
-from coherence.record_lines import record_lines_and_writes
 from rtcommon.validate import InputError, require_int, require_power_of_two
-from tracer.trace.records import AUX_INDEX_MASK, AUX_KIND_SHIFT, INDEX_MASK, N_AUX_KINDS, WRITE_FLAG, AuxKind, pack_aux
+from tracer.trace.records import (AUX_INDEX_MASK, AUX_KIND_SHIFT, AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, WRITE_FLAG,
+                                  AuxKind, pack_aux)
 from tracer.trace.segments import RaySegments, SegmentColumn, SegmentRayType
 
 #: Bytes of a path's saved state in a ray buffer: origin, direction, throughput
@@ -75,50 +75,61 @@ from tracer.trace.segments import RaySegments, SegmentColumn, SegmentRayType
 RAY_STATE_BYTES = 64
 #: Bytes of a queue entry: a 32-bit ray id (the ray buffer's slot).
 QUEUE_ENTRY_BYTES = 4
-#: Bytes of the other sub-kinds' entries in the auxiliary region (a task counter: a 64-bit integer).
-OTHER_AUX_BYTES = 8
+#: Where process 0's order buffers start: above every layout (bases < 2**48)
+#: and below the background load's regions (2**56 up).
+ORDER_BUFFERS_BASE = 1 << 50
+#: Bytes between two processes' order buffers.
+ORDER_BUFFERS_SPACING = 1 << 40
+#: Offset of the queues from the ray buffer (room for 2**24 slots of 256 bytes).
+QUEUE_OFFSET = 1 << 32
 
 
 @dataclass(frozen=True)
 class OrderBuffers:
-    """How big a ray order's buffer and queue entries are.
+    """Where a ray order's buffers live and how big their entries are.
 
     Parameters
     ----------
     ray_state_bytes : int
-        Bytes of a path's saved state (1 .. 1024).
+        Bytes of a path's saved state (1 .. 256).
     queue_entry_bytes : int
-        Bytes of a queue entry (1 .. 1024).
+        Bytes of a queue entry (1 .. 256).
+    base : int
+        Address of process 0's ray buffer, a multiple of 4096; its queues
+        start :data:`QUEUE_OFFSET` bytes later.
+    spacing : int
+        Bytes between two processes' buffers (a power of two >= 2**33).
     """
 
     ray_state_bytes: int = RAY_STATE_BYTES
     queue_entry_bytes: int = QUEUE_ENTRY_BYTES
+    base: int = ORDER_BUFFERS_BASE
+    spacing: int = ORDER_BUFFERS_SPACING
 
     def __post_init__(self):
-        require_int("OrderBuffers.ray_state_bytes", self.ray_state_bytes, 1, 1024)
-        require_int("OrderBuffers.queue_entry_bytes", self.queue_entry_bytes, 1, 1024)
+        require_int("OrderBuffers.ray_state_bytes", self.ray_state_bytes, 1, 256)
+        require_int("OrderBuffers.queue_entry_bytes", self.queue_entry_bytes, 1, 256)
+        require_int("OrderBuffers.base", self.base, 0, 2**55)
+        if self.base % 4096:
+            raise InputError(f"OrderBuffers.base must be a multiple of 4096, got {self.base}")
+        require_power_of_two("OrderBuffers.spacing", self.spacing)
+        if self.spacing < 2 * QUEUE_OFFSET:
+            raise InputError(f"OrderBuffers.spacing must be >= {2 * QUEUE_OFFSET}, got {self.spacing}")
 
-    def entry_bytes(self) -> list:
-        """Bytes of an entry of each :class:`AuxKind` sub-kind, in sub-kind order."""
-        sizes = [OTHER_AUX_BYTES] * N_AUX_KINDS
-        sizes[AuxKind.RAY_STATE] = int(self.ray_state_bytes)
-        sizes[AuxKind.QUEUE_ENTRY] = int(self.queue_entry_bytes)
-        return sizes
-
-    def place(self, placed: PlacedLayout, slots: int) -> PlacedLayout:
-        """``placed`` with a region for ``slots`` ray states, ``slots`` queue entries (and as many of every
-        other sub-kind) after the scene's records (:meth:`PlacedLayout.with_aux_region`)."""
-        return placed.with_aux_region(slots, self.entry_bytes())
-
-
-def slots_needed(pieces) -> int:
-    """The most slots any sub-kind of ``pieces``' auxiliary records uses (one OrderedPieces or a sequence)."""
-    parts = [pieces] if isinstance(pieces, OrderedPieces) else list(pieces)
-    top = 0
-    for part in parts:
-        if part.aux_records.size:
-            top = max(top, int((part.aux_records & np.uint32(AUX_INDEX_MASK)).max()) + 1)
-    return max(top, 1)
+    def extents(self, aux_records, process: int) -> tuple[np.ndarray, np.ndarray]:
+        """Address and size of each auxiliary record of ``process``: int64 (A,) each."""
+        process = require_int("process", process, 0, 1023)
+        records = np.asarray(aux_records, dtype=np.uint32)
+        if np.any((records >> KIND_SHIFT) != AUXILIARY_KIND):
+            raise InputError(f"aux_records must all be of the auxiliary kind {AUXILIARY_KIND}")
+        index = (records & np.uint32(INDEX_MASK)).astype(np.int64)
+        sub, slot = index >> AUX_KIND_SHIFT, index & AUX_INDEX_MASK
+        state = sub == AuxKind.RAY_STATE
+        if np.any(~state & (sub != AuxKind.QUEUE_ENTRY)):
+            raise InputError("aux_records of a ray order must be ray states or queue entries")
+        size = np.where(state, self.ray_state_bytes, self.queue_entry_bytes).astype(np.int64)
+        start = self.base + process * self.spacing + np.where(state, 0, QUEUE_OFFSET) + slot * size
+        return start, size
 
 
 class OrderedPieces(NamedTuple):
@@ -352,8 +363,8 @@ def _wavefront_records(rows, ints, order, structure, queues, sort_cycles) -> Ord
                          records[sequence].astype(np.uint32), after[sequence], float(sort_cycles))
 
 
-def order_stream(trace_records, pieces: OrderedPieces, placed: PlacedLayout,
-                 line_size: int) -> tuple[np.ndarray, np.ndarray]:
+def order_stream(trace_records, pieces: OrderedPieces, placed: PlacedLayout, line_size: int, *,
+                 buffers: OrderBuffers = OrderBuffers(), process: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The line accesses a process makes when it replays ``pieces``.
 
     Parameters
@@ -362,10 +373,13 @@ def order_stream(trace_records, pieces: OrderedPieces, placed: PlacedLayout,
         The trace's records.
     pieces : OrderedPieces
     placed : PlacedLayout
-        Where the scene's records live, with a region for the order's
-        records when it adds any (:meth:`OrderBuffers.place`).
+        Where the scene's records live (virtual addresses).
     line_size : int
         A power of two: every line of this size a record spans is one access.
+    buffers : OrderBuffers
+        Where the order's buffers live.
+    process : int
+        Whose buffers (0 .. 1023).
 
     Returns
     -------
@@ -373,22 +387,31 @@ def order_stream(trace_records, pieces: OrderedPieces, placed: PlacedLayout,
         First byte of every line accessed, in order.
     writes : ndarray of bool, shape (M,)
     """
-    shift = require_power_of_two("line_size", line_size).bit_length() - 1
-    records, _ = pieces.records(trace_records)
-    placed.check_records(records)
-    # one-entry buffers: the kernel replaces both by ones of exactly the lines needed
-    buffer, writes, count, _ = record_lines_and_writes(records, 0, records.shape[0], placed.placement, shift,
-                                                       np.empty(1, dtype=np.uint64), np.empty(1, dtype=np.bool_))
-    return buffer[:count], writes[:count]
+    line_size = require_power_of_two("line_size", line_size)
+    if placed.pages.frame.size:
+        raise InputError("order_stream takes virtual addresses: give a layout without page placement")
+    records, is_aux = pieces.records(trace_records)
+    placed.check_records(records[~is_aux])
+    start = np.empty(records.size, dtype=np.int64)
+    size = np.empty(records.size, dtype=np.int64)
+    scene = records[~is_aux]
+    rows = placed.kind_first[(scene >> KIND_SHIFT).astype(np.int64)] + (scene & INDEX_MASK).astype(np.int64)
+    start[~is_aux], size[~is_aux] = placed.record_start[rows], placed.record_size[rows]
+    start[is_aux], size[is_aux] = buffers.extents(records[is_aux], process)
+    first = start // line_size
+    spans = (start + size - 1) // line_size - first + 1
+    record = np.repeat(np.arange(records.size), spans)
+    line = first[record] + np.arange(record.size) - np.repeat(np.cumsum(spans) - spans, spans)
+    return (line * line_size).astype(np.uint64), (records[record] & np.uint32(WRITE_FLAG)) != 0
 
 
-def replay_order(trace_records, pieces: OrderedPieces, placed: PlacedLayout,
-                 hierarchy: Hierarchy | CacheState) -> SimulationResult:
-    """Run the accesses of :func:`order_stream` through ``hierarchy`` (at its smallest line size).
+def replay_order(trace_records, pieces: OrderedPieces, placed: PlacedLayout, hierarchy: Hierarchy | CacheState, *,
+                 buffers: OrderBuffers = OrderBuffers(), process: int = 0) -> SimulationResult:
+    """Run the accesses of :func:`order_stream` through ``hierarchy`` (its smallest line size).
 
     A hierarchy starts empty; a CacheState continues (and is updated).
     """
     state = hierarchy if isinstance(hierarchy, CacheState) else CacheState(hierarchy)
     line_size = min(level.line_size for level in state.hierarchy.levels)
-    addresses, writes = order_stream(trace_records, pieces, placed, line_size)
+    addresses, writes = order_stream(trace_records, pieces, placed, line_size, buffers=buffers, process=process)
     return simulate(addresses, state, writes=writes)

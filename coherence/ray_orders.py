@@ -31,13 +31,13 @@ from rtcommon.validate import InputError
 from tracer.trace.segments import RaySegments
 
 from .ray_order_base import (OrderBuffers, OrderedPieces, RayOrder, depth_first_pieces, order_stream, replay_order,
-                             slots_needed, wavefront_pieces)
+                             wavefront_pieces)
 from .sorted_ray_orders import HitPoint, MortonOrigin, OctantOrigin
 from .treelet_orders import TreeletQueues
 
 __all__ = ["RAY_ORDERS", "DepthFirst", "HitPoint", "MortonOrigin", "OctantOrigin", "OrderBuffers", "OrderedPieces",
            "RayOrder", "TreeletQueues", "Wavefront", "get_ray_order", "order_pieces", "order_stream", "replay_order",
-           "scene_bounds_of", "slots_needed"]
+           "scene_bounds_of"]
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,9 @@ from numba import njit
 
 from coherence.page_placement import translate_addresses
 from rtcommon.jit import NO_REFCOUNTS, NOT_INLINED
-from tracer.trace.records import (AUXILIARY_KIND, N_AUX_KINDS, aux_index, aux_kind, record_id, record_is_write,
-                                  record_kind)
+from tracer.trace.records import record_id, record_is_write, record_kind
 
-__all__ = ["FILL_AHEAD", "aux_row", "line_span_bound", "record_line_span", "record_lines", "record_lines_and_writes"]
+__all__ = ["FILL_AHEAD", "line_span_bound", "record_line_span", "record_lines", "record_lines_and_writes"]
 
 
 #: Entries :func:`record_lines_and_writes` writes for every record, spanned
@@ -46,28 +45,9 @@ def record_line_span(record, record_start, record_size, kind_first, line_shift):
     first, last : int
         Line numbers (address >> line_shift), ``first <= last``.
     """
-    kind = record_kind(record)
-    if kind == AUXILIARY_KIND:
-        row = np.uint64(aux_row(record, kind_first))
-    else:
-        row = np.uint64(kind_first[np.uint64(kind)] + record_id(record))  # unsigned: no wraparound code
+    row = np.uint64(kind_first[np.uint64(record_kind(record))] + record_id(record))  # unsigned: no wraparound code
     start = record_start[row]
     return start >> line_shift, (start + record_size[row] - 1) >> line_shift
-
-
-@njit(cache=True, inline="always")
-def aux_row(record, kind_first):
-    """Row of a record of :data:`~tracer.trace.records.AUXILIARY_KIND` in a placement with an auxiliary region.
-
-    Such a placement's ``kind_first`` has one entry more than kinds plus one:
-    rows ``kind_first[AUXILIARY_KIND] ..  kind_first[AUXILIARY_KIND + 1] - 1``
-    hold ``N_AUX_KINDS`` blocks of ``S`` slots, one block per sub-kind in
-    :class:`~tracer.trace.records.AuxKind` order, so slot ``s`` of sub-kind
-    ``k`` is row ``kind_first[AUXILIARY_KIND] + k * S + s``
-    (:meth:`coherence.layout.PlacedLayout.with_aux_region`).
-    """
-    slots = (kind_first[AUXILIARY_KIND + 1] - kind_first[AUXILIARY_KIND]) // N_AUX_KINDS
-    return kind_first[AUXILIARY_KIND] + aux_kind(record) * slots + aux_index(record)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -7,7 +7,7 @@ from coherence.cost import ray_sort_cycles
 from coherence.layout import get_layout, record_counts_of
 from coherence.mappings import Strip
 from coherence.cost import CostModel
-from coherence.ray_order_base import OrderBuffers, OrderedPieces, path_structure, slots_needed
+from coherence.ray_order_base import QUEUE_OFFSET, OrderBuffers, path_structure
 from coherence.ray_orders import RAY_ORDERS, get_ray_order, order_pieces, order_stream, replay_order, scene_bounds_of
 from coherence.sorted_ray_orders import morton_keys
 from coherence.simulation import Machine, simulate_run
@@ -120,28 +120,23 @@ def test_rows_out_of_depth_first_order_are_refused():
         order_pieces(segments, rows, "sideways")
 
 
-def test_aux_region_places_buffers_after_the_scene():
-    """The auxiliary region starts on the first region boundary after the scene: slot s of the ray buffer at
-    its start + s * state bytes, the queues one aligned block of slots later; the stream keeps write flags,
-    and a layout without the region refuses auxiliary records in one line. Fails if aux_row in
-    coherence.record_lines forgets the sub-kind's block (``aux_kind(record) * slots`` dropped) (checked)."""
-    placed = get_layout("compact").place({"kd_node": 3})
-    with_region = OrderBuffers(ray_state_bytes=64, queue_entry_bytes=4).place(placed, 100)
-    align = placed.layout.region_align
-    region = -(-placed.end // align) * align
-    buffer = region + -(-100 * 8 // align) * align  # after the task counters' block (8 bytes each)
-    queue = buffer + -(-100 * 64 // align) * align
-    records = np.concatenate((pack_aux(AuxKind.RAY_STATE, [3], True), pack_aux(AuxKind.QUEUE_ENTRY, [9], False)))
-    pieces = OrderedPieces(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), records,
-                           np.zeros(2, np.int64), 0.0)
-    addresses, writes = order_stream(np.zeros(0, np.uint32), pieces, with_region, 32)
-    assert addresses.tolist() == [buffer + 3 * 64, buffer + 3 * 64 + 32, queue + 32]
-    assert writes.tolist() == [True, True, False]
-    assert with_region.aux_slots == 100 and slots_needed(pieces) == 10
-    with pytest.raises(ValueError, match="no region"):
-        order_stream(np.zeros(0, np.uint32), pieces, placed, 32)
-    with pytest.raises(ValueError, match="holds 5 slots"):
-        order_stream(np.zeros(0, np.uint32), pieces, OrderBuffers().place(placed, 5), 32)
+def test_order_stream_places_buffers_per_process():
+    """A ray state of process p lies at base + p * spacing + slot * state bytes, a queue entry
+    QUEUE_OFFSET further at slot * entry bytes; writes keep their flag. Fails if extents forgets the
+    process's spacing (checked)."""
+    buffers = OrderBuffers(ray_state_bytes=64, queue_entry_bytes=4)
+    records = np.concatenate((pack_aux(AuxKind.RAY_STATE, [3], True), pack_aux(AuxKind.QUEUE_ENTRY, [5], False)))
+    start, size = buffers.extents(records, 2)
+    base = buffers.base + 2 * buffers.spacing
+    assert start.tolist() == [base + 3 * 64, base + QUEUE_OFFSET + 5 * 4] and size.tolist() == [64, 4]
+    segments = RaySegments(np.array([[0, 0, 0, 0, 0, 0]], dtype=np.int64), np.zeros((1, 9)))
+    pieces = order_pieces(segments, [0], "wavefront")
+    placed = get_layout("compact").place({})
+    addresses, writes = order_stream(np.zeros(0, np.uint32), pieces, placed, 32, buffers=buffers, process=1)
+    state = buffers.base + buffers.spacing
+    assert addresses.tolist() == [state + QUEUE_OFFSET, state, state + 32, state + QUEUE_OFFSET, state, state + 32,
+                                  state, state + 32]
+    assert writes.tolist() == [True, True, True, False, False, False, True, True]
 
 
 def test_wavefront_replay_counts_its_buffer_accesses(traced):
@@ -153,9 +148,8 @@ def test_wavefront_replay_counts_its_buffer_accesses(traced):
     rows = np.arange(trace.segments.n_segments)
     pieces = order_pieces(trace.segments, rows, "wavefront")
     depth_first = order_pieces(trace.segments, rows, "depth-first")
-    with_region = OrderBuffers().place(placed, slots_needed(pieces))
-    wave = replay_order(trace.records, pieces, with_region, SMALL)
-    plain = replay_order(trace.records, depth_first, with_region, SMALL)
+    wave = replay_order(trace.records, pieces, placed, SMALL)
+    plain = replay_order(trace.records, depth_first, placed, SMALL)
     counts = pieces.aux_counts()
     n_states = counts["ray_state_reads"] + counts["ray_state_writes"]
     assert counts["queue_reads"] == rows.size and counts["ray_state_reads"] == rows.size
