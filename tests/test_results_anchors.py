@@ -143,3 +143,16 @@ def test_misses_by_segment_against_a_segment_by_segment_replay(tiny):
     assert fast.shape == (trace.segments.n_segments, 2)
     assert fast.sum() > 0
     np.testing.assert_array_equal(fast, np.array(slow))
+
+
+def test_depth_first_order_replays_the_traced_order(tiny):
+    """The registry's depth-first order, replayed through order_misses, misses exactly what misses_by_segment
+    counts over all segments (one replay of the trace as traced): the two paths of the generator agree.
+
+    Mutation: replay ``rows[::-1]`` in Workload.order_misses: fails (checked).
+    """
+    trace, placed, hierarchy = tiny
+    work = anchors.Workload(None, trace, placed, hierarchy)
+    rows = np.arange(trace.segments.n_segments, dtype=np.int64)
+    np.testing.assert_array_equal(work.order_misses("depth-first", rows),
+                                  anchors.misses_by_segment(trace, placed, hierarchy).sum(axis=0))

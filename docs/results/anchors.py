@@ -137,17 +137,21 @@ def misses_by_segment(trace, placed, hierarchy) -> np.ndarray:
 class Workload:
     """One path-traced trace of the data file's scene, placed, with its machine and tree."""
 
-    def __init__(self, run: dict, size: int, max_depth: int):
+    def __init__(self, scene, trace, placed, hierarchy):
+        self.scene, self.trace, self.placed, self.hierarchy = scene, trace, placed, hierarchy
+        self._tree = None
+
+    @classmethod
+    def cached(cls, run: dict, size: int, max_depth: int) -> "Workload":
+        """The data file's scene path-traced at ``size`` x ``size`` (from the trace cache), placed by its layout."""
         from analyses.traces import cached_trace
         from cachesim.config import get_hierarchy
         from coherence.layout import get_layout
         from coherence.studies import place_layout
 
-        self.scene, self.trace, _ = cached_trace(run["scene"], size, workload="pathtrace", max_depth=max_depth,
-                                                 path_samples=(run["spp"], run["seed"]), progress=False)
-        self.placed = place_layout(get_layout(run["layout"]), self.trace, self.scene)
-        self.hierarchy = get_hierarchy(run["hierarchy"])
-        self.size, self._tree = size, None
+        scene, trace, _ = cached_trace(run["scene"], size, workload="pathtrace", max_depth=max_depth,
+                                       path_samples=(run["spp"], run["seed"]), progress=False)
+        return cls(scene, trace, place_layout(get_layout(run["layout"]), trace, scene), get_hierarchy(run["hierarchy"]))
 
     @property
     def n_rays(self) -> int:
@@ -180,7 +184,7 @@ class Workload:
         ``own_records=False`` replays the order's pieces without its ray-state
         and queue records: what the order would give if its buffers were free.
         """
-        from coherence.ray_order_base import OrderBuffers, OrderedPieces, slots_needed
+        from coherence.ray_order_base import OrderedPieces
         from coherence.ray_orders import get_ray_order, order_pieces, replay_order
 
         recipe = get_ray_order(order)
@@ -189,9 +193,9 @@ class Workload:
         if not own_records:
             pieces = OrderedPieces(pieces.piece_first, pieces.piece_stop, pieces.piece_segment,
                                    pieces.aux_records[:0], pieces.aux_after[:0], pieces.sort_cycles)
-        # the order's ray states and queue entries get a region of their own after the scene's records
-        placed = OrderBuffers().place(self.placed, slots_needed(pieces))
-        return np.asarray(replay_order(self.trace.records, pieces, placed, self.hierarchy).misses, dtype=np.int64)
+        # the order's ray states and queue entries sit in its own buffers (OrderBuffers' default addresses)
+        misses = replay_order(self.trace.records, pieces, self.placed, self.hierarchy).misses
+        return np.asarray(misses, dtype=np.int64)
 
 
 def registered_orders() -> list[str]:
@@ -279,7 +283,7 @@ def run_anchors(work_dir: Path, size: int, only=None, data: Path = DATA) -> dict
         depth = int(anchor.get("max_depth", run["max_depth"]))
         started = time.perf_counter()
         if depth not in workloads:
-            workloads[depth] = Workload(run, size, depth)
+            workloads[depth] = Workload.cached(run, size, depth)
         result = measure(anchor, workloads[depth], run)
         result["max_depth"] = depth
         result["seconds"] = round(time.perf_counter() - started, 1)
