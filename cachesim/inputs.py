@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
 from rtcommon.validate import InputError
 
 
@@ -79,16 +81,35 @@ def as_pcs(pcs, n_accesses: int, name: str = "pcs") -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.int64)
 
 
-def small_integers(values, n: int, name: str, limit: int, what: str, lowest: int = 0) -> np.ndarray:
-    """``values`` as int64 (N,), each in [lowest, limit), or a one-line error naming the first bad one."""
+def small_integers(values, n: int, name: str, limit: int, what: str, lowest: int = 0,
+                   dtype=np.int64) -> np.ndarray:
+    """``values`` as ``dtype`` (N,), each in [lowest, limit), or a one-line error naming the first bad one.
+
+    ``dtype`` must hold [lowest, limit). The range is checked on the values as given (one
+    compiled pass for their least and greatest), so a stream already of ``dtype`` is not copied.
+    """
     array = np.asarray(values)
     if array.ndim != 1 or array.size != n:
         raise InputError(f"{name} must have shape ({n},), one per address; got {array.shape}")
-    if n and array.dtype.kind not in "iu":
+    if not n:
+        return np.zeros(0, dtype=dtype)
+    if array.dtype.kind not in "iu":
         raise InputError(f"{name} must be integers, got dtype {array.dtype}")
-    array = np.ascontiguousarray(array, dtype=np.int64) if n else np.zeros(0, dtype=np.int64)
-    bad = np.flatnonzero((array < lowest) | (array >= limit))
-    if bad.size:
-        raise InputError(f"{name}[{int(bad[0])}] is {int(array[bad[0]])}; expected an integer in "
+    array = np.ascontiguousarray(array)
+    least, greatest = _bounds(array)
+    if int(least) < lowest or int(greatest) >= limit:
+        bad = int(np.flatnonzero((array < lowest) | (array >= limit))[0])
+        raise InputError(f"{name}[{bad}] is {int(array[bad])}; expected an integer in "
                          f"[{lowest}, {limit}) ({what})")
-    return array
+    return array.astype(dtype, copy=False)
+
+
+@njit(cache=True)
+def _bounds(array):
+    """The least and the greatest of a non-empty integer array, in one pass."""
+    least = array[0]
+    greatest = array[0]
+    for value in array:
+        least = min(least, value)
+        greatest = max(greatest, value)
+    return least, greatest

@@ -370,7 +370,7 @@ def _stream(addresses, thread_ids, machine: SharedHierarchy, writes, sizes, kind
                              f"the machine's hardware threads (n_cores * smt = {machine.n_threads})")
     flags = as_writes(writes, n)
     kind_codes = np.zeros(0, dtype=np.uint8) if kinds is None else \
-        small_integers(kinds, n, "kinds", N_KINDS, "the record kinds").astype(np.uint8)
+        small_integers(kinds, n, "kinds", N_KINDS, "the record kinds", dtype=np.uint8)
     if sizes is None:
         byte_counts = np.zeros(0, dtype=np.int64)
     else:
