@@ -259,7 +259,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
 
         worst = next(m for m in setup.mappings if m.name == verdict.worst["coherence_loss"][0])
         ray_orders = order_section(trace, runs, {"mappings": [worst], "hierarchy": hierarchy, "placed": placed,
-                                                 "cost": cost, "machine": setup.machine}, verdict_n)
+                                                 "cost": cost, "machine": setup.machine, "scene": scene}, verdict_n)
     cost_map = cost.compute_cycles(trace.counters, COUNTER_NAMES).reshape(trace.height, trace.width)
     region = placed.region_bytes()
     scene_bytes = pd.DataFrame({"kind": [k for k, v in region.items() if v > 0] + ["total"],

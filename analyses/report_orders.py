@@ -35,20 +35,24 @@ ORDER_COLUMNS = ("n_processes", "rays", "user_seconds_max", "real_seconds", "spe
                  "ray_state_records", "queue_records", "sort_cycles")
 
 
-def registry_orders(order, *, scene_bounds, tree=None) -> tuple:
+def registry_orders(order, *, scene_bounds, tree=None, records=None) -> tuple:
     """Two :data:`coherence.ordered_runs.Order` of an order of :data:`coherence.ray_orders.RAY_ORDERS`: the
     order itself, and the same without its own costs (its buffer and queue records and its sorting cycles
     left out: the ``W0'`` run of the module docstring). Both share the pieces of every unit either ordered
-    (held as long as the pair is)."""
+    (held as long as the pair is). ``tree`` (a KdTree) and ``records`` (the trace's) go to orders that need
+    them (treelet queues)."""
     from coherence.ordered_runs import OrderedUnit, pieces_unit
-    from coherence.ray_orders import order_pieces
+    from coherence.ray_orders import get_ray_order, order_pieces
+
+    order = get_ray_order(order)
+    extra = {"records": records} if getattr(order, "needs_records", False) else {}
 
     made = {}
 
     def pieces_of(segments, rows):
         key = hash(rows.tobytes())
         if key not in made:
-            made[key] = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree)
+            made[key] = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree, **extra)
         return made[key]
 
     def ordered(segments, rows, n_records):
@@ -73,7 +77,8 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         (:func:`coherence.studies.study`).
     setup : dict
         ``mappings`` (Mapping objects), ``hierarchy``, ``placed``, ``cost``,
-        ``machine`` and, for orders that need it, ``tree``.
+        ``machine`` and, for orders that need the kd-tree, ``tree`` or the
+        ``scene`` to build it from with the trace's recorded ``kd_config``.
     n_processes : int
     orders : sequence of str, optional
         Names of :data:`~coherence.ray_orders.RAY_ORDERS`; default all.
@@ -87,6 +92,9 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
 
     levels = [level.name for level in setup["hierarchy"].levels]
     bounds = scene_bounds_of(trace.segments)
+    names = list(orders or RAY_ORDERS)
+    if setup.get("tree") is None and any(RAY_ORDERS[name].needs_tree for name in names if name in RAY_ORDERS):
+        setup = {**setup, "tree": _trace_tree(trace, setup["scene"])}
     rows = []
     for mapping in setup["mappings"]:
         mine = study_runs[study_runs["mapping"] == mapping.name].set_index("n_processes")
@@ -94,7 +102,7 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         t1, d1 = float(one["user_cycles_max"]), float(one["dispatch_cycles"])
         w0_df = float(depth_first["work_cycles_without_dispatch"])
         distribution = mapping.build(trace.width, trace.height, n_processes)
-        for name in orders or RAY_ORDERS:
+        for name in names:
             if name == "depth-first":  # the study's run itself
                 summary, aux, sort_cycles, w0_bare = depth_first, np.zeros(0, np.uint32), 0.0, w0_df
             else:
@@ -120,6 +128,13 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
             })
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _trace_tree(trace, scene):
+    """The kd-tree the trace was rendered with, built again from ``scene`` and the trace's ``kd_config``."""
+    from tracer.kd.tree import KdTreeConfig, build_kdtree
+
+    return build_kdtree(scene, KdTreeConfig(**trace.metadata["kd_config"]))
 
 
 def order_rows(table: pd.DataFrame, rounded) -> list:
@@ -149,7 +164,7 @@ def _ordered_run(trace, distribution, name: str, setup: dict, bounds) -> tuple:
     from coherence.ray_order_base import OrderBuffers
 
     hierarchy, placed, cost, machine = (setup[key] for key in ("hierarchy", "placed", "cost", "machine"))
-    ordered, bare = registry_orders(name, scene_bounds=bounds, tree=setup.get("tree"))
+    ordered, bare = registry_orders(name, scene_bounds=bounds, tree=setup.get("tree"), records=trace.records)
     run, work = simulate_ordered(trace, distribution, ordered, hierarchy, placed, cost, machine, name=name,
                                  extents=OrderBuffers().extents)
     summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)

@@ -89,3 +89,16 @@ def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
     assert main(["report", "balls", "--size", "12", "--processes", "4", "--mappings", "S", "--out", str(whitted),
                  "--cache", str(tmp_path / "cache")]) == 0
     assert "ray_orders" not in set(pd.read_csv(whitted / "results.csv")["section"])
+
+
+def test_the_tree_is_built_again_as_the_trace_recorded_it():
+    """Orders that need the kd-tree (treelet queues) get the tree the trace was rendered with, built again from
+    the scene and the trace's kd_config: here a median tree. Fails if it were built with the default rule
+    (``KdTreeConfig(**...)`` made ``KdTreeConfig()``) (checked)."""
+    from analyses.report_orders import _trace_tree
+    from tracer.kd.tree import KdTreeConfig
+
+    scene = load("balls")
+    median = build_kdtree(scene, KdTreeConfig(builder="median"))
+    trace = path_trace(scene, median, RenderOptions(size=4, workload="pathtrace")).trace
+    assert np.array_equal(_trace_tree(trace, scene).nodes, median.nodes)
