@@ -178,6 +178,21 @@ class Workload:
         stops = np.searchsorted(pixels, pixel_order, side="right")
         return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)]).astype(np.int64)
 
+    def recipe(self, order: str):
+        """The order named: from :data:`coherence.ray_orders.RAY_ORDERS`, or ``treelet``
+        (:class:`coherence.treelet_orders.TreeletQueues` at its default treelet size, this layout's kd-node
+        bytes) while it is not in the registry."""
+        from coherence.ray_orders import RAY_ORDERS
+        from tracer.trace.records import RecordKind
+
+        if order in RAY_ORDERS:
+            return RAY_ORDERS[order]
+        from coherence.treelet_orders import TreeletQueues
+
+        if order != TreeletQueues.name:
+            raise ValueError(f"anchors.toml: unknown ray order {order!r}")
+        return TreeletQueues(node_bytes=int(self.placed.record_size[self.placed.kind_first[RecordKind.KD_NODE]]))
+
     def order_misses(self, order: str, rows: np.ndarray, own_records: bool = True) -> np.ndarray:
         """Misses per level (int64, (n_levels,)) of one process tracing ``rows`` in ``order``.
 
@@ -185,11 +200,12 @@ class Workload:
         and queue records: what the order would give if its buffers were free.
         """
         from coherence.ray_order_base import OrderedPieces
-        from coherence.ray_orders import get_ray_order, order_pieces, replay_order
+        from coherence.ray_orders import order_pieces, replay_order
 
-        recipe = get_ray_order(order)
+        recipe = self.recipe(order)
         tree = self.tree() if getattr(recipe, "needs_tree", False) else None
-        pieces = order_pieces(self.trace.segments, rows, recipe, tree=tree)
+        records = self.trace.records if getattr(recipe, "needs_records", False) else None
+        pieces = order_pieces(self.trace.segments, rows, recipe, tree=tree, records=records)
         if not own_records:
             pieces = OrderedPieces(pieces.piece_first, pieces.piece_stop, pieces.piece_segment,
                                    pieces.aux_records[:0], pieces.aux_after[:0], pieces.sort_cycles)
@@ -199,11 +215,16 @@ class Workload:
 
 
 def registered_orders() -> list[str]:
+    """Orders the anchors can name at this commit: the registry's, and ``treelet`` when its module exists."""
     try:
         from coherence.ray_orders import RAY_ORDERS
     except ImportError:
         return []
-    return list(RAY_ORDERS)
+    try:
+        from coherence.treelet_orders import TreeletQueues
+    except ImportError:
+        return list(RAY_ORDERS)
+    return list(dict.fromkeys([*RAY_ORDERS, TreeletQueues.name]))
 
 
 def _per_ray(misses: dict, rays: int, levels: dict) -> dict:
