@@ -196,3 +196,18 @@ def test_sorted_wavefronts_equal_reference_walk(name):
     assert events_of(pieces) == wavefront_events(segments.ints, keys)
     _, phase, _, _ = path_structure(segments.ints)
     assert pieces.sort_cycles == sum(ray_sort_cycles(int(n), 63) for n in np.bincount(phase))
+
+
+def test_a_process_without_rays_replays_nothing():
+    """Every order, the treelet queues included, gives no piece and no record for a process that owns no
+    segment (a strip of a mapping with more processes than rows). Fails if wavefront_pieces drops its
+    ``if n else 0`` guard on the phase count (``phase.max()`` of nothing raises) (checked)."""
+    from coherence.treelet_orders import TreeletQueues
+    from reference_treelets import random_records, random_tree
+
+    segments, _ = random_segments(n_pixels=3, spp=1, seed=0)
+    nodes = random_tree(0)
+    records = random_records(segments, len(nodes), 0)
+    for order in [*RAY_ORDERS.values(), TreeletQueues(treelet_bytes=24, node_bytes=8)]:
+        pieces = order_pieces(segments, np.zeros(0, np.int64), order, tree=nodes, records=records)
+        assert pieces.n_pieces == 0 and pieces.aux_records.size == 0 and pieces.sort_cycles == 0.0
