@@ -4,7 +4,7 @@ Run:  python3 benchmarks/bench_ray_orders.py [--scene balls] [--size 64] [--spp 
       [--treelet-bytes 8192] [--hierarchy alpha21164]
 
 Path-traces the scene once (logged), then for every order of
-:data:`coherence.ray_orders.RAY_ORDERS` and the treelet queues: the wall
+:data:`coherence.ray_orders.RAY_ORDERS` (the treelet queues at ``--treelet-bytes``): the wall
 time of :func:`~coherence.ray_orders.order_pieces` over the rays of
 ``--processes`` strips (the units a static mapping gives, each ordered on
 its own: the work the report does per order), best of ``--repeats``; then
@@ -64,8 +64,8 @@ def main(argv=None) -> dict:
                "orders": {}}
     print(f"{scene.name} {args.size}x{args.size} spp {args.spp}: {segments.n_segments:,} rays, "
           f"{int(trace.n_records):,} records; {args.processes} strips, process 0 replayed on {hierarchy.name}")
-    orders = list(RAY_ORDERS.values()) + [TreeletQueues(treelet_bytes=args.treelet_bytes,
-                                                        node_bytes=layout.record("kd_node").size)]
+    treelet = TreeletQueues(treelet_bytes=args.treelet_bytes, node_bytes=layout.record("kd_node").size)
+    orders = [treelet if order.name == treelet.name else order for order in RAY_ORDERS.values()]
     for order in orders:
         def all_units():
             return [order_pieces(segments, rows, order, scene_bounds=bounds, tree=tree, records=records)

@@ -16,10 +16,9 @@ Built-in orders, by name in :data:`RAY_ORDERS`:
   (:func:`~coherence.ray_order_base.wavefront_pieces`).
 * ``morton-origin``, ``octant-origin``, ``hit-point``: the wavefront with
   each phase sorted by a spatial key (:mod:`coherence.sorted_ray_orders`).
-
-:class:`~coherence.treelet_orders.TreeletQueues` (treelet queues) needs the
-trace's kd-tree and records (``tree=``, ``records=``); it joins
-:data:`RAY_ORDERS` once the report passes them.
+* ``treelet``: treelet queues (:class:`~coherence.treelet_orders.TreeletQueues`
+  with 8 KB treelets of 8-byte nodes, the ``compact`` layout's); it needs
+  the trace's kd-tree and records (``tree=``, ``records=``).
 """
 from __future__ import annotations
 
@@ -66,7 +65,8 @@ class Wavefront(RayOrder):
 
 
 RAY_ORDERS: dict[str, RayOrder] = {
-    order.name: order for order in (DepthFirst(), Wavefront(), MortonOrigin(), OctantOrigin(), HitPoint())}
+    order.name: order for order in (DepthFirst(), Wavefront(), MortonOrigin(), OctantOrigin(), HitPoint(),
+                                    TreeletQueues())}
 
 
 def get_ray_order(name_or_order) -> RayOrder:

@@ -29,7 +29,7 @@ def section():
     runs = study(trace, mappings, [1, 4], hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
                  scene=scene, progress=False).runs
     setup = {"mappings": mappings, "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
-             "cost": cost, "machine": machine}
+             "cost": cost, "machine": machine, "scene": scene}
     return order_section(trace, runs, setup, 4), runs
 
 
