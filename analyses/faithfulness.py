@@ -13,7 +13,7 @@ probability, the three unknowns of largest Morris
 ``mu*`` with their indices and flip regions. Overall: which mechanism
 (:data:`MECHANISMS`) matters most, by the rule of :func:`mechanism_shares`.
 It names the command, seed and commit the summary records, states the image
-size against :data:`VERDICT_SIZE`, and says which of the study's figures
+size against :data:`analyses.robustness_size.VERDICT_MIN_SIZE`, and says which of the study's figures
 the project holds (:class:`tracer.scenes.study.StudyScene`) and which it
 does not.
 
@@ -27,9 +27,10 @@ from __future__ import annotations
 import dataclasses
 import sys
 
+from analyses.robustness_size import VERDICT_MIN_SIZE
 from rtcommon.validate import InputError
 
-__all__ = ["MECHANISMS", "VERDICT_SIZE", "mechanism_of", "mechanism_shares", "faithfulness_markdown",
+__all__ = ["MECHANISMS", "mechanism_of", "mechanism_shares", "faithfulness_markdown",
            "write_faithfulness", "main"]
 
 #: The mechanisms of the model the unknowns belong to, mechanism -> unknowns
@@ -46,10 +47,6 @@ MECHANISMS = {
                         "cost_light_read", "cost_ray"),
     "tree memory": ("tree_variant",),
 }
-
-#: Image width and height (pixels) at which the 8-process losses and the
-#: verdict are meant; a smaller study is a first look.
-VERDICT_SIZE = 256
 
 #: The summary's keys the section reads.
 _REQUIRED = ("parameters", "command", "commit", "scenes")
@@ -178,9 +175,9 @@ def faithfulness_markdown(summary: dict) -> str:
         f"{len(p.get('factors', []))} unknowns; the verdict at {p['verdict_n_processes']} processes.",
         "",
     ]
-    if size < VERDICT_SIZE:
+    if size < VERDICT_MIN_SIZE:  # a smaller study is a first look
         lines += [f"This is a first look: the {p['verdict_n_processes']}-process losses and the verdict are meant "
-                  f"at {VERDICT_SIZE} x {VERDICT_SIZE} pixels or more, and this study ran at {size} x {size}. "
+                  f"at {VERDICT_MIN_SIZE} x {VERDICT_MIN_SIZE} pixels or more, and this study ran at {size} x {size}. "
                   "On a small image the mappings have few tasks per process, so their imbalance losses, and with "
                   "them the verdict's margin, are overstated (see each scene's losses).", ""]
     shares = mechanism_shares(scenes)

@@ -25,7 +25,9 @@ import numpy as np
 __all__ = ["VERDICT_MIN_SIZE", "SIZE_CHECK_POINTS", "SIZE_CHECK_TOLERANCE", "SIZE_CHECK_QUANTITIES",
            "SIZE_CHECK_MAPPINGS", "check_sizes", "size_check_rows", "compare_sizes"]
 
-#: Smallest image side the 8-process losses and the verdict are computed at.
+#: Smallest image side the 8-process losses and the verdict are computed at
+#: (the robustness study's default size; the faithfulness section calls a
+#: smaller study a first look).
 VERDICT_MIN_SIZE = 256
 
 #: Sample points of the check.

@@ -49,7 +49,7 @@ import numpy as np
 from rtcommon.validate import InputError
 
 __all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts",
-           "fixed_schedule", "recost_run", "RunStore", "CYCLE_COLUMNS"]
+           "fixed_schedule", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT"]
 
 #: Columns of :attr:`MissCounts.accesses`: read hits and misses, write hits and misses.
 READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES = 0, 1, 2, 3
@@ -57,6 +57,9 @@ N_ACCESS_COLUMNS = 4
 
 #: Columns of a run's process table that depend on the costs; every other column is a count.
 CYCLE_COLUMNS = ("tlb_cycles", "compute_cycles", "memory_cycles", "user_cycles", "user_seconds", "finish_cycles")
+
+#: Placed layouts whose pixels' line addresses a :class:`RunStore` keeps (the most recently used ones).
+LINES_KEPT = 2
 
 
 @dataclass(frozen=True)
@@ -178,6 +181,12 @@ class RunStore:
       run's schedule does not depend on cycles;
     - *simulated* otherwise, and stored in place of the earlier one.
 
+    It also keeps the line addresses of every pixel
+    (:func:`coherence.pixel_lines.pixel_lines`) of the last
+    :data:`LINES_KEPT` placed layouts it was asked for: studies that differ
+    in costs, latencies or the machine's schedule but place the trace alike
+    read the same addresses (:meth:`pixel_lines`).
+
     Attributes
     ----------
     simulated, re_costed, reused : int
@@ -186,6 +195,7 @@ class RunStore:
 
     def __init__(self):
         self._runs = {}
+        self._lines = {}  # placed layout's key -> PixelLines or None, least recently used first
         self._trace = None
         self.simulated = 0
         self.re_costed = 0
@@ -228,3 +238,28 @@ class RunStore:
         """Keep a simulated run under ``keys``."""
         self.simulated += 1
         self._runs[keys[0]] = (keys[1], run)
+
+    def pixel_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None):
+        """:func:`coherence.pixel_lines.pixel_lines` of ``trace`` on ``placed``, worked out once per placement.
+
+        The key is everything the addresses depend on: every record's address
+        and size, the page table, ``line_size`` and ``budget_bytes`` (which
+        decides whether there is a result at all).
+        """
+        from coherence.pixel_lines import pixel_lines
+
+        self.bind(trace)
+        digest = hashlib.blake2b(digest_size=16)
+        for array in (placed.record_start, placed.record_size, placed.kind_first, placed.pages.frame):
+            digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
+            digest.update(b"|")
+        key = (digest.digest(), int(placed.end), int(placed.pages.first_page), int(placed.pages.page_shift),
+               int(line_size), budget_bytes)
+        if key in self._lines:
+            self._lines[key] = self._lines.pop(key)  # most recently used last
+            return self._lines[key]
+        lines = pixel_lines(trace, placed, line_size, budget_bytes)
+        self._lines[key] = lines
+        while len(self._lines) > LINES_KEPT:
+            self._lines.pop(next(iter(self._lines)))
+        return lines

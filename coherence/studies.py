@@ -225,8 +225,8 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     else:
         # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
         smallest_line = min(level.line_size for level in hierarchy.levels)
-        lines = pixel_lines(trace, placed, smallest_line, execution.shared_lines_budget) if len(distinct) > 1 \
-            else None
+        lines = (pixel_lines if store is None else store.pixel_lines)(
+            trace, placed, smallest_line, execution.shared_lines_budget) if len(distinct) > 1 else None
 
         def simulate(index):
             return simulate_run(trace, distribution_of(index), hierarchy, placed, cost, machine, compute=compute,

@@ -9,7 +9,8 @@ from dataclasses import replace
 
 import pytest
 
-from analyses.faithfulness import MECHANISMS, VERDICT_SIZE, faithfulness_markdown, main, mechanism_shares
+from analyses.faithfulness import MECHANISMS, faithfulness_markdown, main, mechanism_shares
+from analyses.robustness_size import VERDICT_MIN_SIZE
 from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness
 from analyses.robustness_factors import FACTORS
 from analyses.robustness_output import robustness_summary
@@ -59,7 +60,7 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
     assert re.search(r"^- Commit: `(.*)`$", text, re.M).group(1) == summary["commit"]
     image = re.search(r"^- Image: (\d+) x (\d+) pixels; (\d+) Morris trajectories over (\d+) unknowns", text, re.M)
     assert [int(g) for g in image.groups()] == [16, 16, 2, len(FACTORS)]
-    assert f"meant at {VERDICT_SIZE} x {VERDICT_SIZE} pixels or more" in text  # 16 < VERDICT_SIZE
+    assert f"meant at {VERDICT_MIN_SIZE} x {VERDICT_MIN_SIZE} pixels or more" in text  # 16 < VERDICT_MIN_SIZE
 
     for scene, s in summary["scenes"].items():
         section = lines[lines.index(f"### {scene}"):]

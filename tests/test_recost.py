@@ -164,3 +164,28 @@ def _bound_elsewhere() -> RunStore:
     store = RunStore()
     store.bind(random_trace())
     return store
+
+
+def test_store_keeps_pixel_lines_per_placement():
+    """The store's pixel lines equal pixel_lines' for every placement, are worked out once per placement (an
+    equal placement built again is served the kept result), and two placements whose page tables alone
+    differ get their own. Fails if the key leaves out the page table (``placed.pages.frame``): the random
+    placement is then served the contiguous one's lines."""
+    from coherence.page_placement import PagePlacement
+    from coherence.pixel_lines import pixel_lines
+
+    trace = written_trace(16, 12, seed=5)
+    store = RunStore()
+
+    def placed(policy, seed):
+        return place_layout(get_layout("compact"), trace).with_pages(PagePlacement(policy, page_size=512, seed=seed),
+                                                                     SMALL)
+
+    kept = {}
+    for policy, seed in (("contiguous", 0), ("random", 1), ("random", 2)):
+        kept[seed] = store.pixel_lines(trace, placed(policy, seed), 32)
+        expected = pixel_lines(trace, placed(policy, seed), 32)
+        for name in ("line_offsets", "addresses", "writes", "pixel_writes"):
+            np.testing.assert_array_equal(getattr(kept[seed], name), getattr(expected, name))
+        assert store.pixel_lines(trace, placed(policy, seed), 32) is kept[seed]
+    assert not np.array_equal(kept[1].addresses, kept[2].addresses)
