@@ -80,20 +80,20 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         ``machine`` and, for orders that need the kd-tree, ``tree`` or the
         ``scene`` to build it from with the trace's recorded ``kd_config``.
     n_processes : int
-    orders : sequence of str, optional
-        Names of :data:`~coherence.ray_orders.RAY_ORDERS`; default all.
+    orders : sequence of str or RayOrder, optional
+        Default :func:`report_orders`.
 
     Returns
     -------
     DataFrame
         Columns mapping, order, ``<level>_misses_per_ray`` per level, then :data:`ORDER_COLUMNS`.
     """
-    from coherence.ray_orders import RAY_ORDERS, scene_bounds_of
+    from coherence.ray_orders import get_ray_order, scene_bounds_of
 
     levels = [level.name for level in setup["hierarchy"].levels]
     bounds = scene_bounds_of(trace.segments)
-    names = list(orders or RAY_ORDERS)
-    if setup.get("tree") is None and any(RAY_ORDERS[name].needs_tree for name in names if name in RAY_ORDERS):
+    chosen = [get_ray_order(order) for order in orders] if orders is not None else report_orders(setup)
+    if setup.get("tree") is None and any(order.needs_tree for order in chosen):
         setup = {**setup, "tree": _trace_tree(trace, setup["scene"])}
     rows = []
     for mapping in setup["mappings"]:
@@ -102,11 +102,12 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         t1, d1 = float(one["user_cycles_max"]), float(one["dispatch_cycles"])
         w0_df = float(depth_first["work_cycles_without_dispatch"])
         distribution = mapping.build(trace.width, trace.height, n_processes)
-        for name in names:
+        for order in chosen:
+            name = order.name
             if name == "depth-first":  # the study's run itself
                 summary, aux, sort_cycles, w0_bare = depth_first, np.zeros(0, np.uint32), 0.0, w0_df
             else:
-                summary, aux, sort_cycles, w0_bare = _ordered_run(trace, distribution, name, setup, bounds)
+                summary, aux, sort_cycles, w0_bare = _ordered_run(trace, distribution, order, setup, bounds)
             w = float(summary["work_cycles"])
             w0 = float(summary["work_cycles_without_dispatch"])
             aux_kind = unpack_aux(aux)[0]
@@ -128,6 +129,21 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
             })
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def report_orders(setup: dict) -> list:
+    """Every order of :data:`coherence.ray_orders.RAY_ORDERS`, and treelet queues if it has none: treelets
+    of the first cache level's size, nodes of the placed layout's kd-node size."""
+    from coherence.ray_orders import RAY_ORDERS, TreeletQueues
+    from tracer.trace.records import RecordKind
+
+    orders = list(RAY_ORDERS.values())
+    if not any(isinstance(order, TreeletQueues) for order in orders):
+        placed = setup["placed"]
+        node_bytes = int(placed.record_size[placed.kind_first[RecordKind.KD_NODE]])
+        orders.append(TreeletQueues(treelet_bytes=max(node_bytes, int(setup["hierarchy"].levels[0].size)),
+                                    node_bytes=node_bytes))
+    return orders
 
 
 def _trace_tree(trace, scene):
@@ -156,7 +172,7 @@ def order_table_html(table: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
-def _ordered_run(trace, distribution, name: str, setup: dict, bounds) -> tuple:
+def _ordered_run(trace, distribution, order, setup: dict, bounds) -> tuple:
     """One order's run: its summary (:func:`coherence.metrics.run_summary`), aux records, sorting cycles, and
     the work without dispatch of the same order without its own costs."""
     from coherence.metrics import run_summary
@@ -164,7 +180,8 @@ def _ordered_run(trace, distribution, name: str, setup: dict, bounds) -> tuple:
     from coherence.ray_order_base import OrderBuffers
 
     hierarchy, placed, cost, machine = (setup[key] for key in ("hierarchy", "placed", "cost", "machine"))
-    ordered, bare = registry_orders(name, scene_bounds=bounds, tree=setup.get("tree"), records=trace.records)
+    name = order.name
+    ordered, bare = registry_orders(order, scene_bounds=bounds, tree=setup.get("tree"), records=trace.records)
     run, work = simulate_ordered(trace, distribution, ordered, hierarchy, placed, cost, machine, name=name,
                                  extents=OrderBuffers().extents)
     summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)

@@ -63,16 +63,17 @@ def test_wavefront_pays_for_its_queues(section):
     of the run (``pieces_unit`` replaced by the bare order in ``registry_orders``) (checked)."""
     table, _ = section
     wavefront = table[table["order"] == "wavefront"]
-    assert len(wavefront) == 2
+    assert len(wavefront) == 2 and (table[table["order"] == "treelet"]["queue_records"] > 0).all()
     assert (wavefront["queue_records"] > 0).all() and (wavefront["ray_state_records"] > 0).all()
     assert wavefront["queue_records"].nunique() == 1
     assert (wavefront["reordering_overhead"] < 1).all()
 
 
 def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
-    """``coherence report --workload pathtrace`` writes the section: every registered order in results.csv and
-    summary.json, under the mapping the miss map shows, and the page's table; a Whitted report has none. Fails
-    if results_table leaves out the order rows (checked)."""
+    """``coherence report --workload pathtrace`` writes the section: every registered order and treelet queues
+    (sized to the first level, with queue records) in results.csv and summary.json, under the mapping the miss
+    map shows, and the page's table; a Whitted report has none. Fails if results_table leaves out the order
+    rows (checked)."""
     from coherence.ray_orders import RAY_ORDERS
 
     out = tmp_path / "out"
@@ -80,9 +81,10 @@ def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
                  "pathtrace", "--spp", "2", "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
     results = pd.read_csv(out / "results.csv")
     orders = results[results["section"] == "ray_orders"]
-    assert set(orders["item"]) == set(RAY_ORDERS)
+    assert set(orders["item"]) == {*RAY_ORDERS, "treelet"}
     summary = json.loads((out / "summary.json").read_text())
-    assert {row["order"] for row in summary["ray_orders"]} == set(RAY_ORDERS)
+    assert {row["order"] for row in summary["ray_orders"]} == {*RAY_ORDERS, "treelet"}
+    assert next(row for row in summary["ray_orders"] if row["order"] == "treelet")["queue_records"] > 0
     assert set(orders["mapping"]) == {summary["parameters"]["miss_map"]["mapping"]}
     assert "<h2>Ray orders:" in (out / "index.html").read_text()
     whitted = tmp_path / "whitted"
