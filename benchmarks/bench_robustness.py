@@ -1,31 +1,42 @@
-"""Both phases of ``coherence robustness`` against the issue's budgets, with the share of runs not simulated.
+"""Both phases of ``coherence robustness`` against the issue's budgets, per scene and in total.
 
 Renders (or loads from the trace cache) every trace the study will read
 (each scene's tree variants at ``--size``, the base's tree at half and
 twice it for the size check) and compiles the kernels first, untimed. Then
-one :func:`analyses.robustness.robustness` call per scene with
-``--trajectories`` Morris trajectories, the size check and Sobol's design of
-``--sobol`` base samples, every phase timed (wall and this process's CPU
-time) and printed as the scene ends.
+one :func:`analyses.robustness.robustness` call per scene of ``--scenes``
+with ``--trajectories`` Morris trajectories, the size check and Sobol's
+design of ``--sobol`` base samples, every phase timed (wall, and this
+process's CPU time over all its threads) and printed as the scene ends
+(**measured**), with the share of its runs re-costed from stored miss counts
+and reused (:mod:`coherence.recost`).
 
-The budgeted designs are larger than the measured ones; their times are
-**projected** from the measured rates (a design's time grows with its
-samples; the size check is run once a scene whatever the design):
+The budgeted designs are larger than the measured ones, and cover every
+study scene (:data:`tracer.scenes.catalog.PAPER_SCENES`); their times are
+**projected**:
 
 - Morris screening, r = 10 trajectories over every unknown (17 samples
-  each) per scene, plus the size check: target <= 20 minutes;
+  each) per scene, plus the size check (run once a scene whatever the
+  design): target <= 20 minutes;
 - Sobol over the top 4 unknowns with N = 64 (N (4 + 2) = 384 samples) per
   scene: target <= 60 minutes.
 
-Both are printed at the measured wall rate (the machine may be shared with
-other work) and, for the target's 2 idle cores, from the measured CPU rate:
-between CPU time / 2 (``study`` keeps both cores busy with a sample's runs,
-one thread per CPU) and CPU time (one core busy). A target counts as met
-when even the slower bound meets it. With each phase, the
-share of its runs that were re-costed from stored miss counts and reused
-(:mod:`coherence.recost`). Ends with one JSON line.
+A measured scene's design is projected from its own rate per sample. A
+scene not measured is projected from the measured scenes' CPU time per
+trace record (the study's base tree at ``--size``; every sample replays
+about that many records), a coarser estimate, marked "by trace size".
+The times for the target's 2 idle cores come from the CPU times: between
+CPU time / 2 (``study`` keeps both cores busy with a sample's runs, one
+thread per CPU) and CPU time (one core busy); a target counts as met when
+even the slower bound meets it. Also printed: how many cores (or Dask
+workers, ``coherence robustness --dask``, each run a task) the projected
+CPU time needs to meet each target. The wall times are as measured on this
+machine, which may be shared with other work. With ``--dask ADDRESS`` the
+runs go to that scheduler's workers: this process's CPU time then leaves
+their work out, and only wall times are meaningful. Ends with one JSON
+line.
 
     python benchmarks/bench_robustness.py [--size 256] [--trajectories 2] [--sobol 2] [--scenes balls tetra ...]
+                                          [--dask tcp://host:8786]
 """
 import argparse
 import json
@@ -65,6 +76,15 @@ def prepare(base, scenes) -> float:
     return time.perf_counter() - start
 
 
+def trace_records(base, scene) -> int:
+    """Records of ``scene``'s trace on the base's tree at the base's size (rendered if not cached)."""
+    from analyses.traces import cached_trace
+
+    _, trace, _ = cached_trace(scene, base.size, kd=base.kd_builder(), max_depth=None, progress=False,
+                               workload=base.workload, tree_variant=base.tree_variant)
+    return int(len(trace.records))
+
+
 def scene_phases(result, timings) -> dict:
     """Per phase of one scene's study: seconds, CPU seconds, samples and run paths."""
     (scene, summary), = result.summary["scenes"].items()
@@ -96,62 +116,106 @@ def share(runs: dict) -> str:
             f" {runs['reused']} reused ({100 * runs['reused'] / total:.0f}%)")
 
 
+def budget_samples() -> dict:
+    """Samples a scene's budgeted design takes, per phase (the size check is a fixed cost, not scaled)."""
+    return {"morris": BUDGET_TRAJECTORIES * (len(FACTORS) + 1), "sobol": BUDGET_SOBOL * (SOBOL_FACTORS + 2)}
+
+
+def project_scene(phases: dict) -> dict:
+    """A measured scene's budgeted phases, from its own rates: phase -> seconds and cpu_seconds."""
+    budget = budget_samples()
+    out = {}
+    for phase in ("morris", "sobol"):
+        measured = phases[phase]
+        out[phase] = {rate: measured[rate] * budget[phase] / measured["samples"]
+                      + (phases["size_check"][rate] if phase == "morris" else 0.0)
+                      for rate in ("seconds", "cpu_seconds")}
+    return out
+
+
+def project_by_records(projected: dict, records: dict, scene: str) -> dict:
+    """An unmeasured scene's budgeted phases: the measured scenes' projected seconds per trace record."""
+    measured = list(projected)
+    total_records = sum(records[name] for name in measured)
+    return {phase: {rate: sum(projected[name][phase][rate] for name in measured) * records[scene] / total_records
+                    for rate in ("seconds", "cpu_seconds")} for phase in ("morris", "sobol")}
+
+
+def judge(cpu_seconds: float, target: float) -> str:
+    """Whether ``cpu_seconds`` of work meets ``target`` on the target's cores, and the cores it would need."""
+    one, both = cpu_seconds, cpu_seconds / CORES
+    verdict = ("met" if one <= target else f"NOT met ({both / target:.1f}x over even with both cores busy)"
+               if both > target else "met only if both cores stay busy")
+    return (f"on {CORES} idle cores between {both:.0f} s (both busy) and {one:.0f} s (one busy); target <= "
+            f"{target:.0f} s: {verdict}; needs >= {max(1, -(-int(cpu_seconds) // int(target)))} busy cores "
+            "(or Dask workers)")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--trajectories", type=int, default=2)
     parser.add_argument("--sobol", type=int, default=2, help="Sobol base samples measured (a power of two)")
-    parser.add_argument("--scenes", nargs="+", default=list(PAPER_SCENES))
+    parser.add_argument("--scenes", nargs="+", default=list(PAPER_SCENES), help="the scenes measured")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--dask", metavar="ADDRESS", help="simulate the runs on this Dask scheduler")
     args = parser.parse_args()
+
+    from analyses.cluster import dask_executor
 
     base = replace(ROBUSTNESS_EXPERIMENT, size=args.size)
     warnings.simplefilter("ignore")
     prepared = prepare(base, args.scenes)
-    print(f"{len(args.scenes)} scene(s) at {args.size}x{args.size}; {os.cpu_count()} CPUs here; traces and "
-          f"compilation before, untimed: {prepared:.0f} s", flush=True)
-    totals, per_scene = {}, {}
-    for scene in args.scenes:
-        timings = {}
-        result = robustness(base, scenes=[scene], trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
-                            timings=timings)
-        per_scene[scene] = scene_phases(result, timings)
-        add_phases(totals, per_scene[scene])
-        print(f"{scene}: " + "; ".join(f"{phase} {f['samples']} samples {f['seconds']:.0f} s wall "
-                                       f"{f['cpu_seconds']:.0f} s CPU, {share(f['runs'])}"
-                                       for phase, f in per_scene[scene].items()), flush=True)
+    print(f"{len(args.scenes)} scene(s) measured at {args.size}x{args.size}; {os.cpu_count()} CPUs here"
+          f"{'; runs on Dask at ' + args.dask + ' (CPU times leave the workers out)' if args.dask else ''}; "
+          f"traces and compilation before, untimed: {prepared:.0f} s", flush=True)
+    totals, per_scene, projected = {}, {}, {}
+    with dask_executor(args.dask) as executor:
+        for scene in args.scenes:
+            timings = {}
+            result = robustness(base, scenes=[scene], trajectories=args.trajectories, seed=args.seed,
+                                sobol=args.sobol, timings=timings, executor=executor)
+            per_scene[scene] = scene_phases(result, timings)
+            add_phases(totals, per_scene[scene])
+            projected[scene] = project_scene(per_scene[scene])
+            print(f"measured {scene}: " + "; ".join(
+                f"{phase} {f['samples']} samples {f['seconds']:.0f} s wall {f['cpu_seconds']:.0f} s CPU, "
+                f"{share(f['runs'])}" for phase, f in per_scene[scene].items()), flush=True)
+    records = {scene: trace_records(base, scene) for scene in PAPER_SCENES}
+    how = {scene: "from its own rate" for scene in projected}
+    for scene in PAPER_SCENES:
+        if scene not in projected:
+            projected[scene] = project_by_records({name: projected[name] for name in args.scenes}, records, scene)
+            how[scene] = "by trace size (not measured)"
     morris, check, sobol = (totals[phase] for phase in ("morris", "size_check", "sobol"))
-    n_scenes = len(args.scenes)
-    morris_samples = BUDGET_TRAJECTORIES * (len(FACTORS) + 1) * n_scenes
-    sobol_samples = BUDGET_SOBOL * (SOBOL_FACTORS + 2) * n_scenes
-    projected = {}
-    for rate, spread in (("seconds", 1.0), ("cpu_seconds", 1.0), ("cpu_seconds_on_cores", float(CORES))):
-        measured = rate.replace("_on_cores", "")
-        projected[rate] = {
-            "morris": (morris[measured] * morris_samples / morris["samples"] + check[measured]) / spread,
-            "sobol": sobol[measured] * sobol_samples / sobol["samples"] / spread}
-    print(f"measured Morris: {args.trajectories} trajectories x {len(FACTORS) + 1} samples a scene: "
-          f"{morris['samples']} samples in {morris['seconds']:.0f} s wall, {morris['cpu_seconds']:.0f} s CPU; "
-          f"{share(morris['runs'])}")
-    print(f"measured size check: {check['seconds']:.0f} s wall, {check['cpu_seconds']:.0f} s CPU "
-          f"(5 samples a scene at {' and '.join(map(str, check_sizes(args.size)))})")
-    print(f"measured Sobol: N = {args.sobol} over the top {SOBOL_FACTORS}: {sobol['samples']} samples in "
-          f"{sobol['seconds']:.0f} s wall, {sobol['cpu_seconds']:.0f} s CPU; {share(sobol['runs'])}")
-    for phase, samples, target in (("morris", morris_samples, MORRIS_TARGET_SECONDS),
-                                   ("sobol", sobol_samples, SOBOL_TARGET_SECONDS)):
-        wall, one, both = (projected[rate][phase] for rate in ("seconds", "cpu_seconds", "cpu_seconds_on_cores"))
+    print(f"measured in total: Morris {args.trajectories} trajectories x {len(FACTORS) + 1} samples a scene, "
+          f"{morris['samples']} samples in {morris['seconds']:.0f} s wall, {morris['cpu_seconds']:.0f} s CPU, "
+          f"{share(morris['runs'])}; size check {check['seconds']:.0f} s wall, {check['cpu_seconds']:.0f} s CPU "
+          f"(5 samples a scene at {' and '.join(map(str, check_sizes(args.size)))}); Sobol N = {args.sobol} over "
+          f"the top {SOBOL_FACTORS}: {sobol['samples']} samples in {sobol['seconds']:.0f} s wall, "
+          f"{sobol['cpu_seconds']:.0f} s CPU, {share(sobol['runs'])}")
+    budget = budget_samples()
+    for scene in PAPER_SCENES:
+        figures = projected[scene]
+        print(f"projected {scene} ({how[scene]}, {records[scene]} records): Morris r = {BUDGET_TRAJECTORIES} + "
+              f"size check {figures['morris']['cpu_seconds']:.0f} s CPU ({figures['morris']['seconds']:.0f} s at "
+              f"the measured wall rate); Sobol N = {BUDGET_SOBOL}: {figures['sobol']['cpu_seconds']:.0f} s CPU "
+              f"({figures['sobol']['seconds']:.0f} s wall rate)")
+    total = {phase: {rate: sum(projected[scene][phase][rate] for scene in PAPER_SCENES)
+                     for rate in ("seconds", "cpu_seconds")} for phase in ("morris", "sobol")}
+    for phase, target in (("morris", MORRIS_TARGET_SECONDS), ("sobol", SOBOL_TARGET_SECONDS)):
         design = (f"r = {BUDGET_TRAJECTORIES} over {len(FACTORS)} unknowns + size check" if phase == "morris"
                   else f"N = {BUDGET_SOBOL} over {SOBOL_FACTORS} unknowns")
-        verdict = ("met" if one <= target else f"NOT met ({both / target:.1f}x over even with both cores busy)"
-                   if both > target else "met only if both cores stay busy")
-        print(f"projected {phase} ({design}, {samples} samples): {wall:.0f} s at the measured wall rate; on "
-              f"{CORES} idle cores from the CPU rate between {both:.0f} s (both busy) and {one:.0f} s (one busy); "
-              f"target <= {target:.0f} s: {verdict}")
+        print(f"projected total {phase} over {len(PAPER_SCENES)} scenes ({design}, "
+              f"{budget[phase] * len(PAPER_SCENES)} samples; {len(args.scenes)} scene(s) measured): "
+              f"{total[phase]['seconds']:.0f} s at the measured wall rate; {judge(total[phase]['cpu_seconds'], target)}")
     print(json.dumps({"size": args.size, "scenes": args.scenes, "trajectories": args.trajectories,
-                      "sobol": args.sobol, "morris": morris, "size_check": check, "sobol_phase": sobol,
-                      "per_scene": per_scene, "budget_morris_samples": morris_samples,
-                      "budget_sobol_samples": sobol_samples,
-                      "projected_seconds": {k: {p: round(v, 1) for p, v in d.items()} for k, d in projected.items()},
+                      "sobol": args.sobol, "dask": args.dask, "morris": morris, "size_check": check,
+                      "sobol_phase": sobol, "per_scene": per_scene, "records": records, "projected_how": how,
+                      "budget_samples_per_scene": budget,
+                      "projected_seconds": {scene: {p: {k: round(v, 1) for k, v in d.items()} for p, d in f.items()}
+                                            for scene, f in projected.items()},
+                      "projected_total": {p: {k: round(v, 1) for k, v in d.items()} for p, d in total.items()},
                       "targets": {"morris": MORRIS_TARGET_SECONDS, "sobol": SOBOL_TARGET_SECONDS},
                       "cpus": os.cpu_count()}, default=float))
 
