@@ -284,9 +284,10 @@ def measure(anchor: dict, work: Workload, run: dict) -> dict:
         return {"values": {name: None for name in levels},
                 "reason": f"order {anchor['order']!r} is not registered in coherence.ray_orders "
                           f"(registered: {', '.join(registered_orders()) or 'none'})"}
-    if anchor["measure"] == "order_gain":
-        return order_gain(anchor, work, levels)
-    return submission_change(anchor, work, levels, run["submission_seed"])
+    result = order_gain(anchor, work, levels) if anchor["measure"] == "order_gain" \
+        else submission_change(anchor, work, levels, run["submission_seed"])
+    result["recipe"] = repr(work.recipe(anchor["order"]))
+    return result
 
 
 def run_anchors(work_dir: Path, size: int, only=None, data: Path = DATA) -> dict:
@@ -373,7 +374,8 @@ direction of each finding, not its size.""",
             continue
         table = pd.DataFrame([{"rays": key, **{level: value for level, value in per_level.items()}}
                               for key, per_level in result["misses_per_ray"].items()])
-        blocks.append(f"Misses per ray (bounce limit {result['max_depth']}; rays counted: "
+        recipe = f"; order `{result['recipe']}`" if "recipe" in result else ""
+        blocks.append(f"Misses per ray (bounce limit {result['max_depth']}{recipe}; rays counted: "
                       + ", ".join(f"{key} {count}" for key, count in result["rays"].items()) + "):")
         blocks += [markdown_table(table), stamp]
         blocks.append(f"{anchor['measure']}: " + ", ".join(f"{level} {_number(value)}"
