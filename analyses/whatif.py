@@ -39,6 +39,11 @@ Under a platform (base ``platform``), its variants
                        :data:`coherence.platforms.PREFETCHERS_ON`
 =====================  ========================================================
 
+Under a platform every point's runs are simulated on the variant's shared
+levels (:func:`shared_levels`), the point's level changes applied to whole
+levels, interleaved every ``interleave_cycles`` of the base; each row then
+also gives, per level, the machine's coherence and false-sharing misses.
+
 Each row of the result says, for one point, mapping and process count, how
 much efficiency was lost to imbalance and to coherence and which was larger
 (``verdict``: ``"balance"`` or ``"coherence"``). On a textured scene each
@@ -255,25 +260,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
         hierarchy = get_hierarchy(point["hierarchy"])
     else:
         hierarchy = base or study.base_hierarchy()
-    levels = {level.name: level for level in hierarchy.levels}
-    updates: dict[str, dict] = {}
-    for key, value in point.items():
-        if key == "line_size":
-            for name in levels:
-                updates.setdefault(name, {})["line_size"] = value
-        elif "." in key:
-            name, attribute = key.split(".", 1)
-            if name not in levels:
-                raise InputError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
-            updates.setdefault(name, {})[attribute] = value
-    try:
-        if updates:
-            hierarchy = replace(hierarchy, levels=tuple(replace(level, **updates.get(level.name, {}))
-                                                        for level in hierarchy.levels))
-        if "memory_latency" in point:
-            hierarchy = replace(hierarchy, memory_latency=point["memory_latency"])
-    except ValueError as error:
-        raise InputError(f"what-if point {point}: {error}") from None
+    hierarchy = _point_levels(hierarchy, point)
     cost = get_cost_model(point.get("cost", study.cost))
     scale = require_number("compute_scale", point.get("compute_scale", 1.0), 0)
     if scale == 0:
@@ -295,6 +282,47 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
                       background_load=int(point.get("background", study.background)))
     n_processes = int(point.get("n_processes", study.n_processes))
     return hierarchy, layout, cost, machine, n_processes
+
+
+def _point_levels(hierarchy: Hierarchy, point: dict) -> Hierarchy:
+    """``hierarchy`` with the point's ``line_size``, ``<level>.<field>`` and ``memory_latency``."""
+    levels = {level.name: level for level in hierarchy.levels}
+    updates: dict[str, dict] = {}
+    for key, value in point.items():
+        if key == "line_size":
+            for name in levels:
+                updates.setdefault(name, {})["line_size"] = value
+        elif "." in key:
+            name, attribute = key.split(".", 1)
+            if name not in levels:
+                raise InputError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
+            updates.setdefault(name, {})[attribute] = value
+    try:
+        if updates:
+            hierarchy = replace(hierarchy, levels=tuple(replace(level, **updates.get(level.name, {}))
+                                                        for level in hierarchy.levels))
+        if "memory_latency" in point:
+            hierarchy = replace(hierarchy, memory_latency=point["memory_latency"])
+    except ValueError as error:
+        raise InputError(f"what-if point {point}: {error}") from None
+    return hierarchy
+
+
+def shared_levels(study: WhatIf, point: dict):
+    """Under a platform, what a point's runs simulate on: the point's platform variant's shared levels, with the
+    point's level changes applied to the whole levels (an ``L3.size`` is the size of one L3), interleaved at the
+    base's ``interleave_cycles`` (:class:`coherence.shared_run.SharedLevels`); None without a platform."""
+    from coherence.shared_run import SharedLevels
+
+    platform = platform_variant(study, point)
+    if platform is None:
+        return None
+    machine = platform.hierarchy
+    try:
+        machine = replace(machine, hierarchy=_point_levels(machine.hierarchy, point))
+    except ValueError as error:
+        raise InputError(f"what-if point {point}: {error}") from None
+    return SharedLevels(machine, study.experiment.interleave_cycles)
 
 
 def platform_variant(study: WhatIf, point: dict):
@@ -333,10 +361,12 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     # The scene gives polygons their true sizes in the layout; SPD scenes at
     # other size factors have none.
     scene = load(study.scene) if "scene_size" not in point else None
-    result = run_study(trace, study.mappings, [n_processes], hierarchy=hierarchy, layout=layout, cost=cost,
+    caches = shared_levels(study, point) or hierarchy  # under a platform, its shared levels
+    result = run_study(trace, study.mappings, [n_processes], hierarchy=caches, layout=layout, cost=cost,
                        machine=machine, scene=scene, progress=False, execution=Execution(n_jobs=1))
     runs = result.runs[result.runs["n_processes"] == n_processes]
-    level_columns = [c for c in runs.columns if c.endswith(("_hit_rate", "_misses_per_ray"))]
+    level_columns = [c for c in runs.columns
+                     if c.endswith(("_hit_rate", "_misses_per_ray", "_coherence_misses", "_false_sharing_misses"))]
     table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *level_columns]].copy()
     if trace.metadata.get("textures"):
         texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)

@@ -176,3 +176,23 @@ def test_default_q_keeps_l3_misses_within_1_percent_of_q1_on_balls_64(tmp_path):
         l3[q] = at_8.groupby("mapping")["L3_misses"].sum()
     assert (l3[1] > 0).all()
     assert ((l3[DEFAULT_INTERLEAVE_CYCLES] / l3[1] - 1).abs() <= 0.01).all(), (l3[1], l3[DEFAULT_INTERLEAVE_CYCLES])
+
+
+def test_whatif_points_under_a_platform_run_on_its_shared_levels():
+    """A what-if point under a platform runs on the platform variant's whole shared levels with the point's
+    level changes and the base's Q; without a platform there are none. Mutation: ``return None`` first in
+    analyses.whatif.shared_levels."""
+    from dataclasses import replace
+
+    from analyses.whatif import WhatIf, shared_levels
+    from coherence.platforms import get_platform
+
+    study = WhatIf.of("latency", {"memory_latency": [100, 200]}, scene="tetra", size=8, platform="zen4-7950x")
+    caches = shared_levels(study, {"memory_latency": 200, "L2.latency": 20, "cores": 8})
+    zen = get_platform("zen4-7950x")
+    assert caches.interleave_cycles == study.experiment.interleave_cycles
+    assert caches.machine.n_cores == 8 and caches.hierarchy.memory_latency == 200
+    assert [level.size for level in caches.hierarchy.levels] == [level.size for level in zen.hierarchy.hierarchy.levels]
+    assert caches.hierarchy.levels[1].latency == 20
+    assert shared_levels(replace(study, experiment=replace(study.experiment, platform=None,
+                                                           frame_buffer_bytes=None)), {}) is None
