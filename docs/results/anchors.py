@@ -355,10 +355,15 @@ direction of each finding, not its size.""",
         rows.append({"anchor": anchor["id"], "published": anchor["published"], "citation": anchor["citation"],
                      "order": anchor["order"], "quantity": anchor["measure"],
                      "rule": f"{anchor['rule']} {anchor['threshold']:g}", "ours": measured,
-                     "verdict": verdict(values, anchor["rule"], anchor["threshold"]) if result else NOT_MEASURED})
+                     "verdict": verdict(values, anchor["rule"], anchor["threshold"]) if result else NOT_MEASURED,
+                     "ours, order's records free": ", ".join(f"{level} {_number(value)}" for level, value in
+                                                             result.get("gain_without_own_records", {}).items())
+                     if result else ""})
     import pandas as pd
 
     blocks += [markdown_table(pd.DataFrame(rows)), stamp]
+    blocks.append("""The last column is not part of any rule: an order's gain if its ray states and
+queue entries cost no memory traffic (its pieces replayed alone).""")
     blocks.append("## Each anchor")
     for anchor in anchors:
         result = record["anchors"].get(anchor["id"])
