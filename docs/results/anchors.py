@@ -164,11 +164,18 @@ class Workload:
         return names.index(name)
 
     def tree(self):
+        """The trace's kd-tree, built again from the scene with the configuration the trace recorded."""
         if self._tree is None:
-            from tracer.kd.tree import build_kdtree
-            from tracer.rendering.workload import get_workload
+            from tracer.kd.tree import KdTreeConfig, build_kdtree
 
-            self._tree = build_kdtree(self.scene, get_workload("pathtrace").kd_config)
+            from tracer.trace.records import RecordKind
+
+            tree = build_kdtree(self.scene, KdTreeConfig(**self.trace.metadata["kd_config"]))
+            first = self.placed.kind_first
+            if len(tree.nodes) != first[RecordKind.KD_NODE + 1] - first[RecordKind.KD_NODE]:
+                raise ValueError(f"the kd-tree built again has {len(tree.nodes)} nodes, the trace's "
+                                 f"{first[RecordKind.KD_NODE + 1] - first[RecordKind.KD_NODE]}: not the trace's tree")
+            self._tree = tree
         return self._tree
 
     def pixel_rows(self, pixel_order: np.ndarray) -> np.ndarray:
