@@ -117,3 +117,21 @@ def test_treelet_order_on_a_path_trace():
         covered[first:stop] += 1
     assert (covered == 1).all()
     assert set(unpack_aux(pieces.aux_records)[0].tolist()) == {AuxKind.RAY_STATE, AuxKind.QUEUE_ENTRY}
+
+
+def test_cut_of_a_hand_checked_ray():
+    """On the hand-drawn tree (treelets of 3 nodes: 0 1 4 | 2 | 3 | 5 | 6 7 8) a ray reading nodes 0, 1, 2,
+    a sphere, then 4, 6, 7 and its material is cut into (0, 1) in treelet 0, (2, sphere) in 1, (4) back in
+    0 and (6, 7, material) in 4. Fails if a piece takes the treelet of its last node record instead of its
+    first (``current`` -> ``t`` when a piece is closed in _cut) (checked)."""
+    from tracer.trace.records import RecordKind, pack
+    from tracer.trace.segments import RaySegments
+
+    kinds = [RecordKind.KD_NODE] * 3 + [RecordKind.SPHERE] + [RecordKind.KD_NODE] * 3 + [RecordKind.MATERIAL]
+    records = pack(kinds, [0, 1, 2, 5, 4, 6, 7, 0])
+    segments = RaySegments(np.array([[0, 0, 0, 0, 0, 8]], dtype=np.int64), np.zeros((1, 9)))
+    node_treelet, _ = treelets(_HAND, 24, 8)
+    offsets, first, stop, piece_treelet = cut_segments(records, segments, np.array([0]), node_treelet)
+    assert list(zip(first.tolist(), stop.tolist(), piece_treelet.tolist())) == [(0, 2, 0), (2, 4, 1), (4, 5, 0),
+                                                                               (5, 8, 4)]
+    assert offsets.tolist() == [0, 4]
