@@ -5,10 +5,11 @@
     ``N`` x ``N`` pixels and writes ``DIR/anchors.json``: per anchor the
     values at each level, the misses per ray behind them and the command that
     reproduces it, with the commit, machine, date and wall time.
-``python docs/results/anchors.py page --work DIR``
-    copies that JSON beside this script (``anchors.json``) and writes
-    ``anchors.md`` from it and the data file; ``page`` without ``--work``
-    rewrites the page from the stored JSON.
+``python docs/results/anchors.py page --work DIR [DIR ...]``
+    stores the records of those runs (one per image size) beside this
+    script as ``anchors.json`` and writes ``anchors.md`` from them and the
+    data file: the first run in full, the others as a verdict table each;
+    ``page`` without ``--work`` rewrites the page from the stored records.
 
 What each quantity is and how a rule decides "confirmed" is stated at the top
 of ``anchors.toml``. An anchor whose order is not registered in
@@ -334,25 +335,13 @@ def _number(value) -> str:
     return "—" if value is None else f"{value:.3g}"
 
 
-def page_text(record: dict, data: Path = DATA) -> str:
-    """The page ``anchors.md``: the data file's anchors, the measurements of ``record``, stamps."""
-    run, anchors = load_anchors(data)
-    size = record["size"]
-    stamp = (f"{STAMP_PREFIX} `python docs/results/anchors.py run --work OUT --size {size}` at commit "
-             f"`{record['commit']}` ({record['date']}, "
-             f"{record['seconds']:.0f} s on {record['machine']}).")
-    blocks = ["# Anchors: published findings on reordering incoherent rays",
-              f"""Each published finding is stated as a claim our path-traced traces can test,
-with the rule that decides it, in `docs/results/anchors.toml` (committed before
-anything was measured). Ours: {run['scene']} at {size}×{size} pixels, {run['spp']} samples per
-pixel, seed {run['seed']}, bounce limit {run['max_depth']} unless the anchor says otherwise;
-one process owns every ray; the {run['hierarchy']} hierarchy on empty caches;
-the {run['layout']} layout, whose records of the scene and its tree take
-{max(record['scene_bytes'].values()):,} bytes. A "miss" at a level is an access that level could not
-serve. Citations name where the figure was read; "body not checked" means only
-the abstract was seen. A small image on a scene that fits in the L3 tests the
-direction of each finding, not its size.""",
-              "## Verdicts"]
+def _stamp(record: dict) -> str:
+    return (f"{STAMP_PREFIX} `python docs/results/anchors.py run --work OUT --size {record['size']}` at commit "
+            f"`{record['commit']}` ({record['date']}, {record['seconds']:.0f} s on {record['machine']}).")
+
+
+def _verdict_rows(anchors: list, record: dict) -> list:
+    """One row per anchor: its published figure and rule, our values in ``record`` and the verdict."""
     rows = []
     for anchor in anchors:
         result = record["anchors"].get(anchor["id"])
@@ -366,12 +355,40 @@ direction of each finding, not its size.""",
                      "ours, order's records free": ", ".join(f"{level} {_number(value)}" for level, value in
                                                              result.get("gain_without_own_records", {}).items())
                      if result else ""})
+    return rows
+
+
+def page_text(records: list, data: Path = DATA) -> str:
+    """The page ``anchors.md``: the data file's anchors, the measurements of ``records`` (one per image size,
+    the first in full, the others in a table of their own), stamps."""
     import pandas as pd
 
+    run, anchors = load_anchors(data)
+    record = records[0]
+    size = record["size"]
+    stamp = _stamp(record)
+    blocks = ["# Anchors: published findings on reordering incoherent rays",
+              f"""Each published finding is stated as a claim our path-traced traces can test,
+with the rule that decides it, in `docs/results/anchors.toml` (committed before
+anything was measured). Ours: {run['scene']} at {size}×{size} pixels, {run['spp']} samples per
+pixel, seed {run['seed']}, bounce limit {run['max_depth']} unless the anchor says otherwise;
+one process owns every ray; the {run['hierarchy']} hierarchy on empty caches;
+the {run['layout']} layout, whose records of the scene and its tree take
+{max(record['scene_bytes'].values()):,} bytes. A "miss" at a level is an access that level could not
+serve. Citations name where the figure was read; "body not checked" means only
+the abstract was seen. A small image on a scene that fits in the L3 tests the
+direction of each finding, not its size.""",
+              "## Verdicts"]
+    rows = _verdict_rows(anchors, record)
     blocks += [markdown_table(pd.DataFrame(rows)), stamp]
     blocks.append("""The last column is not part of any rule: an order's gain if its ray states and
 queue entries cost no memory traffic (its pieces replayed alone).""")
-    blocks.append("## Each anchor")
+    for other in records[1:]:
+        blocks.append(f"## The same at {other['size']}×{other['size']} pixels")
+        table = pd.DataFrame(_verdict_rows(anchors, other))
+        blocks += [markdown_table(table[["anchor", "order", "rule", "ours", "verdict", "ours, order's records free"]]),
+                   _stamp(other)]
+    blocks.append(f"## Each anchor, at {size}×{size} pixels")
     for anchor in anchors:
         result = record["anchors"].get(anchor["id"])
         blocks.append(f"### `{anchor['id']}`")
@@ -402,11 +419,11 @@ queue entries cost no memory traffic (its pieces replayed alone).""")
     return "\n\n".join(blocks) + "\n"
 
 
-def write_page(record: dict, pages: Path = HERE) -> Path:
-    """Store ``record`` as ``anchors.json`` and write ``anchors.md`` beside this script."""
-    (pages / "anchors.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+def write_page(records: list, pages: Path = HERE) -> Path:
+    """Store ``records`` (one per image size) as ``anchors.json`` and write ``anchors.md`` beside this script."""
+    (pages / "anchors.json").write_text(json.dumps(records, indent=1) + "\n", encoding="utf-8")
     path = pages / "anchors.md"
-    path.write_text(page_text(record), encoding="utf-8")
+    path.write_text(page_text(records), encoding="utf-8")
     return path
 
 
@@ -417,15 +434,18 @@ def main(argv=None):
     run.add_argument("--work", type=Path, required=True)
     run.add_argument("--size", type=int, default=64, help="image width and height (default 64)")
     run.add_argument("--only", nargs="+", metavar="ID")
-    page = sub.add_parser("page", help="write anchors.md from --work/anchors.json (default: the stored one)")
-    page.add_argument("--work", type=Path)
+    page = sub.add_parser("page", help="write anchors.md from each --work's anchors.json (default: the stored "
+                                       "records); the first in full, the others as tables of their own")
+    page.add_argument("--work", type=Path, nargs="+")
     args = parser.parse_args(argv)
     if args.step == "run":
         run_anchors(args.work, args.size, args.only)
         return
-    source = (args.work / "anchors.json") if args.work else HERE / "anchors.json"
-    record = json.loads(source.read_text(encoding="utf-8"))
-    print(write_page(record))
+    if args.work:
+        records = [json.loads((work / "anchors.json").read_text(encoding="utf-8")) for work in args.work]
+    else:
+        records = json.loads((HERE / "anchors.json").read_text(encoding="utf-8"))
+    print(write_page(records))
 
 
 if __name__ == "__main__":
