@@ -3,8 +3,8 @@
 Opt-in: with a platform (:data:`coherence.platforms.PLATFORMS`) in the
 paper's experiment, every scene's trace (the study-era tracer's, with its
 per-ray data) is also run with the same mappings and process counts on the
-platform: each hardware thread a CPU, the hierarchy a run under a platform
-simulates (:meth:`analyses.experiment.Experiment.hierarchy_object`), and
+platform: each hardware thread a CPU, its shared levels as a run under a
+platform simulates them (:meth:`analyses.experiment.Experiment.study_hierarchy`), and
 the platform's own cost model, not fitted to the study. The study's machine
 and its calibration are untouched; the platform's results go beside them:
 ``today_*`` columns of ``scenes.csv``, ``today.csv`` (the platform's run
@@ -51,7 +51,8 @@ def today_of(experiment):
     platform = experiment.platform_object()
     if platform is None:
         return experiment, None
-    parameters = {**platform_parameters(platform), "hierarchy": experiment.hierarchy_object().to_dict(),
+    parameters = {**platform_parameters(platform, experiment.interleave_cycles),
+                  "hierarchy": experiment.study_hierarchy().to_dict(),
                   "cost": platform.cost.to_dict(), "n_cpus": experiment.cpus()}
     return replace(experiment, platform=None), Today(experiment, parameters)
 
@@ -77,7 +78,7 @@ def run_today(today: Today, trace, scene, counts, execution) -> pd.DataFrame:
     from coherence.studies import study
 
     experiment = today.experiment
-    return study(trace, experiment.mapping_objects(), counts, hierarchy=experiment.hierarchy_object(),
+    return study(trace, experiment.mapping_objects(), counts, hierarchy=experiment.study_hierarchy(),
                  layout=experiment.layout_object(), cost=experiment.cost_model(), machine=experiment.machine(),
                  scene=scene, progress=experiment.progress, execution=execution).runs
 

@@ -37,18 +37,19 @@ def test_the_study_s_machine_is_unchanged_by_a_today_column(results):
 
 
 def test_today_runs_are_the_platform_s_with_its_own_costs(results, cache):
-    """The today runs equal coherence.study on the same trace with the platform's thread view, cost model and
-    4 CPUs (the study's background load kept). Mutation: ``cost=experiment.cost_model()`` ->
+    """The today runs equal coherence.study on the same trace with the platform's shared levels (default
+    interleaving), cost model and 4 CPUs (the study's background load kept). Mutation: ``cost=experiment.cost_model()`` ->
     ``cost=get_cost_model("alpha8400")`` in run_today."""
     from analyses.traces import cached_trace
     from coherence import study
     from coherence.layout import get_layout
+    from coherence.shared_run import SharedLevels
     from coherence.simulation import Machine
 
     _, today = results
     m1 = get_platform("apple-m1")
     scene, trace, _ = cached_trace("tetra", SIZE, cache_dir=cache, progress=False, workload="study1997")
-    expected = study(trace, list(paper.DEFAULT_MAPPINGS), COUNTS, hierarchy=m1.thread_view(),
+    expected = study(trace, list(paper.DEFAULT_MAPPINGS), COUNTS, hierarchy=SharedLevels(m1.hierarchy),
                      layout=get_layout("alpha1997"), cost=m1.cost, scene=scene, progress=False,
                      machine=Machine(n_cpus=4, background_load=paper.DEFAULT_BACKGROUND)).runs
     runs = today.today["runs"]

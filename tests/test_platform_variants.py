@@ -92,3 +92,20 @@ def test_whatif_help_names_every_platform_key(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for key in ("frame_buffer_bytes (3, 4, 16)", "cores (", "smt (on, off", "l3_size (", "prefetch (on, off"):
         assert key in text
+
+
+def test_whatif_cli_varies_a_platform(tmp_path, capsys):
+    """``coherence whatif --platform apple-m1 --grid cores=2,4``: one row per point and mapping, on the shared
+    levels (their coherence columns in the CSV). Mutation: ``WhatIf(name="grid", grid=dict(pairs))`` in
+    build_study (the grid is checked before the platform is given, and refused)."""
+    import pandas as pd
+
+    from analyses.cli import main
+
+    argv = ["whatif", "--platform", "apple-m1", "--grid", "cores=2,4", "--grid", "frame_buffer_bytes=3",
+            "--scene", "tetra", "--size", "8", "--mappings", "S", "P", "--processes", "4", "--jobs", "1",
+            "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert main(argv) == 0, capsys.readouterr().err
+    table = pd.read_csv(tmp_path / "out" / "whatif-grid.csv")
+    assert sorted(set(zip(table["cores"], table["mapping"]))) == [(2, "P"), (2, "S"), (4, "P"), (4, "S")]
+    assert "L1_false_sharing_misses" in set(table["metric"])

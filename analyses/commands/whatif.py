@@ -88,7 +88,7 @@ def build_study(args):
     from dataclasses import replace
 
     from analyses.commands.options import experiment_from_args
-    from analyses.whatif import BUILTIN, WhatIf, load_study_file, parse_grid_flag
+    from analyses.whatif import BUILTIN, WHATIF_EXPERIMENT, WhatIf, load_study_file, parse_grid_flag
 
     sources = sum(bool(source) for source in (args.study, args.grid, args.file))
     if sources != 1:
@@ -109,7 +109,8 @@ def build_study(args):
         if repeated:
             raise InputError(f"--grid {repeated[0]} is given more than once; list every value in one flag "
                              f"({repeated[0]}=V1,V2,...)")
-        study = WhatIf(name="grid", grid=dict(pairs))
+        # the base first: a grid over a platform's variants needs the platform the options give
+        study = WhatIf(name="grid", experiment=experiment_from_args(args, WHATIF_EXPERIMENT), grid=dict(pairs))
     # the options given replace the study's base experiment; the rest stay the study's
     return replace(study, experiment=experiment_from_args(args, study.experiment))
 
