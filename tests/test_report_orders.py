@@ -1,5 +1,7 @@
 """The report's ray-order section (analyses.report_orders) and its place in the report of a path-traced trace."""
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -72,8 +74,8 @@ def test_wavefront_pays_for_its_queues(section):
 def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
     """``coherence report --workload pathtrace`` writes the section: every registered order and treelet queues
     (sized to the first level, with queue records) in results.csv and summary.json, under the mapping the miss
-    map shows, and the page's table; a Whitted report has none. Fails if results_table leaves out the order
-    rows (checked)."""
+    map shows, and the page's table, each metric listed in docs/outputs.md; a Whitted report has none. Fails if
+    results_table leaves out the order rows (checked)."""
     from coherence.ray_orders import RAY_ORDERS
 
     out = tmp_path / "out"
@@ -87,6 +89,11 @@ def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
     assert next(row for row in summary["ray_orders"] if row["order"] == "treelet")["queue_records"] > 0
     assert set(orders["mapping"]) == {summary["parameters"]["miss_map"]["mapping"]}
     assert "<h2>Ray orders:" in (out / "index.html").read_text()
+    # docs/outputs.md lists exactly the section's metrics (levels as <level>)
+    page = (Path(__file__).resolve().parent.parent / "docs" / "outputs.md").read_text(encoding="utf-8")
+    documented = {line.split("|")[2].strip().strip("`") for line in page.splitlines()
+                  if line.startswith("| `ray_orders` |")}
+    assert {re.sub(r"^L\d_", "<level>_", metric) for metric in orders["metric"]} == documented
     whitted = tmp_path / "whitted"
     assert main(["report", "balls", "--size", "12", "--processes", "4", "--mappings", "S", "--out", str(whitted),
                  "--cache", str(tmp_path / "cache")]) == 0
