@@ -38,6 +38,9 @@ __all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SHARED_RUN_COLUMNS", "SharedLevels", "S
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
 DEFAULT_INTERLEAVE_CYCLES = 1000
 
+#: Records :func:`pixel_pieces` splits at once (its work arrays hold some 100 bytes per record).
+PIECES_CHUNK = 1 << 21
+
 
 @dataclass(frozen=True)
 class SharedLevels:
@@ -94,7 +97,8 @@ class SharedRun:
     run : coherence.simulation.Run
         Per process: the same columns as a private-cache run (hits and
         misses per level are the process's accesses, wherever they were
-        served).
+        served; ``cpu`` is the scheduler's CPU, hardware thread
+        ``coherence.shared_schedule.cpu_threads(n_cores, smt)[cpu]``).
     shared : cachesim.multicore_state.SharedResult
         Counts per level, instance and record kind of the machine's
         instances (background reads included, as kind 0), with coherence
@@ -128,17 +132,30 @@ def pixel_pieces(trace, placed: PlacedLayout, line_size: int) -> PixelPieces:
     """
     offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
     n_pixels = offsets.shape[0] - 1
-    record_pixel = np.repeat(np.arange(n_pixels, dtype=np.int64), np.diff(offsets))
-    # record_pieces moves a private record to copy (thread + 1); given each record's
-    # pixel as its "thread", the pieces come back tagged with their pixel.
-    stream = record_pieces(np.asarray(trace.records), record_pixel, placed, line_size)
-    pixel_of = stream.threads
     span = private_span(placed)
-    private = np.isin(stream.kinds, np.array([int(kind) for kind in PRIVATE_KINDS], dtype=np.uint8))
-    addresses = stream.addresses - np.where(private, (pixel_of + 1) * span, 0).astype(np.uint64)
-    piece_offsets = np.searchsorted(pixel_of, np.arange(n_pixels + 1)).astype(np.int64)
-    return PixelPieces(piece_offsets, addresses, stream.sizes.astype(np.int64), stream.kinds, stream.writes,
-                       private, int(span))
+    private_kinds = np.array([int(kind) for kind in PRIVATE_KINDS], dtype=np.uint8)
+    records = np.asarray(trace.records)
+    parts = []
+    counts = np.zeros(n_pixels, dtype=np.int64)
+    first = 0
+    while first < n_pixels:  # pixels in chunks of about PIECES_CHUNK records: the work arrays stay small
+        stop = int(np.searchsorted(offsets, offsets[first] + PIECES_CHUNK, side="right")) - 1
+        stop = min(max(stop, first + 1), n_pixels)
+        record_pixel = np.repeat(np.arange(first, stop, dtype=np.int64), np.diff(offsets[first:stop + 1]))
+        # record_pieces moves a private record to copy (thread + 1); given each record's
+        # pixel as its "thread", the pieces come back tagged with their pixel.
+        stream = record_pieces(records[offsets[first]:offsets[stop]], record_pixel, placed, line_size)
+        private = np.isin(stream.kinds, private_kinds)
+        addresses = stream.addresses - np.where(private, (stream.threads + 1) * span, 0).astype(np.uint64)
+        counts[first:stop] = np.bincount(stream.threads - first, minlength=stop - first)
+        parts.append((addresses, stream.sizes.astype(np.int64), stream.kinds, stream.writes, private))
+        first = stop
+    piece_offsets = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    if not parts:
+        parts.append((np.zeros(0, np.uint64), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.bool_),
+                      np.zeros(0, np.bool_)))
+    columns = [np.concatenate([part[column] for part in parts]) for column in range(5)]
+    return PixelPieces(piece_offsets, *columns[:5], int(span))
 
 
 def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHierarchy, placed: PlacedLayout,

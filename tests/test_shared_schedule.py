@@ -196,3 +196,25 @@ def test_whatif_points_under_a_platform_run_on_its_shared_levels():
     assert caches.hierarchy.levels[1].latency == 20
     assert shared_levels(replace(study, experiment=replace(study.experiment, platform=None,
                                                            frame_buffer_bytes=None)), {}) is None
+
+
+def test_pixel_pieces_in_chunks_equal_one_pass(monkeypatch):
+    """Split in chunks of 7 records (pixels never split), the pieces equal those of one pass, and each pixel's
+    pieces are its records' (record_pieces on that pixel alone). Mutation: ``first = stop`` -> ``first = stop + 1``
+    in pixel_pieces (a pixel per chunk is skipped)."""
+    import coherence.shared_run as shared_run
+    from coherence.thread_streams import record_pieces
+
+    trace = synthetic_trace(5, 4, seed=3)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    whole = pixel_pieces(trace, placed, 32)
+    monkeypatch.setattr(shared_run, "PIECES_CHUNK", 7)
+    chunked = pixel_pieces(trace, placed, 32)
+    for field in whole._fields:
+        np.testing.assert_array_equal(getattr(chunked, field), getattr(whole, field))
+    for pixel in (0, 7, 19):
+        rows = slice(trace.pixel_offsets[pixel], trace.pixel_offsets[pixel + 1])
+        alone = record_pieces(trace.records[rows], np.full(rows.stop - rows.start, -1), placed, 32)
+        pieces = slice(whole.piece_offsets[pixel], whole.piece_offsets[pixel + 1])
+        np.testing.assert_array_equal(whole.addresses[pieces], alone.addresses)
+        np.testing.assert_array_equal(whole.sizes[pieces], alone.sizes)
