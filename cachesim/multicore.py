@@ -52,8 +52,8 @@ from cachesim import prefetch as P
 from cachesim.inputs import as_addresses, as_writes, small_integers
 from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
                                       FALSE_SHARING_MISSES, N_KINDS, SharedResult, SharedState, ThreadStream)
-from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
-                           _find, _insert)
+from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, RANDOM, WRITE_HITS, WRITE_MISSES,
+                           WRITES, _find, _random_way)
 from cachesim.sharing import SharedHierarchy
 from cachesim.simulate import _check_line_range
 from rtcommon.jit import NO_REFCOUNTS
@@ -80,6 +80,37 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     mask = set_mask[level]
     set_index = line & mask if mask >= 0 else line % n_sets[level]
     return offset[level] + instance * level_ways[level] + set_index * ways[level]
+
+
+@njit(cache=True, inline="always")
+def _probe(tags, base, n_ways, line):
+    """:func:`cachesim.sets._find` without an early exit: every way is compared, so the
+    loop has no branch that depends on where the line is (the last match; a line is in a set once)."""
+    slot = np.int64(-1)
+    for way in range(n_ways):
+        slot = base + way if tags[base + way] == line else slot
+    return slot
+
+
+@njit(cache=True, inline="always")
+def _place(tags, stamps, seed, base, n_ways, policy, line, clock):
+    """:func:`cachesim.sets._insert` (the same victim: the first empty way, else the first
+    of the least stamps, else a random draw) with one comparison per way: an empty way
+    ranks below every stamp (stamps are clocks, >= 0), the earlier of two empty ways first."""
+    victim = base
+    lowest = np.int64(9223372036854775807)
+    for way in range(n_ways):
+        slot = base + way
+        rank = way - np.int64(9223372036854775807) if tags[slot] < 0 else stamps[slot]
+        if rank < lowest:
+            lowest = rank
+            victim = slot
+    if lowest >= 0 and policy == RANDOM:
+        victim = base + _random_way(seed, clock, n_ways)
+    evicted = tags[victim]
+    tags[victim] = line
+    stamps[victim] = clock
+    return evicted
 
 
 @njit(cache=True, inline="always")
@@ -232,7 +263,7 @@ def shared_access(thread, address, is_write, size, kind, geometry, machine, stat
     served = n_levels
     instance0 = instance_of[0, thread]
     base0 = _set_of(line0, 0, instance0, n_sets, set_mask, ways, offset, level_ways)
-    slot = _find(tags, base0, ways[0], line0)
+    slot = _probe(tags, base0, ways[0], line0)
     if slot >= 0:
         if policy[0] == LRU:
             stamps[slot] = clock
@@ -252,7 +283,7 @@ def shared_access(thread, address, is_write, size, kind, geometry, machine, stat
             instances[level] = instance
             bases[level] = base
             if level > 0:
-                slot = _find(tags, base, ways[level], line)
+                slot = _probe(tags, base, ways[level], line)
                 if slot >= 0:
                     counts[level, instance, kind, HITS] += 1
                     if is_write:
@@ -298,7 +329,7 @@ def _fill(served, is_write, kind, geometry, machine, state, clock, scratch):
             ghost = _find(ghosts, base, ways[level], line)
             if ghost >= 0:  # the line is back: its ghost goes
                 _drop_ghost(ghost, entry, ghosts, ghost_filter)
-        evicted = _insert(tags, state.stamps, geometry.seeds[level], base, ways[level], geometry.policy[level], line,
+        evicted = _place(tags, state.stamps, geometry.seeds[level], base, ways[level], geometry.policy[level], line,
                           clock)
         if evicted >= 0:
             state.counts[level, instance, kind, EVICTIONS] += 1
