@@ -107,7 +107,7 @@ class WhatIf:
         Every grid point varies it. ``scene``, ``size``, ``mappings``,
         ``n_processes`` (the one count, an int), ``hierarchy``, ``cost``,
         ``layout``, ``n_cpus`` and ``background`` read through to it;
-        under a platform, ``hierarchy`` names its thread view, ``cost`` its
+        under a platform, ``hierarchy`` names its shared hierarchy, ``cost`` its
         cost model and ``n_cpus`` its hardware threads, and the grid may
         not vary them (:data:`PLATFORM_PARAMETERS`).
     grid : dict of str to list
@@ -167,9 +167,9 @@ class WhatIf:
 
     @property
     def hierarchy(self):
-        """The base's hierarchy as given, or the name of its platform's thread view."""
+        """The base's hierarchy as given, or the name of its platform's shared hierarchy (what the runs simulate)."""
         platform = self.experiment.platform_object()
-        return self.experiment.hierarchy if platform is None else platform.thread_view().name
+        return self.experiment.hierarchy if platform is None else platform.hierarchy.name
 
     @property
     def cost(self):
