@@ -43,7 +43,7 @@ is read before each piece and written after it. Nothing is sorted.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -329,6 +329,13 @@ class TreeletQueues(RayOrder):
         if self.treelet_bytes < self.node_bytes:
             raise InputError(f"TreeletQueues.treelet_bytes must be >= node_bytes ({self.node_bytes}), "
                              f"got {self.treelet_bytes}")
+
+    def sized(self, cache_bytes: int, node_bytes: int) -> "TreeletQueues":
+        """This order with treelets of ``cache_bytes`` (a cache level's size; at least one node) of nodes of
+        ``node_bytes`` (the placed layout's kd-node size): how a run sizes the registered ``treelet``."""
+        node_bytes = require_int("TreeletQueues.sized: node_bytes", node_bytes, 1)
+        cache_bytes = require_int("TreeletQueues.sized: cache_bytes", cache_bytes, 1)
+        return replace(self, treelet_bytes=max(node_bytes, cache_bytes), node_bytes=node_bytes)
 
     def _order(self, segments, rows, scene_bounds, tree, records) -> OrderedPieces:
         return treelet_pieces(records, segments, rows, tree, self.treelet_bytes, self.node_bytes)

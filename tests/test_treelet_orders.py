@@ -135,3 +135,13 @@ def test_cut_of_a_hand_checked_ray():
     assert list(zip(first.tolist(), stop.tolist(), piece_treelet.tolist())) == [(0, 2, 0), (2, 4, 1), (4, 5, 0),
                                                                                (5, 8, 4)]
     assert offsets.tolist() == [0, 4]
+
+
+def test_sized_treelets_follow_the_cache_and_the_layout():
+    """sized(cache, node) gives treelets of the cache's bytes of the layout's nodes, never less than one
+    node. Fails if sized keeps the registered node size (``node_bytes=node_bytes`` dropped) (checked)."""
+    from coherence.ray_orders import RAY_ORDERS
+
+    order = RAY_ORDERS["treelet"].sized(32768, 40)
+    assert (order.treelet_bytes, order.node_bytes, order.name) == (32768, 40, "treelet")
+    assert RAY_ORDERS["treelet"].sized(16, 40).treelet_bytes == 40
