@@ -156,3 +156,17 @@ def test_depth_first_order_replays_the_traced_order(tiny):
     rows = np.arange(trace.segments.n_segments, dtype=np.int64)
     np.testing.assert_array_equal(work.order_misses("depth-first", rows),
                                   anchors.misses_by_segment(trace, placed, hierarchy).sum(axis=0))
+
+
+def test_pixel_rows_keep_each_pixels_rays_in_order(tiny):
+    """Pixels in a shuffled order: every segment row once, pixels in the order asked, each pixel's rows as
+    traced (what submission_change feeds the order). Compared with a slow per-pixel filter.
+
+    Mutation: ``side="right"`` -> ``side="left"`` for ``stops`` in pixel_rows: fails (checked).
+    """
+    trace, placed, hierarchy = tiny
+    work = anchors.Workload(None, trace, placed, hierarchy)
+    order = np.random.default_rng(1).permutation(trace.n_pixels)
+    pixels = trace.segments.ints[:, 0]
+    expected = np.concatenate([np.flatnonzero(pixels == p) for p in order])
+    np.testing.assert_array_equal(work.pixel_rows(order), expected)
