@@ -149,7 +149,7 @@ def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state
                 continue
             base = _set_of(line, level, other, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
                            machine.level_ways)
-            slot = _find(state.tags, base, geometry.ways[level], line)
+            slot = _probe(state.tags, base, geometry.ways[level], line)
             if slot >= 0:
                 state.tags[slot] = -1
                 state.ghosts[slot] = line
