@@ -21,6 +21,9 @@ sorting cycles left out; a second run):
 * ``dispatch_factor`` = ``(W0 / W) / ((T1 - D1) / T1)``, as the study's.
 
 The depth-first order is the study's run itself (gain and overhead 1).
+The registered treelet order runs with treelets of the hierarchy's first
+level's size and nodes of the placed layout's kd-node size; column
+``treelet_bytes`` says the treelet size an order used (0: not a treelet order).
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ from tracer.trace.records import AuxKind, unpack_aux
 #: The section's columns besides mapping, order and the per-level misses per ray.
 ORDER_COLUMNS = ("n_processes", "rays", "user_seconds_max", "real_seconds", "speedup_user", "efficiency",
                  "load_balance", "coherence_factor", "reordering_gain", "reordering_overhead", "dispatch_factor",
-                 "ray_state_records", "queue_records", "sort_cycles")
+                 "ray_state_records", "queue_records", "sort_cycles", "treelet_bytes")
 
 
 def registry_orders(order, *, scene_bounds, tree=None, records=None) -> tuple:
@@ -92,7 +95,8 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
 
     levels = [level.name for level in setup["hierarchy"].levels]
     bounds = scene_bounds_of(trace.segments)
-    chosen = [get_ray_order(order) for order in orders] if orders is not None else report_orders(setup)
+    chosen = ([_sized(get_ray_order(order), setup) for order in orders] if orders is not None
+              else report_orders(setup))
     if setup.get("tree") is None and any(order.needs_tree for order in chosen):
         setup = {**setup, "tree": _trace_tree(trace, setup["scene"])}
     rows = []
@@ -126,24 +130,32 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
                 "ray_state_records": int(np.count_nonzero(aux_kind == AuxKind.RAY_STATE)),
                 "queue_records": int(np.count_nonzero(aux_kind == AuxKind.QUEUE_ENTRY)),
                 "sort_cycles": float(sort_cycles),
+                "treelet_bytes": int(getattr(order, "treelet_bytes", 0)),
             })
             rows.append(row)
     return pd.DataFrame(rows)
 
 
 def report_orders(setup: dict) -> list:
-    """Every order of :data:`coherence.ray_orders.RAY_ORDERS`, and treelet queues if it has none: treelets
-    of the first cache level's size, nodes of the placed layout's kd-node size."""
-    from coherence.ray_orders import RAY_ORDERS, TreeletQueues
+    """Every order of :data:`coherence.ray_orders.RAY_ORDERS`, the registered treelet queues sized to the
+    section: treelets of the first cache level's size, nodes of the placed layout's kd-node size."""
+    from coherence.ray_orders import RAY_ORDERS
+
+    return [_sized(order, setup) for order in RAY_ORDERS.values()]
+
+
+def _sized(order, setup: dict):
+    """``order``, or if it is the registered ``treelet`` order, that order with treelets of ``setup``'s first
+    cache level's size (at least one node) and nodes of the placed layout's kd-node size; other orders, and
+    treelet orders with sizes of their own, are kept."""
+    from coherence.ray_orders import RAY_ORDERS
     from tracer.trace.records import RecordKind
 
-    orders = list(RAY_ORDERS.values())
-    if not any(isinstance(order, TreeletQueues) for order in orders):
-        placed = setup["placed"]
-        node_bytes = int(placed.record_size[placed.kind_first[RecordKind.KD_NODE]])
-        orders.append(TreeletQueues(treelet_bytes=max(node_bytes, int(setup["hierarchy"].levels[0].size)),
-                                    node_bytes=node_bytes))
-    return orders
+    if order != RAY_ORDERS["treelet"]:
+        return order
+    placed = setup["placed"]
+    node_bytes = int(placed.record_size[placed.kind_first[RecordKind.KD_NODE]])
+    return order.sized(int(setup["hierarchy"].levels[0].size), node_bytes)
 
 
 def _trace_tree(trace, scene):

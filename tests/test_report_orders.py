@@ -111,3 +111,33 @@ def test_the_tree_is_built_again_as_the_trace_recorded_it():
     median = build_kdtree(scene, KdTreeConfig(builder="median"))
     trace = path_trace(scene, median, RenderOptions(size=4, workload="pathtrace")).trace
     assert np.array_equal(_trace_tree(trace, scene).nodes, median.nodes)
+
+
+def test_treelets_follow_the_first_cache_level():
+    """With a first level of 4 KB (not the registered 8 KB) and the ``alpha1997`` layout (40-byte nodes), the
+    section's treelet order runs with 4 KB treelets of 40-byte nodes, says so in ``treelet_bytes`` (0 for the
+    other orders); a treelet order given with its own sizes keeps them. Fails if the section used the registered
+    default (``_sized`` returning ``order`` unchanged) (checked)."""
+    from dataclasses import replace
+
+    from analyses.report_orders import report_orders
+    from coherence.ray_orders import RAY_ORDERS
+
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=6, workload="pathtrace", spp=1)).trace
+    experiment = Experiment(scene="balls", size=6, layout="alpha1997")
+    hierarchy = experiment.hierarchy_object()
+    hierarchy = replace(hierarchy, levels=(replace(hierarchy.levels[0], size=4096), *hierarchy.levels[1:]))
+    layout, cost, machine = experiment.layout_object(), experiment.cost_model(), experiment.machine()
+    mapping = get_mapping("P")
+    runs = study(trace, [mapping], [1, 2], hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
+                 scene=scene, progress=False).runs
+    setup = {"mappings": [mapping], "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
+             "cost": cost, "machine": machine, "scene": scene}
+    treelet = next(order for order in report_orders(setup) if order.name == "treelet")
+    assert (treelet.treelet_bytes, treelet.node_bytes) == (4096, 40) != (RAY_ORDERS["treelet"].treelet_bytes,
+                                                                           RAY_ORDERS["treelet"].node_bytes)
+    table = order_section(trace, runs, setup, 2, orders=["depth-first", "treelet"]).set_index("order")
+    assert table.loc["treelet", "treelet_bytes"] == 4096 and table.loc["depth-first", "treelet_bytes"] == 0
+    own = order_section(trace, runs, setup, 2, orders=[RAY_ORDERS["treelet"].sized(8192, 40)])
+    assert own["treelet_bytes"].iloc[0] == 8192  # a treelet order with sizes of its own keeps them
