@@ -1,0 +1,150 @@
+"""A what-if over the path-traced workload: where does reordering rays pay for itself?
+
+Every grid point renders (or takes from the trace cache) a path-traced trace,
+runs the study's mappings at 1 and the base's one process count, and
+computes the report's ray-order section on it
+(:func:`analyses.report_orders.order_section`): per ray order, the
+reordering gain (how much less the caches made the processes work), the
+reordering overhead (what the order's own buffer and queue traffic and its
+sorting cost) and, added here, ``net_speedup``: the depth-first order's
+slowest process time over the order's (above 1 when the order pays for
+itself at the point).
+
+Grid parameters (:data:`GRID_KEYS`; each optional):
+
+===============  ==========================================================
+``scene``        a built-in scene or NFF/OBJ file (the million-triangle
+                 scene is ``tetra`` at ``scene_size`` 10: 4^10 triangles)
+``scene_size``   SPD size factor of the scene (balls, tetra, shell only)
+``spp``          samples per pixel
+``max_depth``    the bounce limit (the path's ray-tree depth)
+``<level>.size`` bytes of a cache level (``L1.size``, ``L2.size``, ...)
+===============  ==========================================================
+
+Python API: ``order_whatif(base, grid)`` gives the table and
+``save_order_whatif(table, base, grid, folder)`` writes ``whatif-orders.csv``
+and its ``.meta.json``.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+from pathlib import Path
+
+import pandas as pd
+
+from analyses.experiment import Experiment
+from rtcommon.validate import InputError
+
+#: The base unless told otherwise: path-traced balls at 32x32, one sample a pixel, pixel interleaving (P) at
+#: 8 processes on 8 idle CPUs.
+ORDER_WHATIF_EXPERIMENT = Experiment(size=32, workload="pathtrace", mappings=("P",), n_processes=(8,),
+                                     background=0, progress=False)
+
+#: Grid parameters besides ``<level>.size``.
+GRID_KEYS = ("scene", "scene_size", "spp", "max_depth")
+
+#: The table's columns after the grid's: as :func:`analyses.report_orders.order_section`'s, then these.
+EXTRA_COLUMNS = ("net_speedup",)
+
+#: The file :func:`save_order_whatif` writes.
+ORDER_WHATIF_FILE = "whatif-orders.csv"
+
+
+def grid_points(grid: dict) -> list[dict]:
+    """Every combination of ``grid`` (a dict of parameter to list of values), checked.
+
+    Raises
+    ------
+    InputError
+        An empty grid or value list, or a parameter other than :data:`GRID_KEYS` and ``<level>.size``.
+    """
+    if not grid:
+        raise InputError("order what-if: the grid is empty; give at least one of "
+                         f"{', '.join(GRID_KEYS)} or <level>.size")
+    for key, values in grid.items():
+        if key not in GRID_KEYS and not (key.count(".") == 1 and key.endswith(".size")):
+            raise InputError(f"order what-if: grid parameter {key!r}: expected one of {', '.join(GRID_KEYS)} "
+                             "or <level>.size")
+        if not list(values):
+            raise InputError(f"order what-if: grid parameter {key!r} has no values")
+    keys = list(grid)
+    return [dict(zip(keys, combination)) for combination in itertools.product(*(list(grid[k]) for k in keys))]
+
+
+def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None = None, *, orders=None) -> pd.DataFrame:
+    """The ray orders' table at every grid point.
+
+    Parameters
+    ----------
+    base : analyses.experiment.Experiment
+        Scene, image size, spp, seed, bounce limit, mappings, the one process count, caches, layout, cost,
+        machine and trace cache; the workload must be ``pathtrace``.
+    grid : dict of str to list
+        Values per parameter (module docstring); the study runs every combination.
+    orders : sequence of str or RayOrder, optional
+        Default every registered order (:func:`analyses.report_orders.report_orders`).
+
+    Returns
+    -------
+    DataFrame
+        One row per point, mapping and order: the grid's columns, then the columns of
+        :func:`analyses.report_orders.order_section` and :data:`EXTRA_COLUMNS`.
+
+    Raises
+    ------
+    InputError
+        A base that is not path-traced or has other than one process count, or a bad grid or point.
+    """
+    if base.workload != "pathtrace":
+        raise InputError(f"order what-if: the base's workload must be 'pathtrace', got {base.workload!r}")
+    if len(base.n_processes) != 1:
+        raise InputError(f"order what-if: the base needs one process count, got {list(base.n_processes)}")
+    tables = [_point_table(base, point, orders) for point in grid_points(grid or {})]
+    return pd.concat(tables, ignore_index=True)
+
+
+def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
+    """One grid point's rows (:func:`order_whatif`)."""
+    from analyses.report_orders import order_section
+    from analyses.traces import cached_trace
+    from analyses.whatif import _point_levels, _sized_scene_file
+    from coherence.studies import place_layout, study
+
+    try:
+        experiment = replace(base, **{key: point[key] for key in ("scene", "spp", "max_depth") if key in point})
+    except ValueError as error:
+        raise InputError(f"order what-if point {point}: {error}") from None
+    scene_name = experiment.scene
+    if "scene_size" in point:
+        scene_name = _sized_scene_file(str(experiment.scene), point["scene_size"], experiment.cache_dir)
+    scene, trace, _ = cached_trace(scene_name, experiment.size, cache_dir=experiment.cache_dir,
+                                   kd=experiment.kd_builder(), max_depth=experiment.max_depth,
+                                   progress=experiment.progress, workload=experiment.trace_workload(),
+                                   tree_variant=experiment.tree_variant,
+                                   path_samples=(experiment.spp, experiment.seed))
+    hierarchy = _point_levels(experiment.hierarchy_object(), {k: v for k, v in point.items() if "." in k})
+    layout, cost, machine = experiment.layout_object(), experiment.cost_model(), experiment.machine()
+    mappings = experiment.mapping_objects()
+    n_processes = int(experiment.n_processes[0])
+    runs = study(trace, mappings, sorted({1, n_processes}), hierarchy=hierarchy, layout=layout, cost=cost,
+                 machine=machine, scene=scene, progress=False).runs
+    setup = {"mappings": mappings, "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
+             "cost": cost, "machine": machine, "scene": scene}
+    table = order_section(trace, runs, setup, n_processes, orders)
+    depth_first = table[table["order"] == "depth-first"].set_index("mapping")["user_seconds_max"]
+    table["net_speedup"] = table["mapping"].map(depth_first) / table["user_seconds_max"]
+    for key, value in reversed(list(point.items())):
+        table.insert(0, key, value)
+    return table
+
+
+def save_order_whatif(table: pd.DataFrame, base: Experiment, grid: dict, folder) -> Path:
+    """Write ``table`` as ``<folder>/whatif-orders.csv`` with its ``.meta.json`` (the base's parameters and
+    the grid), both atomically; returns the CSV's path."""
+    from coherence.provenance import provenance, write_csv_atomic
+
+    path = Path(folder) / ORDER_WHATIF_FILE
+    meta = provenance(study="orders", experiment=base.as_parameters(),
+                      grid={key: [str(v) for v in values] for key, values in grid.items()})
+    return write_csv_atomic(table, path, meta)

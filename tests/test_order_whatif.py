@@ -1,0 +1,90 @@
+"""The what-if over the path-traced workload's ray orders (analyses.order_whatif)."""
+import json
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from analyses.order_whatif import ORDER_WHATIF_EXPERIMENT, order_whatif, save_order_whatif
+from analyses.report_orders import order_section
+from coherence.studies import place_layout, study
+from rtcommon.validate import InputError
+from tracer.kd.tree import build_kdtree
+from tracer.rendering.pathtrace import path_trace
+from tracer.rendering.render import RenderOptions
+from tracer.scenes.catalog import load
+
+ORDERS = ("depth-first", "wavefront")
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    return replace(ORDER_WHATIF_EXPERIMENT, size=8, mappings=("P",), n_processes=(4,),
+                   cache_dir=str(tmp_path_factory.mktemp("cache")))
+
+
+@pytest.fixture(scope="module")
+def table(base):
+    return order_whatif(base, {"spp": [1, 2], "L1.size": [4096]}, orders=ORDERS)
+
+
+def _direct(base, spp, l1_size):
+    """The section as the report computes it, on a trace rendered here, the L1 resized by hand."""
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=8, workload="pathtrace", spp=spp)).trace
+    hierarchy = base.hierarchy_object()
+    hierarchy = replace(hierarchy, levels=(replace(hierarchy.levels[0], size=l1_size), *hierarchy.levels[1:]))
+    layout, cost, machine, mappings = base.layout_object(), base.cost_model(), base.machine(), base.mapping_objects()
+    runs = study(trace, mappings, [1, 4], hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
+                 scene=scene, progress=False).runs
+    setup = {"mappings": mappings, "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
+             "cost": cost, "machine": machine, "scene": scene}
+    return order_section(trace, runs, setup, 4, ORDERS)
+
+
+@pytest.mark.parametrize("spp", [1, 2])
+def test_points_are_the_report_section(base, table, spp):
+    """Each point's rows equal the report's ray-order section computed directly on that point's trace and
+    caches. Fails if the point's level sizes were not applied (``_point_levels(...)`` replaced by
+    ``experiment.hierarchy_object()``) or the point's spp were dropped (``"spp"`` left out of the keys
+    ``replace`` takes) (both checked)."""
+    expected = _direct(base, spp, 4096)
+    mine = table[table["spp"] == spp].reset_index(drop=True)
+    assert list(mine["L1.size"]) == [4096] * len(ORDERS)
+    pd.testing.assert_frame_equal(mine[expected.columns], expected, check_exact=False, rtol=1e-12)
+
+
+def test_net_speedup_is_against_depth_first(table):
+    """``net_speedup`` is the depth-first row's slowest process time over the order's, so 1 for depth-first.
+    Fails if it were the order's time over depth-first's (the division turned over) (checked)."""
+    for _, point in table.groupby("spp"):
+        first = point[point["order"] == "depth-first"]["user_seconds_max"].iloc[0]
+        np.testing.assert_allclose(point["net_speedup"], first / point["user_seconds_max"], rtol=1e-12)
+        assert point[point["order"] == "depth-first"]["net_speedup"].iloc[0] == 1.0
+
+
+def test_saved_with_its_meta(base, table, tmp_path):
+    """The CSV reads back as the table and its .meta.json holds the grid. Fails if the grid were left out of
+    the meta (``grid=`` argument dropped) (checked)."""
+    path = save_order_whatif(table, base, {"spp": [1, 2], "L1.size": [4096]}, tmp_path)
+    back = pd.read_csv(path)
+    np.testing.assert_allclose(back["net_speedup"], table["net_speedup"], rtol=1e-12)
+    meta = json.loads(path.with_name(path.name + ".meta.json").read_text())
+    assert meta["parameters"]["grid"] == {"spp": ["1", "2"], "L1.size": ["4096"]}
+
+
+@pytest.mark.parametrize("grid, words", [({}, "empty"), ({"memory_latency": [80]}, "memory_latency"),
+                                         ({"spp": []}, "no values")])
+def test_bad_grid_is_refused(base, grid, words):
+    """A bad grid raises a one-line InputError naming it. Fails if unknown keys were accepted (the key check
+    removed) (checked for the second case)."""
+    with pytest.raises(InputError, match=words):
+        order_whatif(base, grid)
+
+
+def test_whitted_base_is_refused(base):
+    """The base must be path-traced. Fails without the workload check (checked: a Whitted trace has no
+    segments and the section fails elsewhere)."""
+    with pytest.raises(InputError, match="pathtrace"):
+        order_whatif(replace(base, workload="modern", spp=1), {"L1.size": [4096]})
