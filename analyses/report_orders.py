@@ -41,8 +41,8 @@ ORDER_COLUMNS = ("n_processes", "rays", "user_seconds_max", "real_seconds", "spe
 def registry_orders(order, *, scene_bounds, tree=None, records=None) -> tuple:
     """Two :data:`coherence.ordered_runs.Order` of an order of :data:`coherence.ray_orders.RAY_ORDERS`: the
     order itself, and the same without its own costs (its buffer and queue records and its sorting cycles
-    left out: the ``W0'`` run of the module docstring). Both share the pieces of every unit either ordered
-    (held as long as the pair is). ``tree`` (a KdTree) and ``records`` (the trace's) go to orders that need
+    left out: the ``W0'`` run of the module docstring). The second reuses the piece ranges of every unit the
+    first ordered (held as long as the pair is; only the ranges). ``tree`` (a KdTree) and ``records`` (the trace's) go to orders that need
     them (treelet queues)."""
     from coherence.ordered_runs import OrderedUnit, pieces_unit
     from coherence.ray_orders import get_ray_order, order_pieces
@@ -50,20 +50,20 @@ def registry_orders(order, *, scene_bounds, tree=None, records=None) -> tuple:
     order = get_ray_order(order)
     extra = {"records": records} if getattr(order, "needs_records", False) else {}
 
-    made = {}
+    made = {}  # each ordered unit's piece ranges only: all the bare order reads
 
     def pieces_of(segments, rows):
-        key = hash(rows.tobytes())
-        if key not in made:
-            made[key] = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree, **extra)
-        return made[key]
+        pieces = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree, **extra)
+        made[hash(rows.tobytes())] = (pieces.piece_first, pieces.piece_stop)
+        return pieces
 
     def ordered(segments, rows, n_records):
         return pieces_unit(pieces_of(segments, rows), n_records)
 
     def bare(segments, rows, n_records):
-        pieces = pieces_of(segments, rows)
-        return OrderedUnit(pieces.piece_first, pieces.piece_stop, np.zeros(0, np.uint32), 0.0)
+        key = hash(rows.tobytes())
+        first, stop = made[key] if key in made else pieces_of(segments, rows)[:2]
+        return OrderedUnit(first, stop, np.zeros(0, np.uint32), 0.0)
 
     return ordered, bare
 
@@ -198,7 +198,9 @@ def _ordered_run(trace, distribution, order, setup: dict, bounds) -> tuple:
                                  extents=OrderBuffers().extents)
     summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)
     w0_bare = summary["work_cycles_without_dispatch"]
-    if work.n_aux or work.sort_cycles:
+    aux, sort_cycles = np.array(work.trace.records[trace.n_records:]), work.sort_cycles
+    del run, work  # the ordered run's pieces, records and per-piece counters, before the bare run makes its own
+    if len(aux) or sort_cycles:
         plain, _ = simulate_ordered(trace, distribution, bare, hierarchy, placed, cost, machine, name=name)
         w0_bare = float((plain.processes["user_cycles"] - plain.processes["dispatch_cycles"]).sum())
-    return summary, np.asarray(work.trace.records[trace.n_records:]), work.sort_cycles, w0_bare
+    return summary, aux, sort_cycles, w0_bare
