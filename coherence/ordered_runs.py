@@ -25,9 +25,11 @@ the existing simulation runs unchanged (:func:`coherence.simulation.simulate_run
   owned by their process, dynamic ones are handed out as the mapping's
   tasks were.
 * A pixel's compute cycles are shared among its pieces by their record
-  counts (a whole pixel keeps its cycles exactly); its counters go to the
-  piece holding its first record (sums per process are unchanged). A
-  unit's sorting cycles are added to its first pseudo-pixel.
+  counts (a whole pixel keeps its cycles exactly). A unit's sorting cycles
+  are added to its first pseudo-pixel, and so are its pixels' counters,
+  summed (a unit's pieces all run on one process, so the sums per process
+  are unchanged; the other pieces' rows stay zero and, left unwritten,
+  take no memory).
 
 So the depth-first order (each unit's segments as they are, no auxiliary
 records) replays exactly the run of the mapping itself.
@@ -180,7 +182,8 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     if np.any(pixel_offsets[1:] == pixel_offsets[:-1]):
         raise InputError("ray orders need every pixel to have records (each path's camera ray reads the root)")
     seg_offsets = np.searchsorted(segments.ints[:, SegmentColumn.PIXEL], np.arange(n_pixels + 1)).astype(np.int64)
-    starts, stops, unit_of, aux_parts, sort, aux_process = [], [], [], [], [], []
+    starts, stops, unit_of, aux_parts, sort, aux_process, unit_counters = [], [], [], [], [], [], []
+    pixel_counters = np.asarray(trace.counters)
     aux_base = n_records
     for unit, pixels in enumerate(unit_pixels(distribution)):
         rows = _ranges(seg_offsets[pixels], seg_offsets[pixels + 1])
@@ -194,6 +197,7 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
         aux_process.append(np.full(len(result.aux), 0 if distribution.dynamic else unit, np.int64))
         aux_base += len(result.aux)
         sort.append(float(result.sort_cycles))
+        unit_counters.append(pixel_counters[pixels].sum(axis=0))
     starts, stops, unit_of = (np.concatenate(parts) if parts else np.zeros(0, np.int64)
                               for parts in (starts, stops, unit_of))
     starts, stops, unit_of = _merged(starts, stops, unit_of, pixel_offsets, n_records)
@@ -205,12 +209,14 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     piece_id[rank] = np.arange(len(rank), dtype=np.int64)
     aux = np.concatenate(aux_parts) if aux_parts else np.zeros(0, np.uint32)
     records = np.asarray(trace.records) if len(aux) == 0 else np.concatenate([np.asarray(trace.records), aux])
-    compute, counters = _piece_costs(trace, np.asarray(pixel_compute, np.float64), offsets, pixel_offsets,
-                                     n_records)
+    compute = _piece_compute(np.asarray(pixel_compute, np.float64), offsets, pixel_offsets, n_records)
     n_units = len(sort)
     first_piece = np.searchsorted(unit_of, np.arange(n_units))
     has_piece = first_piece < np.append(first_piece[1:], len(unit_of))
     np.add.at(compute, piece_id[first_piece[has_piece]], np.asarray(sort)[has_piece])
+    counters = np.zeros((len(rank), pixel_counters.shape[1]), np.int64)
+    if n_units:
+        counters[piece_id[first_piece[has_piece]]] = np.asarray(unit_counters)[has_piece]
     task_offsets = np.searchsorted(unit_of, np.arange(n_units + 1)).astype(np.int64)
     n_pieces = len(rank)
     if distribution.dynamic:
@@ -255,8 +261,8 @@ def _merged(starts, stops, unit_of, pixel_offsets, n_records: int) -> tuple:
     return starts[head], stops[tail_stop], unit_of[head]
 
 
-def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -> tuple:
-    """Compute cycles (shared by record counts; a whole pixel keeps its own) and counters per piece."""
+def _piece_compute(pixel_compute, offsets, pixel_offsets, n_records: int) -> np.ndarray:
+    """Compute cycles per piece: a pixel's shared by record counts (a whole pixel keeps its own)."""
     starts, stops = offsets[:-1], offsets[1:]
     in_trace = starts < n_records
     pixel = np.searchsorted(pixel_offsets, starts[in_trace], side="right") - 1
@@ -265,11 +271,7 @@ def _piece_costs(trace, pixel_compute, offsets, pixel_offsets, n_records: int) -
     cycles = pixel_compute[pixel]
     compute = np.zeros(len(starts))
     compute[in_trace] = np.where(length == pixel_length, cycles, cycles * length / pixel_length)
-    counters = np.asarray(trace.counters)
-    piece_counters = np.zeros((len(starts), counters.shape[1]), np.int64)
-    # the piece holding each pixel's first record takes its counters (pieces hold one pixel's records)
-    piece_counters[np.searchsorted(offsets, pixel_offsets[:-1], side="right") - 1] = counters
-    return compute, piece_counters
+    return compute
 
 
 def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy, placed, cost, machine, *,

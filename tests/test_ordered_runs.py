@@ -53,7 +53,7 @@ def test_pieces_of_a_reordered_unit_by_hand():
     replays pixel 1, then segment [3, 5), an auxiliary record, then [0, 3), with 7 sorting cycles: the pieces
     are numbered by where their records lie ([0, 3) [3, 5) [5, 6) then the aux record at 6), the task replays
     them as 2, 1, 3, 0, compute is shared by record counts (pixel 0's 10 cycles as 6 and 4) plus the sorting
-    cycles on the first piece, and each pixel's counters sit on the piece with its first record. Fails if the
+    cycles on the first piece, as are the unit's counters (both pixels' summed). Fails if the
     auxiliary records are not placed after the trace's (``aux_base = n_records`` dropped) (checked)."""
     from types import SimpleNamespace
 
@@ -74,7 +74,7 @@ def test_pieces_of_a_reordered_unit_by_hand():
     assert work.distribution.task_pixels.tolist() == [2, 1, 3, 0]
     assert work.distribution.task_process.tolist() == [0]
     assert work.compute.tolist() == [6.0, 4.0, 2.0 + 7.0, 0.0]
-    assert work.trace.counters.tolist() == [[1, 2], [0, 0], [3, 4], [0, 0]]
+    assert work.trace.counters.tolist() == [[0, 0], [0, 0], [1 + 3, 2 + 4], [0, 0]]  # the unit's, on its first piece
     assert (work.n_aux, work.sort_cycles) == (1, 7.0)
 
 
