@@ -72,6 +72,30 @@ def grid_points(grid: dict) -> list[dict]:
     return [dict(zip(keys, combination)) for combination in itertools.product(*(list(grid[k]) for k in keys))]
 
 
+def parse_order_grid(flags) -> dict:
+    """``["spp=1,4", "L1.size=8KB,32KB"]`` -> ``{"spp": [1, 4], "L1.size": [8192, 32768]}`` (values as
+    :func:`analyses.whatif.parse_value` reads them), checked as :func:`grid_points` checks a grid.
+
+    Raises
+    ------
+    InputError
+        A flag without ``=`` or values, a parameter given twice, or one :func:`grid_points` refuses.
+    """
+    from analyses.whatif import parse_value
+
+    grid = {}
+    for flag in flags:
+        key, sep, values = flag.partition("=")
+        key = key.strip()
+        if not sep or not values.strip():
+            raise InputError(f"--grid {flag!r}: expected NAME=VALUE[,VALUE...], e.g. spp=1,4")
+        if key in grid:
+            raise InputError(f"--grid {key} is given more than once; list every value in one flag")
+        grid[key] = [parse_value(value) for value in values.split(",")]
+    grid_points(grid)
+    return grid
+
+
 def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None = None, *, orders=None) -> pd.DataFrame:
     """The ray orders' table at every grid point.
 

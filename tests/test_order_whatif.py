@@ -88,3 +88,31 @@ def test_whitted_base_is_refused(base):
     segments and the section fails elsewhere)."""
     with pytest.raises(InputError, match="pathtrace"):
         order_whatif(replace(base, workload="modern", spp=1), {"L1.size": [4096]})
+
+
+def test_cli_writes_the_api_table(base, tmp_path):
+    """``coherence whatif --orders`` writes what the Python API gives on the same base and grid (``8KB``
+    read as 8192). Fails if the options' process count were overridden by the default base's
+    (``experiment_from_args(args, ORDER_WHATIF_EXPERIMENT, n_processes=(8,))``) (checked)."""
+    from analyses.cli import main
+
+    out = tmp_path / "out"
+    assert main(["whatif", "--orders", "--grid", "L1.size=8KB", "--size", "8", "--processes", "4",
+                 "--cache", base.cache_dir, "--out", str(out)]) == 0
+    written = pd.read_csv(out / "whatif-orders.csv")
+    expected = order_whatif(base, {"L1.size": [8192]})
+    assert list(written["order"]) == list(expected["order"])
+    np.testing.assert_allclose(written["net_speedup"], expected["net_speedup"], rtol=1e-12)
+
+
+@pytest.mark.parametrize("flags, words", [(["--grid", "spp"], "NAME=VALUE"),
+                                          (["--grid", "spp=1", "--grid", "spp=2"], "more than once"),
+                                          (["caches"], "--grid flags only")])
+def test_cli_refuses_bad_flags(tmp_path, capsys, flags, words):
+    """Bad ``--orders`` flags end with a one-line error naming them and write nothing. Fails if a repeated
+    parameter overwrote the first (the repeat check removed) (checked for the second case)."""
+    from analyses.cli import main
+
+    assert main(["whatif", "--orders", *flags, "--out", str(tmp_path / "out")]) != 0
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -49,8 +49,17 @@ sizes also get whatif-<name>-lru.csv: the exact misses of fully
 associative LRU caches of those sizes, from one reuse-distance pass per
 process stream (the full simulation answers for the real caches).
 
+where reordering rays pays for itself (--orders, path-traced): each point
+renders a path-traced trace and reports, per mapping and ray order at the
+one process count, the reordering gain and overhead of the report's
+ray-order section and net_speedup (depth-first's slowest process time over
+the order's). Grid parameters: scene, scene_size, spp, max_depth,
+<level>.size; default base: balls 32x32, spp 1, P, 8 processes. Writes
+whatif-orders.csv with .meta.json (analyses.order_whatif).
+
 examples:
   coherence whatif latency --size 64
+  coherence whatif --orders --grid spp=1,4 --grid L1.size=8KB,32KB --size 16
   coherence whatif --grid L1.size=4KB,8KB,32KB --grid memory_latency=80,300 --scene tetra
   coherence whatif caches --dask tcp://scheduler:8786
   coherence whatif --platform zen4-7950x --grid cores=4,8,16 --grid smt=on,off
@@ -81,6 +90,8 @@ def register(subparsers) -> None:
     parser.add_argument("--out", default="whatif", metavar="DIR", help="output folder (default: ./whatif)")
     parser.add_argument("--jobs", type=int, metavar="N", help="local worker processes (default: CPUs)")
     parser.add_argument("--list", action="store_true", help="list the built-in studies' grids and exit")
+    parser.add_argument("--orders", action="store_true",
+                        help="the path-traced ray orders' what-if: where reordering pays for itself (see below)")
     parser.set_defaults(func=run)
 
 
@@ -133,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     checks.check_scene_argument(args.scene, "--scene")
     if args.size is not None:  # before the memory budget's check, which would ask for more than the machine has
         checks.check_memory("--size", args.size)
+    if args.orders:
+        return run_orders(args)
     study = build_study(args)
     if args.dask:
         checks.require_distributed()
@@ -150,4 +163,26 @@ def run(args: argparse.Namespace) -> int:
     shown = [*study.grid, "mapping", "imbalance_loss", "coherence_loss", "verdict"]
     print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
     print(f"wrote {csv} and {png}")
+    return 0
+
+
+def run_orders(args: argparse.Namespace) -> int:
+    """``coherence whatif --orders --grid ...``: :func:`analyses.order_whatif.order_whatif` on the options' base."""
+    from analyses.commands.options import experiment_from_args
+    from analyses.order_whatif import ORDER_WHATIF_EXPERIMENT, order_whatif, parse_order_grid, save_order_whatif
+    from analyses.output import check_output_folder
+    from analyses.traces import check_cache_dir
+
+    if args.study or args.file or not args.grid:
+        raise InputError("--orders takes its grid from --grid flags only (no STUDY, no --file)")
+    grid = parse_order_grid(args.grid)
+    base = experiment_from_args(args, ORDER_WHATIF_EXPERIMENT)
+    check_cache_dir(args.cache)
+    out = check_output_folder(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = order_whatif(base, grid)
+    csv = save_order_whatif(table, base, grid, out)
+    shown = [*grid, "mapping", "order", "reordering_gain", "reordering_overhead", "net_speedup"]
+    print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
+    print(f"wrote {csv}")
     return 0
