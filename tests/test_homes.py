@@ -68,15 +68,16 @@ def _listed_outputs(text: str) -> list[str]:
 
 def test_help_lists_the_files_the_writers_name():
     """``coherence report --help`` and ``coherence paper --help`` list exactly the
-    files of ``REPORT_FILES`` (with ``MISS_MAP_FILES``) and ``PAPER_FILES``; paper's
-    --crossover names ``CROSSOVER_FILES``. Fails if ``REPORT_FILES["summary"]``
+    files of ``REPORT_FILES`` (with ``MISS_MAP_FILES``) and ``PAPER_FILES`` (with
+    ``TODAY_FILES``, written under --platform); paper's --crossover names ``CROSSOVER_FILES``. Fails if ``REPORT_FILES["summary"]``
     becomes ``"report.json"``."""
     from analyses.paper_output import CROSSOVER_FILES, PAPER_FILES
+    from analyses.paper_today import TODAY_FILES
     from analyses.report import MISS_MAP_FILES, REPORT_FILES
 
     report, paper = _help_text("report"), _help_text("paper")
     assert sorted(_listed_outputs(report)) == sorted([*REPORT_FILES.values(), *MISS_MAP_FILES])
-    assert sorted(_listed_outputs(paper)) == sorted(PAPER_FILES.values())
+    assert sorted(_listed_outputs(paper)) == sorted([*PAPER_FILES.values(), *TODAY_FILES.values()])
     assert all(name in " ".join(paper.split()) for name in CROSSOVER_FILES.values())
 
 
