@@ -50,7 +50,7 @@ from numba import njit
 
 from rtcommon.validate import InputError, require_int
 from tracer.kd.nodes import above_child, below_child, is_leaf
-from tracer.trace.records import AUX_INDEX_MASK, AuxKind, RecordKind, make_aux_record, record_id, record_kind
+from tracer.trace.records import AUX_INDEX_MASK, INDEX_MASK, KIND_SHIFT, AuxKind, RecordKind, make_aux_record, record_id, record_kind
 from tracer.trace.segments import SegmentColumn
 
 from .ray_order_base import OrderedPieces, RayOrder, path_structure
@@ -171,6 +171,10 @@ def cut_segments(records, segments, rows, node_treelet) -> tuple:
         raise InputError(f"records: the segments reach record {int(ints[:, SegmentColumn.STOP].max())}, "
                          f"but the trace has {records.shape[0]}")
     node_treelet = np.ascontiguousarray(node_treelet, dtype=np.int64)
+    kd = records[(records >> KIND_SHIFT) == int(RecordKind.KD_NODE)]
+    if kd.size and int((kd & INDEX_MASK).max()) >= node_treelet.shape[0]:
+        raise InputError(f"tree: the records visit kd node {int((kd & INDEX_MASK).max())}, but the tree has "
+                         f"{node_treelet.shape[0]} nodes; give the tree the trace was rendered with")
     return _cut(records, np.ascontiguousarray(ints[:, SegmentColumn.FIRST]),
                 np.ascontiguousarray(ints[:, SegmentColumn.STOP]), node_treelet)
 

@@ -92,6 +92,17 @@ def test_treelet_order_needs_tree_and_records():
         TreeletQueues(treelet_bytes=4, node_bytes=8)
 
 
+def test_a_tree_smaller_than_the_records_visit_is_refused():
+    """Records that visit kd nodes the given tree does not have are a one-line error naming the tree, not
+    an out-of-bounds read in the cutting kernel. Fails if cut_segments drops its node-count check (checked:
+    the kernel then reads past node_treelet)."""
+    segments, _ = random_segments(n_pixels=2, spp=1, seed=0)
+    records = random_records(segments, 100_000, 1)
+    with pytest.raises(ValueError, match="tree: the records visit kd node"):
+        order_pieces(segments, np.arange(segments.n_segments), TreeletQueues(),
+                     tree=np.array([[0, 3]], dtype=np.uint32), records=records)
+
+
 def test_treelet_order_on_a_path_trace():
     """On a real path trace with an L1-sized treelet budget of 64 bytes, rays are cut (more pieces than
     segments), queue entries are written and read in equal numbers, and the pieces replay every record
