@@ -22,8 +22,7 @@ from cachesim.sharing import SharedHierarchy
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout
-from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
-                              fixed_schedule)
+from coherence.recost import N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
@@ -301,6 +300,7 @@ def _run(trace, distribution, hierarchy: SharedHierarchy, cost: CostModel, machi
     frame["user_cycles"] = cycles[:, COMPUTE_CYCLES] + cycles[:, MEMORY_CYCLES] + cycles[:, DISPATCH_CYCLES]
     frame["user_seconds"] = frame["user_cycles"] / cost.clock_hz
     frame["finish_cycles"] = cycles[:, FINISH_CYCLES]
+    # Never re-costable: which thread's turn comes next, and so what the shared levels hold, follows the clocks.
     miss_counts = MissCounts(accesses.copy(), np.zeros(n_processes, np.int64), by_process, tuple(COUNTER_NAMES),
-                             fixed_schedule(distribution, machine))
+                             False)
     return Run(pd.DataFrame(frame), task_owner, float(cycles[:, FINISH_CYCLES].max()), None, miss_counts)

@@ -87,6 +87,23 @@ def test_larger_q_still_replays_exactly_and_keeps_each_process_in_order():
         np.testing.assert_array_equal(piece[run.log[1] == thread_of[process]], expected)
 
 
+def test_a_shared_run_is_never_recosted():
+    """A run on shared levels says its counts depend on cycles, so re-costing refuses it even where a
+    private-cache run of the same mapping and machine would qualify (one process per CPU, static mapping,
+    no other users). Fails if simulate_shared_run passes fixed_schedule(distribution, machine) (checked)."""
+    from coherence.recost import fixed_schedule, recost_run
+
+    trace = synthetic_trace(4, 4, seed=3)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    machine = tiny_machine(1, ("thread", "machine"), 3)
+    distribution = get_mapping("S").build(4, 4, 2)
+    os_machine = Machine(n_cpus=2, quantum_cycles=0)
+    assert fixed_schedule(distribution, os_machine)
+    run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=100)
+    assert not run.run.miss_counts.fixed_schedule
+    assert recost_run(run.run, machine.hierarchy, COST) is None
+
+
 def two_pixel_trace():
     """Pixel 0 writes then reads frame-buffer pixel 0; pixel 1 the same with pixel 1 (one line holds both)."""
     records = []
