@@ -124,6 +124,9 @@ def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None =
         raise InputError(f"order what-if: the base's workload must be 'pathtrace', got {base.workload!r}")
     if len(base.n_processes) != 1:
         raise InputError(f"order what-if: the base needs one process count, got {list(base.n_processes)}")
+    if base.platform is not None:
+        raise InputError("order what-if: --platform is not supported: ordered runs take one hardware thread's view "
+                         "of shared levels, not the shared levels a run under a platform simulates")
     tables = [_point_table(base, point, orders) for point in grid_points(grid or {})]
     return pd.concat(tables, ignore_index=True)
 

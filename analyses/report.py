@@ -254,7 +254,9 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
 
         texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost)
     ray_orders = None
-    if trace.segments is not None and not setup.machine.page_placement.translates:
+    # Under a platform the runs are on its shared levels, while the ordered runs would take one thread's
+    # view of them: the section would compare two cache models, so it is left out there.
+    if trace.segments is not None and not setup.machine.page_placement.translates and experiment.platform is None:
         from analyses.report_orders import order_section
 
         worst = next(m for m in setup.mappings if m.name == verdict.worst["coherence_loss"][0])

@@ -90,6 +90,13 @@ def test_whitted_base_is_refused(base):
         order_whatif(replace(base, workload="modern", spp=1), {"L1.size": [4096]})
 
 
+def test_platform_base_is_refused(base):
+    """Under a platform the runs are on shared levels and ordered runs are not, so the study is refused by
+    name. Fails without the platform check (checked: the points then run on one thread's view)."""
+    with pytest.raises(InputError, match="--platform is not supported"):
+        order_whatif(replace(base, platform="apple-m1"), {"L1.size": [4096]})
+
+
 def test_cli_writes_the_api_table(base, tmp_path):
     """``coherence whatif --orders`` writes what the Python API gives on the same base and grid (``8KB``
     read as 8192). Fails if the options' process count were overridden by the default base's

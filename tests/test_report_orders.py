@@ -100,6 +100,18 @@ def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
     assert "ray_orders" not in set(pd.read_csv(whitted / "results.csv")["section"])
 
 
+def test_a_report_under_a_platform_leaves_the_section_out(tmp_path):
+    """Under a platform the runs are on its shared levels, the ordered runs would be on one thread's view, so
+    the section is left out rather than compare two cache models. Fails without the platform condition in
+    build_report (checked: the section then appears)."""
+    out = tmp_path / "out"
+    assert main(["report", "tetra", "--size", "8", "--processes", "2", "--mappings", "S", "--workload",
+                 "pathtrace", "--spp", "1", "--platform", "apple-m1", "--out", str(out),
+                 "--cache", str(tmp_path / "cache")]) == 0
+    assert "ray_orders" not in set(pd.read_csv(out / "results.csv")["section"])
+    assert "ray_orders" not in json.loads((out / "summary.json").read_text())
+
+
 def test_the_tree_is_built_again_as_the_trace_recorded_it():
     """Orders that need the kd-tree (treelet queues) get the tree the trace was rendered with, built again from
     the scene and the trace's kd_config: here a median tree. Fails if it were built with the default rule

@@ -207,7 +207,9 @@ threads write pixels `n` apart: with 3-byte pixels a 64-byte line holds 21,
 so at 8 threads a thread returns to a line it shared, at 32 its next pixel
 lies on another line and it never returns. DB's counter is written once per
 task; a copy evicted before another thread's write is a capacity miss, not a
-coherence miss.""")
+coherence miss. These counter figures come from the thread streams' idealised
+round-robin hand-outs; DB's runs in `coherence report --platform` do not yet
+access the counter.""")
     page.text("## Frame-buffer pixel size (S and P)")
     page.table(sharing[sharing["mapping"].isin(["S", "P"])][["frame_buffer_bytes", "mapping", "threads", "smt",
                                                              "false_sharing_misses", "memory_cycles"]]
