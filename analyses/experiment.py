@@ -259,6 +259,13 @@ class Experiment:
         platform = self.platform_object()
         return _hierarchy(self.hierarchy) if platform is None else platform.thread_view()
 
+    def recorded_hierarchy(self):
+        """The levels a result records as its hierarchy: :meth:`hierarchy_object`, or under a platform the
+        levels one hardware thread reaches at their full sizes (which threads share each one is in the
+        platform's parameters, :func:`platform_parameters`), not the thread view's cut shares."""
+        platform = self.platform_object()
+        return self.hierarchy_object() if platform is None else platform.hierarchy.hierarchy
+
     def study_hierarchy(self):
         """What :func:`coherence.studies.study` simulates on: :meth:`hierarchy_object`, or under a platform its
         shared levels (:class:`coherence.shared_run.SharedLevels` with ``interleave_cycles``)."""
@@ -346,7 +353,7 @@ class Experiment:
             extra["frame_buffer_bytes"] = int(self.frame_buffer_bytes)
         return {"scene": os.fspath(self.scene), "size": int(self.size), "workload": self.workload,
                 "kd": self.kd_builder(), "max_depth": self.max_depth, "mappings": self.mapping_names(),
-                "n_processes": list(self.n_processes), "hierarchy": self.hierarchy_object().to_dict(),
+                "n_processes": list(self.n_processes), "hierarchy": self.recorded_hierarchy().to_dict(),
                 "layout": self.layout_object().name, "cost": self.cost_model().to_dict(),
                 "n_cpus": self.cpus(), "background_load": int(self.background),
                 "background_footprint": int(self.background_footprint), "page_placement": self.page_placement,

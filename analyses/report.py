@@ -266,10 +266,11 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     region = placed.region_bytes()
     scene_bytes = pd.DataFrame({"kind": [k for k, v in region.items() if v > 0] + ["total"],
                                 "bytes": [v for v in region.values() if v > 0] + [placed.scene_bytes]})
-    caches = pd.DataFrame({"level": [lv.name for lv in hierarchy.levels], "size": [lv.size for lv in hierarchy.levels],
-                           "line_size": [lv.line_size for lv in hierarchy.levels],
-                           "ways": [lv.ways for lv in hierarchy.levels],
-                           "latency": [lv.latency for lv in hierarchy.levels]})
+    recorded = experiment.recorded_hierarchy()  # under a platform: whole shared levels, not one thread's share
+    caches = pd.DataFrame({"level": [lv.name for lv in recorded.levels], "size": [lv.size for lv in recorded.levels],
+                           "line_size": [lv.line_size for lv in recorded.levels],
+                           "ways": [lv.ways for lv in recorded.levels],
+                           "latency": [lv.latency for lv in recorded.levels]})
 
     # the experiment's record, with what this run resolved (the scene's name and depth, 1 among the counts)
     parameters = {
@@ -277,7 +278,7 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
         "scene": scene.name, "size": int(experiment.size), "kd": setup.kd,
         "workload": info.get("workload", "modern"), "max_depth": int(scene.max_depth),
         "mappings": names, "n_processes": counts, "verdict_n_processes": verdict_n,
-        "machine": result.parameters["machine"], "hierarchy": hierarchy.to_dict(), "layout": layout.name,
+        "machine": result.parameters["machine"], "hierarchy": recorded.to_dict(), "layout": layout.name,
         "cost": cost.to_dict(), "trace_key": info["key"], "memory_shares": setup.shares,
         "runs_at_once": setup.n_jobs,
         "miss_map": {"mapping": misses.mapping, "n_processes": misses.n_processes, "chosen_by": chosen_by},

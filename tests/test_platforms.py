@@ -110,7 +110,9 @@ def test_experiment_under_a_platform_takes_its_machine():
     hardware thread), its study runs on the platform's shared levels at Q = interleave_cycles, and its
     parameters say so; without a platform the parameters have no platform key, so every output is as before,
     and a Q other than the default is refused.
-    Mutation: return ``_hierarchy(self.hierarchy)`` in hierarchy_object whatever the platform."""
+    The recorded hierarchy is the platform's whole levels (32 MB L3), not the thread view's shares.
+    Mutation: return ``_hierarchy(self.hierarchy)`` in hierarchy_object whatever the platform; or record
+    ``hierarchy_object()`` in as_parameters."""
     from analyses.experiment import Experiment
     from coherence.shared_run import DEFAULT_INTERLEAVE_CYCLES, SharedLevels
 
@@ -119,7 +121,7 @@ def test_experiment_under_a_platform_takes_its_machine():
     assert experiment.hierarchy_object() == zen.thread_view()
     assert experiment.cost_model() == zen.cost and experiment.machine().n_cpus == 32
     parameters = experiment.as_parameters()
-    assert parameters["n_cpus"] == 32 and parameters["hierarchy"]["name"] == "zen4-7950x-thread"
+    assert parameters["n_cpus"] == 32 and parameters["hierarchy"] == zen.hierarchy.hierarchy.to_dict()
     assert parameters["platform"]["name"] == "zen4-7950x" and parameters["platform"]["smt"] == 2
     assert "shared levels interleaved" in parameters["platform"]["shared_levels"]
     assert parameters["platform"]["interleave_cycles"] == DEFAULT_INTERLEAVE_CYCLES
