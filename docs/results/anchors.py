@@ -187,19 +187,18 @@ class Workload:
         return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)]).astype(np.int64)
 
     def recipe(self, order: str):
-        """The order named: from :data:`coherence.ray_orders.RAY_ORDERS`, or ``treelet``
-        (:class:`coherence.treelet_orders.TreeletQueues` at its default treelet size, this layout's kd-node
-        bytes) while it is not in the registry."""
+        """The order named in :data:`coherence.ray_orders.RAY_ORDERS`; the treelet queues keep their
+        registered treelet size with this layout's kd-node bytes."""
         from coherence.ray_orders import RAY_ORDERS
         from tracer.trace.records import RecordKind
 
-        if order in RAY_ORDERS:
-            return RAY_ORDERS[order]
-        from coherence.treelet_orders import TreeletQueues
-
-        if order != TreeletQueues.name:
+        if order not in RAY_ORDERS:
             raise ValueError(f"anchors.toml: unknown ray order {order!r}")
-        return TreeletQueues(node_bytes=int(self.placed.record_size[self.placed.kind_first[RecordKind.KD_NODE]]))
+        chosen = RAY_ORDERS[order]
+        if order != "treelet":
+            return chosen
+        node_bytes = int(self.placed.record_size[self.placed.kind_first[RecordKind.KD_NODE]])
+        return chosen.sized(chosen.treelet_bytes, node_bytes)
 
     def order_misses(self, order: str, rows: np.ndarray, own_records: bool = True) -> np.ndarray:
         """Misses per level (int64, (n_levels,)) of one process tracing ``rows`` in ``order``.
