@@ -194,7 +194,7 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
         stops.append(stop + shift)
         unit_of.append(np.full(len(first), unit, np.int64))
         aux_parts.append(np.asarray(result.aux, np.uint32))
-        aux_process.append(np.full(len(result.aux), 0 if distribution.dynamic else unit, np.int64))
+        aux_process.append(len(result.aux))  # records in process 0's buffers (dynamic) or its process's
         aux_base += len(result.aux)
         sort.append(float(result.sort_cycles))
         unit_counters.append(pixel_counters[pixels].sum(axis=0))
@@ -208,6 +208,7 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     piece_id = np.empty(len(rank), np.int64)
     piece_id[rank] = np.arange(len(rank), dtype=np.int64)
     aux = np.concatenate(aux_parts) if aux_parts else np.zeros(0, np.uint32)
+    del aux_parts
     records = np.asarray(trace.records) if len(aux) == 0 else np.concatenate([np.asarray(trace.records), aux])
     compute = _piece_compute(np.asarray(pixel_compute, np.float64), offsets, pixel_offsets, n_records)
     n_units = len(sort)
@@ -225,7 +226,8 @@ def ordered_work(trace, distribution: Distribution, order: Order, pixel_compute:
     else:
         pieces = Distribution(distribution.name, n_pieces, 1, distribution.n_processes, task_offsets, piece_id,
                               np.arange(n_units, dtype=np.int64))
-    aux_process = np.concatenate(aux_process) if aux_process else np.zeros(0, np.int64)
+    aux_owner = np.zeros(n_units, np.int64) if distribution.dynamic else np.arange(n_units, dtype=np.int64)
+    aux_process = np.repeat(aux_owner, np.asarray(aux_process, np.int64))
     return OrderedWork(PieceTrace(offsets, records, counters, n_pieces, 1), pieces, compute, len(aux), float(sum(sort)),
                        aux_process)
 
