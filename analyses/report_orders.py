@@ -54,14 +54,14 @@ def registry_orders(order, *, scene_bounds, tree=None, records=None) -> tuple:
 
     def pieces_of(segments, rows):
         pieces = order_pieces(segments, rows, order, scene_bounds=scene_bounds, tree=tree, **extra)
-        made[hash(rows.tobytes())] = (pieces.piece_first, pieces.piece_stop)
+        made[rows.tobytes()] = (pieces.piece_first, pieces.piece_stop)
         return pieces
 
     def ordered(segments, rows, n_records):
         return pieces_unit(pieces_of(segments, rows), n_records)
 
     def bare(segments, rows, n_records):
-        key = hash(rows.tobytes())
+        key = rows.tobytes()
         first, stop = made[key] if key in made else pieces_of(segments, rows)[:2]
         return OrderedUnit(first, stop, np.zeros(0, np.uint32), 0.0)
 
