@@ -75,6 +75,17 @@ def _filter_slot(line, instance_number, ghost_filter):
 # The helpers take arrays, not bundles: a bundle's field read in the
 # per-access loop costs a reference-count update each time.
 @njit(cache=True, inline="always")
+def _byte_range(address, size, line0, line_shift):
+    """Bytes ``first .. end - 1`` an access touches: ``size`` bytes from ``address``, or its whole line
+    ``line0`` when ``size`` is 0."""
+    if size > 0:
+        first = np.int64(address)
+        return first, first + size
+    first = line0 << line_shift
+    return first, first + (np.int64(1) << line_shift)
+
+
+@njit(cache=True, inline="always")
 def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     """First way of ``line``'s set in instance ``instance`` of ``level``."""
     mask = set_mask[level]
@@ -254,12 +265,7 @@ def shared_access(thread, address, is_write, size, kind, geometry, machine, stat
     policy = geometry.policy
     n_levels = rel_shift.shape[0]
     line0 = np.int64(address >> np.uint64(geometry.line_shift))
-    if size > 0:
-        first = np.int64(address)
-        end = first + size
-    else:
-        first = line0 << geometry.line_shift
-        end = first + (np.int64(1) << geometry.line_shift)
+    first, end = _byte_range(address, size, line0, geometry.line_shift)
     served = n_levels
     instance0 = instance_of[0, thread]
     base0 = _set_of(line0, 0, instance0, n_sets, set_mask, ways, offset, level_ways)
@@ -378,12 +384,7 @@ def _replay(stream, geometry, machine, state, clock, scratch):
             served_counts[thread, 0] += 1
             if is_write:
                 counts[0, instance0, kind, WRITE_HITS] += 1
-                if size > 0:
-                    first = np.int64(address)
-                    end = first + size
-                else:
-                    first = line0 << geometry.line_shift
-                    end = first + (np.int64(1) << geometry.line_shift)
+                first, end = _byte_range(address, size, line0, geometry.line_shift)
                 _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
             continue
         served = shared_access(thread, address, is_write, size, kind, geometry, machine, state, clock, scratch)

@@ -26,7 +26,7 @@ from coherence.recost import N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HIT
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
-from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, schedule_of
+from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
 from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces
 from rtcommon.validate import InputError, require_bool, require_number
 
@@ -210,11 +210,7 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     require_bool("log", log)
     n_pixels = trace.width * trace.height
     counters = np.asarray(trace.counters)
-    if compute is None:
-        compute = cost.compute_cycles(counters, COUNTER_NAMES)
-    compute = np.ascontiguousarray(compute, dtype=np.float64)
-    if compute.shape != (n_pixels,):
-        raise InputError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+    compute = pixel_compute(trace, cost, compute, COUNTER_NAMES)
     line_size = levels[0].line_size
     if pieces is None:
         pieces = pixel_pieces(trace, placed, line_size)

@@ -358,11 +358,7 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
                          f"the trace for {trace.width}x{trace.height}")
     require_bool("pixel_misses", pixel_misses)
     counters = np.asarray(trace.counters)
-    if compute is None:
-        compute = cost.compute_cycles(counters, counter_names)
-    compute = np.ascontiguousarray(compute, dtype=np.float64)
-    if compute.shape != (n_pixels,):
-        raise InputError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+    compute = pixel_compute(trace, cost, compute, counter_names)
 
     if machine.page_placement.translates and placed.pages.frame.shape[0] == 0:
         if lines is not None and lines.line_offsets.shape[0] > 0:
@@ -445,6 +441,18 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
                              fixed_schedule(distribution, machine))
     return Run(processes, task_owner, float(out_cycles[:, FINISH_CYCLES].max()),
                out_misses.reshape(trace.height, trace.width, n_levels) if pixel_misses else None, miss_counts)
+
+
+def pixel_compute(trace, cost: CostModel, compute, counter_names) -> np.ndarray:
+    """Compute cycles per pixel, float64 shape (P,): ``compute`` as given and checked, or ``cost``'s cycles of
+    the trace's counters (columns ``counter_names``) when it is None."""
+    n_pixels = trace.width * trace.height
+    if compute is None:
+        compute = cost.compute_cycles(np.asarray(trace.counters), counter_names)
+    compute = np.ascontiguousarray(compute, dtype=np.float64)
+    if compute.shape != (n_pixels,):
+        raise InputError(f"compute must have shape ({n_pixels},), got {compute.shape}")
+    return compute
 
 
 @njit(cache=True, nogil=True)
