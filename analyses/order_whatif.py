@@ -12,14 +12,14 @@ itself at the point).
 
 Grid parameters (:data:`GRID_KEYS`; each optional):
 
-===============  ==========================================================
+================ ==========================================================
 ``scene``        a built-in scene or NFF/OBJ file (the million-triangle
                  scene is ``tetra`` at ``scene_size`` 10: 4^10 triangles)
 ``scene_size``   SPD size factor of the scene (balls, tetra, shell only)
 ``spp``          samples per pixel
 ``max_depth``    the bounce limit (the path's ray-tree depth)
 ``<level>.size`` bytes of a cache level (``L1.size``, ``L2.size``, ...)
-===============  ==========================================================
+================ ==========================================================
 
 Python API: ``order_whatif(base, grid)`` gives the table and
 ``save_order_whatif(table, base, grid, folder)`` writes ``whatif-orders.csv``

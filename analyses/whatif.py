@@ -11,7 +11,7 @@ the same results.
 
 Grid parameters (names as in flags and TOML files):
 
-=====================  ========================================================
+====================== ========================================================
 ``memory_latency``     cycles of a memory access
 ``<level>.size``       bytes of a cache level (``L1.size``; ``96KB``, ``4MB``)
 ``<level>.line_size``  line size of one level; ``line_size`` sets every level
@@ -25,19 +25,19 @@ Grid parameters (names as in flags and TOML files):
 ``scene_size``         SPD size factor of the scene (balls, tetra, shell only)
 ``n_processes``        processes; ``n_cpus``, ``background`` the machine
 ``frame_buffer_bytes`` bytes of a frame-buffer pixel: 3, 4 or 16
-=====================  ========================================================
+====================== ========================================================
 
 Under a platform (base ``platform``), its variants
 (:meth:`coherence.platforms.Platform.variant`):
 
-=====================  ========================================================
+====================== ========================================================
 ``cores``              cores of the machine (complexes keep their size)
 ``smt``                ``on`` (the platform's SMT), ``off`` (one thread a
                        core) or threads per core
 ``l3_size``            bytes of the whole shared L3 (``16MB``)
 ``prefetch``           ``on`` / ``off``: the prefetchers of
                        :data:`coherence.platforms.PREFETCHERS_ON`
-=====================  ========================================================
+====================== ========================================================
 
 Under a platform every point's runs are simulated on the variant's shared
 levels (:func:`shared_levels`), the point's level changes applied to whole
