@@ -230,7 +230,7 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     line_shift = line_size.bit_length() - 1
     background = machine.background(line_shift)
     n_logged = _log_room(pieces, machine, log)
-    out = SharedOutputs(out_cycles, out_placement, task_owner, accesses, np.zeros((0, n_levels), dtype=np.int64),
+    out = SharedOutputs(out_cycles, out_placement, task_owner, accesses,
                         np.zeros(n_logged, dtype=np.uint64), np.zeros(n_logged, dtype=np.int64),
                         np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
     state.clock = int(run_shared_schedule(

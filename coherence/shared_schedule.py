@@ -125,8 +125,6 @@ class SharedOutputs(NamedTuple):
     accesses : ndarray of int64, shape (n, L, coherence.recost.N_ACCESS_COLUMNS)
         Read hits, read misses, write hits and write misses of each process at each
         level (columns :data:`coherence.recost.READ_HITS` ...; a miss column is its hit column + 1).
-    pixel_misses : ndarray of int64, shape (P, L), or (0, L) when not wanted
-        Misses of each pixel at each level, reads and writes.
     log_addresses : ndarray of uint64, shape (M,), or (0,)
         When not empty, the address of every access in the order the
         machine served it (ours and the background's); room for all of them.
@@ -142,7 +140,6 @@ class SharedOutputs(NamedTuple):
     placement: np.ndarray
     task_owner: np.ndarray
     accesses: np.ndarray
-    pixel_misses: np.ndarray
     log_addresses: np.ndarray
     log_threads: np.ndarray
     log_pieces: np.ndarray
@@ -276,8 +273,6 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     out_placement = out.placement
     task_owner = out.task_owner
     accesses = out.accesses
-    pixel_misses = out.pixel_misses
-    record_pixel_misses = pixel_misses.shape[0] > 0
     log_addresses = out.log_addresses
     log_threads = out.log_threads
     log_pieces = out.log_pieces
@@ -430,8 +425,6 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 hit_column = WRITE_HITS if is_write else READ_HITS
                 for level in range(level_served):
                     accesses[process, level, hit_column + 1] += 1
-                    if record_pixel_misses:
-                        pixel_misses[pixel, level] += 1
                 if level_served < n_levels:
                     accesses[process, level_served, hit_column] += 1
                 cycles = latency[0] if is_write else latency[level_served]
