@@ -27,7 +27,7 @@ from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
-from coherence.thread_streams import PRIVATE_KINDS, private_span, record_pieces
+from coherence.thread_streams import record_places, split_records
 from rtcommon.validate import InputError, require_bool, require_number
 
 __all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun", "pixel_pieces",
@@ -36,10 +36,6 @@ __all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SHARED_RUN_COLUMNS", "SharedLevels", "S
 #: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
 DEFAULT_INTERLEAVE_CYCLES = 1000
-
-#: Records :func:`pixel_pieces` splits at once (its work arrays hold some 100 bytes per record).
-PIECES_CHUNK = 1 << 21
-
 
 @dataclass(frozen=True)
 class SharedLevels:
@@ -130,31 +126,13 @@ def pixel_pieces(trace, placed: PlacedLayout, line_size: int) -> PixelPieces:
         moved to a process's copy as it makes them.
     """
     offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
-    n_pixels = offsets.shape[0] - 1
-    span = private_span(placed)
-    private_kinds = np.array([int(kind) for kind in PRIVATE_KINDS], dtype=np.uint8)
     records = np.asarray(trace.records)
-    parts = []
-    counts = np.zeros(n_pixels, dtype=np.int64)
-    first = 0
-    while first < n_pixels:  # pixels in chunks of about PIECES_CHUNK records: the work arrays stay small
-        stop = int(np.searchsorted(offsets, offsets[first] + PIECES_CHUNK, side="right")) - 1
-        stop = min(max(stop, first + 1), n_pixels)
-        record_pixel = np.repeat(np.arange(first, stop, dtype=np.int64), np.diff(offsets[first:stop + 1]))
-        # record_pieces moves a private record to copy (thread + 1); given each record's
-        # pixel as its "thread", the pieces come back tagged with their pixel.
-        stream = record_pieces(records[offsets[first]:offsets[stop]], record_pixel, placed, line_size)
-        private = np.isin(stream.kinds, private_kinds)
-        addresses = stream.addresses - np.where(private, (stream.threads + 1) * span, 0).astype(np.uint64)
-        counts[first:stop] = np.bincount(stream.threads - first, minlength=stop - first)
-        parts.append((addresses, stream.sizes.astype(np.int64), stream.kinds, stream.writes, private))
-        first = stop
+    places = record_places(records, placed, line_size)
+    # each pixel split as by thread -1: private kinds at their layout address
+    stream, counts, _ = split_records(records, offsets, np.full(offsets.shape[0] - 1, -1, dtype=np.int64), places)
     piece_offsets = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-    if not parts:
-        parts.append((np.zeros(0, np.uint64), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.bool_),
-                      np.zeros(0, np.bool_)))
-    columns = [np.concatenate([part[column] for part in parts]) for column in range(5)]
-    return PixelPieces(piece_offsets, *columns[:5], int(span))
+    return PixelPieces(piece_offsets, stream.addresses, stream.sizes, stream.kinds, stream.writes,
+                       places.private_kind[stream.kinds], int(places.span))
 
 
 def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHierarchy, placed: PlacedLayout,

@@ -30,7 +30,10 @@ miss: DB's counter traffic.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+from numba import njit
 
 from cachesim.interleave import interleave
 from cachesim.multicore_state import ThreadStream
@@ -39,7 +42,8 @@ from coherence.mappings import get_mapping
 from rtcommon.validate import InputError, require_int, require_power_of_two
 from tracer.trace.records import AUXILIARY_KIND, INDEX_MASK, KIND_SHIFT, WRITE_FLAG, RecordKind
 
-__all__ = ["COUNTER_BYTES", "PRIVATE_KINDS", "counter_address", "private_span", "record_pieces", "thread_stream"]
+__all__ = ["COUNTER_BYTES", "PRIVATE_KINDS", "RecordPlaces", "counter_address", "private_span", "record_pieces",
+           "record_places", "split_records", "thread_stream"]
 
 #: Record kinds each process has a copy of.
 PRIVATE_KINDS = (RecordKind.RAY_STACK, RecordKind.HIT_RECORD, RecordKind.SHADING_TEMP)
@@ -82,26 +86,145 @@ def record_pieces(records, threads, placed: PlacedLayout, line_size: int) -> Thr
     return _pieces(records, threads, placed, line_size)[0]
 
 
-def _pieces(records, threads, placed: PlacedLayout, line_size: int) -> tuple[ThreadStream, np.ndarray]:
-    """:func:`record_pieces`, and the record each access comes from (int64, (N,))."""
+class RecordPlaces(NamedTuple):
+    """Where each record lies, as :func:`split_records` reads it (from a :class:`PlacedLayout`).
+
+    Attributes
+    ----------
+    kind_first : ndarray of int64, shape (K + 1,)
+        Row of each kind's first record.
+    record_start, record_size : ndarray of int64, shape (R,)
+        First byte and bytes of each row.
+    private_kind : ndarray of bool, shape (16,)
+        Which record kinds each thread has a copy of (:data:`PRIVATE_KINDS`).
+    span : int
+        Bytes between two threads' copies (:func:`private_span`).
+    line_shift : int
+        log2 of the line size records are split at.
+    """
+
+    kind_first: np.ndarray
+    record_start: np.ndarray
+    record_size: np.ndarray
+    private_kind: np.ndarray
+    span: int
+    line_shift: int
+
+
+def record_places(records, placed: PlacedLayout, line_size: int) -> RecordPlaces:
+    """The checked :class:`RecordPlaces` of ``placed`` for splitting ``records`` (uint32, (R,)) at lines of
+    ``line_size`` bytes; refused when the layout's pages are translated or a record is not in it."""
     line_size = require_power_of_two("line_size", line_size)
     if placed.pages.frame.size:
         raise InputError("thread streams take virtual addresses: give a layout without page placement")
-    records = np.ascontiguousarray(records, dtype=np.uint32)
     placed.check_records(records)
-    kinds = (records >> KIND_SHIFT).astype(np.int64)
-    rows = placed.kind_first[kinds] + (records & INDEX_MASK).astype(np.int64)
-    private = np.isin(kinds, [int(kind) for kind in PRIVATE_KINDS])
-    starts = placed.record_start[rows] + np.where(private, (threads + 1) * private_span(placed), 0)
-    ends = starts + placed.record_size[rows]
-    spans = (ends - 1) // line_size - starts // line_size + 1
-    record = np.repeat(np.arange(records.size), spans)
-    piece = np.arange(record.size) - np.repeat(np.cumsum(spans) - spans, spans)
-    line_start = (starts[record] // line_size + piece) * line_size
-    first = np.maximum(starts[record], line_start)
-    end = np.minimum(ends[record], line_start + line_size)
-    return ThreadStream(first.astype(np.uint64), np.asarray(threads, dtype=np.int64)[record],
-                        (records[record] & WRITE_FLAG) != 0, end - first, kinds[record].astype(np.uint8)), record
+    private_kind = np.zeros(1 << (32 - KIND_SHIFT), dtype=np.bool_)
+    private_kind[[int(kind) for kind in PRIVATE_KINDS]] = True
+    return RecordPlaces(placed.kind_first, placed.record_start, placed.record_size, private_kind,
+                        private_span(placed), line_size.bit_length() - 1)
+
+
+@njit(cache=True, inline="always")
+def _record_bytes(record, thread, places):
+    """Kind, first byte and end of one packed record made by ``thread`` (its own copy of a private kind)."""
+    kind = np.int64(record >> np.uint32(KIND_SHIFT))
+    row = places.kind_first[kind] + np.int64(record & np.uint32(INDEX_MASK))
+    start = places.record_start[row]
+    if places.private_kind[kind]:
+        start += (thread + 1) * places.span
+    return kind, start, start + places.record_size[row]
+
+
+@njit(cache=True)
+def _count_pieces(records, group_offsets, group_threads, places):
+    """Accesses (lines spanned) of each group of records; int64 (G,)."""
+    shift = places.line_shift
+    counts = np.zeros(group_threads.shape[0], dtype=np.int64)
+    for group in range(group_threads.shape[0]):
+        thread = group_threads[group]
+        n = np.int64(0)
+        for i in range(group_offsets[group], group_offsets[group + 1]):
+            _, start, end = _record_bytes(records[i], thread, places)
+            n += ((end - 1) >> shift) - (start >> shift) + 1
+        counts[group] = n
+    return counts
+
+
+@njit(cache=True)
+def _fill_pieces(records, group_offsets, group_threads, places, out, record_of):
+    """Write each record's accesses, in order, into ``out`` (a :class:`ThreadStream` of the right length;
+    its ``threads`` left alone) and, when it is not empty, each access's record into ``record_of``."""
+    shift = places.line_shift
+    line_bytes = np.int64(1) << shift
+    addresses, writes, sizes, kinds = out.addresses, out.writes, out.sizes, out.kinds
+    with_records = record_of.shape[0] > 0
+    k = 0
+    for group in range(group_threads.shape[0]):
+        thread = group_threads[group]
+        for i in range(group_offsets[group], group_offsets[group + 1]):
+            record = records[i]
+            kind, start, end = _record_bytes(record, thread, places)
+            is_write = (record & np.uint32(WRITE_FLAG)) != 0
+            for line in range(start >> shift, ((end - 1) >> shift) + 1):
+                line_start = line << shift
+                first = max(start, line_start)
+                addresses[k] = np.uint64(first)
+                sizes[k] = min(end, line_start + line_bytes) - first
+                kinds[k] = np.uint8(kind)
+                writes[k] = is_write
+                if with_records:
+                    record_of[k] = i
+                k += 1
+
+
+def split_records(records, group_offsets, group_threads, places: RecordPlaces, *, with_records: bool = False):
+    """Each record's accesses: one per line its bytes span, with its bytes there, its kind and write flag.
+
+    Parameters
+    ----------
+    records : ndarray of uint32, shape (R,)
+        Packed records, in access order, checked by :func:`record_places`.
+    group_offsets : ndarray of int64, shape (G + 1,)
+        Group ``g`` is records ``group_offsets[g]:group_offsets[g + 1]``.
+    group_threads : ndarray of int64, shape (G,)
+        Hardware thread that makes each group's records (chooses the copy
+        of a private kind; -1: the layout's own place).
+    places : RecordPlaces
+    with_records : bool
+        Also give the record each access comes from.
+
+    Returns
+    -------
+    stream : ThreadStream
+        One entry per access, in order; its ``threads`` empty (0,).
+    counts : ndarray of int64, shape (G,)
+        Accesses of each group.
+    record_of : ndarray of int64, shape (N,) or (0,)
+        With ``with_records``, the record of each access.
+    """
+    records = np.ascontiguousarray(records, dtype=np.uint32)
+    group_offsets = np.ascontiguousarray(group_offsets, dtype=np.int64)
+    group_threads = np.ascontiguousarray(group_threads, dtype=np.int64)
+    counts = _count_pieces(records, group_offsets, group_threads, places)
+    n = int(counts.sum())
+    out = ThreadStream(np.empty(n, dtype=np.uint64), np.zeros(0, dtype=np.int64), np.empty(n, dtype=np.bool_),
+                       np.empty(n, dtype=np.int64), np.empty(n, dtype=np.uint8))
+    record_of = np.empty(n if with_records else 0, dtype=np.int64)
+    _fill_pieces(records, group_offsets, group_threads, places, out, record_of)
+    return out, counts, record_of
+
+
+def _pieces(records, threads, placed: PlacedLayout, line_size: int) -> tuple[ThreadStream, np.ndarray]:
+    """:func:`record_pieces`, and the record each access comes from (int64, (N,))."""
+    records = np.ascontiguousarray(records, dtype=np.uint32)
+    places = record_places(records, placed, line_size)
+    threads = np.asarray(threads, dtype=np.int64)
+    # records in runs of one thread
+    runs = np.flatnonzero(threads[1:] != threads[:-1]) + 1
+    offsets = np.concatenate(([0], runs, [threads.size]) if threads.size else ([0],)).astype(np.int64)
+    stream, counts, record = split_records(records, offsets, threads[offsets[:-1]], places, with_records=True)
+    return ThreadStream(stream.addresses, np.repeat(threads[offsets[:-1]], counts), stream.writes, stream.sizes,
+                        stream.kinds), record
 
 
 def thread_stream(trace, placed: PlacedLayout, mapping, n_threads: int, *, line_size: int = 64,

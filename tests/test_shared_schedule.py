@@ -215,23 +215,23 @@ def test_whatif_points_under_a_platform_run_on_its_shared_levels():
                                                            frame_buffer_bytes=None)), {}) is None
 
 
-def test_pixel_pieces_in_chunks_equal_one_pass(monkeypatch):
-    """Split in chunks of 7 records (pixels never split), the pieces equal those of one pass, and each pixel's
-    pieces are its records' (record_pieces on that pixel alone). Mutation: ``first = stop`` -> ``first = stop + 1``
-    in pixel_pieces (a pixel per chunk is skipped)."""
-    import coherence.shared_run as shared_run
-    from coherence.thread_streams import record_pieces
+@pytest.mark.parametrize("layout, line_size", [("alpha1997", 32), ("compact", 64), ("alpha1997", 16)])
+def test_pixel_pieces_match_a_byte_by_byte_split(layout, line_size):
+    """Each pixel's pieces (first byte, write flag, bytes, kind) are its records split byte by byte at the
+    lines, private kinds at their layout address and flagged private. Mutation: ``np.full(..., -1, ...)`` ->
+    ``np.full(..., 0, ...)`` in pixel_pieces (private kinds at the first process's copy) (checked)."""
+    from coherence.thread_streams import PRIVATE_KINDS, private_span
+    from test_thread_streams import slow_pixel
 
     trace = synthetic_trace(5, 4, seed=3)
-    placed = place_layout(get_layout("alpha1997"), trace)
-    whole = pixel_pieces(trace, placed, 32)
-    monkeypatch.setattr(shared_run, "PIECES_CHUNK", 7)
-    chunked = pixel_pieces(trace, placed, 32)
-    for field in whole._fields:
-        np.testing.assert_array_equal(getattr(chunked, field), getattr(whole, field))
-    for pixel in (0, 7, 19):
-        rows = slice(trace.pixel_offsets[pixel], trace.pixel_offsets[pixel + 1])
-        alone = record_pieces(trace.records[rows], np.full(rows.stop - rows.start, -1), placed, 32)
-        pieces = slice(whole.piece_offsets[pixel], whole.piece_offsets[pixel + 1])
-        np.testing.assert_array_equal(whole.addresses[pieces], alone.addresses)
-        np.testing.assert_array_equal(whole.sizes[pieces], alone.sizes)
+    placed = place_layout(get_layout(layout), trace)
+    pieces = pixel_pieces(trace, placed, line_size)
+    assert pieces.private_span == private_span(placed)
+    for pixel in range(trace.width * trace.height):
+        span = slice(pieces.piece_offsets[pixel], pieces.piece_offsets[pixel + 1])
+        expected = slow_pixel(trace, placed, pixel, -1, line_size)
+        got = list(zip(pieces.addresses[span].tolist(), [-1] * (span.stop - span.start), pieces.writes[span].tolist(),
+                       pieces.sizes[span].tolist(), pieces.kinds[span].tolist()))
+        assert got == expected
+        assert pieces.private[span].tolist() == [kind in PRIVATE_KINDS for kind in pieces.kinds[span].tolist()]
+    assert pieces.piece_offsets[-1] == pieces.addresses.size
