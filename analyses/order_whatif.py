@@ -21,6 +21,10 @@ Grid parameters (:data:`GRID_KEYS`; each optional):
 ``<level>.size`` bytes of a cache level (``L1.size``, ``L2.size``, ...)
 ================ ==========================================================
 
+Under a platform (the base's ``platform``), the study and every order run on
+its shared levels (:func:`coherence.ordered_runs.simulate_ordered_shared`),
+an ``<level>.size`` being the size of one whole level.
+
 Python API: ``order_whatif(base, grid)`` gives the table and
 ``save_order_whatif(table, base, grid, folder)`` writes ``whatif-orders.csv``
 and its ``.meta.json``.
@@ -124,9 +128,6 @@ def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None =
         raise InputError(f"order what-if: the base's workload must be 'pathtrace', got {base.workload!r}")
     if len(base.n_processes) != 1:
         raise InputError(f"order what-if: the base needs one process count, got {list(base.n_processes)}")
-    if base.platform is not None:
-        raise InputError("order what-if: --platform is not supported: ordered runs take one hardware thread's view "
-                         "of shared levels, not the shared levels a run under a platform simulates")
     tables = [_point_table(base, point, orders) for point in grid_points(grid or {})]
     return pd.concat(tables, ignore_index=True)
 
@@ -135,7 +136,7 @@ def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
     """One grid point's rows (:func:`order_whatif`)."""
     from analyses.report_orders import order_section
     from analyses.traces import cached_trace
-    from analyses.whatif import _point_levels, _sized_scene_file
+    from analyses.whatif import _sized_scene_file
     from coherence.studies import place_layout, study
 
     try:
@@ -150,7 +151,7 @@ def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
                                    progress=experiment.progress, workload=experiment.trace_workload(),
                                    tree_variant=experiment.tree_variant,
                                    path_samples=(experiment.spp, experiment.seed))
-    hierarchy = _point_levels(experiment.hierarchy_object(), {k: v for k, v in point.items() if "." in k})
+    hierarchy = _levels_of(experiment, {k: v for k, v in point.items() if "." in k})
     layout, cost, machine = experiment.layout_object(), experiment.cost_model(), experiment.machine()
     mappings = experiment.mapping_objects()
     n_processes = int(experiment.n_processes[0])
@@ -164,6 +165,23 @@ def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
     for key, value in reversed(list(point.items())):
         table.insert(0, key, value)
     return table
+
+
+def _levels_of(experiment: Experiment, sizes: dict):
+    """What a point's runs simulate on, its ``<level>.size`` applied: the experiment's hierarchy, or under a
+    platform its shared levels, each size that of one whole level (an ``L3.size`` is one L3's)."""
+    from analyses.whatif import _point_levels
+    from coherence.shared_run import SharedLevels
+
+    levels = experiment.study_hierarchy()
+    if not isinstance(levels, SharedLevels):
+        return _point_levels(levels, sizes)
+    resized = _point_levels(levels.machine.hierarchy, sizes)
+    try:
+        machine = replace(levels.machine, hierarchy=resized)
+    except ValueError as error:
+        raise InputError(f"order what-if point {sizes}: {error}") from None
+    return replace(levels, machine=machine)
 
 
 def save_order_whatif(table: pd.DataFrame, base: Experiment, grid: dict, folder) -> Path:

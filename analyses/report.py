@@ -254,14 +254,14 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
 
         texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost)
     ray_orders = None
-    # Under a platform the runs are on its shared levels, while the ordered runs would take one thread's
-    # view of them: the section would compare two cache models, so it is left out there.
-    if trace.segments is not None and not setup.machine.page_placement.translates and experiment.platform is None:
+    if trace.segments is not None and not setup.machine.page_placement.translates:
         from analyses.report_orders import order_section
 
         worst = next(m for m in setup.mappings if m.name == verdict.worst["coherence_loss"][0])
-        ray_orders = order_section(trace, runs, {"mappings": [worst], "hierarchy": hierarchy, "placed": placed,
-                                                 "cost": cost, "machine": setup.machine, "scene": scene}, verdict_n)
+        # on the levels the study ran on: under a platform its shared levels, as the depth-first row's run
+        ray_orders = order_section(trace, runs, {"mappings": [worst], "hierarchy": experiment.study_hierarchy(),
+                                                 "placed": placed, "cost": cost, "machine": setup.machine,
+                                                 "scene": scene}, verdict_n)
     cost_map = cost.compute_cycles(trace.counters, COUNTER_NAMES).reshape(trace.height, trace.width)
     region = placed.region_bytes()
     scene_bytes = pd.DataFrame({"kind": [k for k, v in region.items() if v > 0] + ["total"],

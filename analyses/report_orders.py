@@ -24,6 +24,9 @@ The depth-first order is the study's run itself (gain and overhead 1).
 The registered treelet order runs with treelets of the hierarchy's first
 level's size and nodes of the placed layout's kd-node size; column
 ``treelet_bytes`` says the treelet size an order used (0: not a treelet order).
+Under a platform every order runs on its shared levels, as the study's runs
+(:func:`coherence.ordered_runs.simulate_ordered_shared`), treelets sized to its
+whole first level.
 """
 from __future__ import annotations
 
@@ -82,6 +85,11 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         ``mappings`` (Mapping objects), ``hierarchy``, ``placed``, ``cost``,
         ``machine`` and, for orders that need the kd-tree, ``tree`` or the
         ``scene`` to build it from with the trace's recorded ``kd_config``.
+        ``hierarchy`` is that of ``study_runs``: a :class:`cachesim.Hierarchy`
+        (private caches, :func:`coherence.ordered_runs.simulate_ordered`) or a
+        platform's :class:`coherence.shared_run.SharedLevels`, on which every
+        order runs (:func:`coherence.ordered_runs.simulate_ordered_shared`),
+        treelets sized to its first level's whole size.
     n_processes : int
     orders : sequence of str or RayOrder, optional
         Default :func:`report_orders`.
@@ -92,7 +100,10 @@ def order_section(trace, study_runs: pd.DataFrame, setup: dict, n_processes: int
         Columns mapping, order, ``<level>_misses_per_ray`` per level, then :data:`ORDER_COLUMNS`.
     """
     from coherence.ray_orders import get_ray_order, scene_bounds_of
+    from coherence.shared_run import SharedLevels
 
+    if isinstance(setup["hierarchy"], SharedLevels):  # the orders' runs on shared levels too
+        setup = {**setup, "shared": setup["hierarchy"], "hierarchy": setup["hierarchy"].hierarchy}
     levels = [level.name for level in setup["hierarchy"].levels]
     bounds = scene_bounds_of(trace.segments)
     chosen = ([_sized(get_ray_order(order), setup) for order in orders] if orders is not None
@@ -188,19 +199,27 @@ def _ordered_run(trace, distribution, order, setup: dict, bounds) -> tuple:
     """One order's run: its summary (:func:`coherence.metrics.run_summary`), aux records, sorting cycles, and
     the work without dispatch of the same order without its own costs."""
     from coherence.metrics import run_summary
-    from coherence.ordered_runs import simulate_ordered
+    from coherence.ordered_runs import simulate_ordered, simulate_ordered_shared
     from coherence.ray_order_base import OrderBuffers
 
     hierarchy, placed, cost, machine = (setup[key] for key in ("hierarchy", "placed", "cost", "machine"))
+    shared = setup.get("shared")
     name = order.name
     ordered, bare = registry_orders(order, scene_bounds=bounds, tree=setup.get("tree"), records=trace.records)
-    run, work = simulate_ordered(trace, distribution, ordered, hierarchy, placed, cost, machine, name=name,
-                                 extents=OrderBuffers().extents)
+
+    def simulated(chosen):
+        if shared is None:
+            return simulate_ordered(trace, distribution, chosen, hierarchy, placed, cost, machine, name=name,
+                                    extents=OrderBuffers().extents)
+        run, work = simulate_ordered_shared(trace, distribution, chosen, shared, placed, cost, machine, name=name)
+        return run.run, work
+
+    run, work = simulated(ordered)
     summary = run_summary(run.processes, [level.name for level in hierarchy.levels], cost.clock_hz, run.real_cycles)
     w0_bare = summary["work_cycles_without_dispatch"]
     aux, sort_cycles = np.array(work.trace.records[trace.n_records:]), work.sort_cycles
     del run, work  # the ordered run's pieces, records and per-piece counters, before the bare run makes its own
     if len(aux) or sort_cycles:
-        plain, _ = simulate_ordered(trace, distribution, bare, hierarchy, placed, cost, machine, name=name)
+        plain, _ = simulated(bare)
         w0_bare = float((plain.processes["user_cycles"] - plain.processes["dispatch_cycles"]).sum())
     return summary, aux, sort_cycles, w0_bare

@@ -43,6 +43,15 @@ process's buffers; every dynamic task uses process 0's, which, since every
 CPU of the simulation has caches of its own, is each process reusing its
 own buffers from one block to the next (two processes time-sharing one CPU
 would share them).
+
+On a platform's shared levels, :func:`simulate_ordered_shared` runs the
+same pseudo-pixels through :func:`coherence.shared_run.simulate_shared_run`.
+There the buffers must be the replaying process's own even under DB (one
+process's buffer lines would otherwise move between cores), so their
+records are private to a process, as the tracer's per-ray data are: the run
+places process ``p``'s at ``OrderBuffers.extents(.., p)`` whichever blocks
+it takes. The depth-first order replays the platform's run of the mapping
+itself there too.
 """
 from __future__ import annotations
 
@@ -302,6 +311,112 @@ def simulate_ordered(trace, distribution: Distribution, order: Order, hierarchy,
             raise InputError(f"ray order {name!r} adds buffer records: give extents= to place them")
         placed, pieces = with_order_buffers(placed, work, int(trace.n_records), extents)
     return simulate_run(pieces, work.distribution, hierarchy, placed, cost, machine, compute=work.compute), work
+
+
+def simulate_ordered_shared(trace, distribution: Distribution, order: Order, shared, placed, cost, machine, *,
+                            name: str = "order", buffers=None) -> tuple:
+    """Simulate ``distribution`` with every unit's rays in ``order`` on a platform's shared levels.
+
+    The ordered work of :func:`ordered_work` runs through
+    :func:`coherence.shared_run.simulate_shared_run`, so an order and the
+    depth-first run it is compared with share one cache model. The order's
+    buffers are each process's own, at the addresses
+    :meth:`coherence.ray_order_base.OrderBuffers.extents` gives it: their
+    records are private to the process that replays them (as the ray data of
+    :data:`coherence.thread_streams.PRIVATE_KINDS` are), so under a dynamic
+    mapping each handed-out block's rays use the buffers of the process that
+    took it, and no two processes share a buffer line.
+
+    Parameters
+    ----------
+    trace, distribution, order, placed, cost, machine, name
+        As :func:`simulate_ordered` (``placed`` and ``machine`` without page placement).
+    shared : coherence.shared_run.SharedLevels
+        The platform's shared levels and its interleaving ``Q``.
+    buffers : coherence.ray_order_base.OrderBuffers, optional
+        Where each process's buffers lie (default ``OrderBuffers()``); its
+        ``base`` must be at least its ``spacing``.
+
+    Returns
+    -------
+    (coherence.shared_run.SharedRun, OrderedWork)
+        The run (pixels counting pieces) and what it replayed.
+    """
+    from coherence.shared_run import SharedLevels, simulate_shared_run
+    from tracer.trace.access import COUNTER_NAMES
+
+    if not isinstance(shared, SharedLevels):
+        raise InputError(f"simulate_ordered_shared needs SharedLevels, got {type(shared).__name__}")
+    work = ordered_work(trace, distribution, order, cost.compute_cycles(trace.counters, COUNTER_NAMES), name)
+    placed, pieces = shared_order_pieces(work, placed, int(trace.n_records), shared.hierarchy.levels[0].line_size,
+                                         buffers, name)
+    run = simulate_shared_run(pieces.trace, work.distribution, shared.machine,
+                              placed, cost, machine, interleave_cycles=shared.interleave_cycles,
+                              compute=work.compute, pieces=pieces.pieces)
+    return run, work
+
+
+class SharedOrderPieces(NamedTuple):
+    """An ordered run's accesses for the shared levels (:func:`shared_order_pieces`)."""
+
+    trace: PieceTrace  #: the pseudo-trace, aux records renumbered to the buffer rows
+    pieces: object     #: :class:`coherence.shared_schedule.PixelPieces` of its pseudo-pixels
+
+
+def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: int, buffers=None,
+                        name: str = "order") -> tuple:
+    """The layout with the order's buffer rows and every pseudo-pixel's accesses, buffers private to a process.
+
+    Every auxiliary record gets a row of process 0's buffer slots placed one
+    ``spacing`` below process 0's buffers, its accesses marked private with
+    ``spacing`` as the distance between two processes' copies: the run moves
+    process ``p``'s to ``buffers.extents(.., p)``.
+
+    Parameters
+    ----------
+    work : OrderedWork
+    placed : coherence.layout.PlacedLayout
+        Virtual addresses (no page placement).
+    n_records : int
+        The trace's records.
+    line_size : int
+        The first level's line size.
+    buffers : coherence.ray_order_base.OrderBuffers, optional
+    name : str
+        The order's name, for error messages.
+
+    Returns
+    -------
+    (PlacedLayout, SharedOrderPieces)
+    """
+    from coherence.ray_order_base import OrderBuffers
+    from coherence.shared_run import pixel_pieces
+    from coherence.shared_schedule import PixelPieces
+    from coherence.thread_streams import PRIVATE_KINDS
+
+    if not work.n_aux:
+        return placed, SharedOrderPieces(work.trace, pixel_pieces(work.trace, placed, line_size))
+    buffers = OrderBuffers() if buffers is None else buffers
+    if buffers.base < buffers.spacing:
+        raise InputError(f"ray order {name!r} on shared levels: OrderBuffers.base ({buffers.base}) must be at least "
+                         f"its spacing ({buffers.spacing})")
+    trace_kinds = np.asarray(work.trace.records[:n_records]) >> np.uint32(KIND_SHIFT)
+    if np.isin(trace_kinds, [int(kind) for kind in PRIVATE_KINDS]).any():
+        # those copies are one layout span apart, the buffers one spacing: the run moves both by one distance
+        raise InputError(f"ray order {name!r} on shared levels: the trace logs per-ray private records; ray orders "
+                         "take path-traced traces, which log none")
+
+    def below_process_zero(aux_records, process):
+        start, size = buffers.extents(aux_records, 0)
+        return start - buffers.spacing, size
+
+    one_owner = OrderedWork(work.trace, work.distribution, work.compute, work.n_aux, work.sort_cycles,
+                            np.zeros(work.n_aux, np.int64))
+    placed, trace = with_order_buffers(placed, one_owner, n_records, below_process_zero)
+    pieces = pixel_pieces(trace, placed, line_size)
+    private = pieces.private | (pieces.kinds == AUXILIARY_KIND)
+    return placed, SharedOrderPieces(trace, PixelPieces(pieces.piece_offsets, pieces.addresses, pieces.sizes,
+                                                        pieces.kinds, pieces.writes, private, int(buffers.spacing)))
 
 
 def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tuple:

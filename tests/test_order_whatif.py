@@ -90,11 +90,28 @@ def test_whitted_base_is_refused(base):
         order_whatif(replace(base, workload="modern", spp=1), {"L1.size": [4096]})
 
 
-def test_platform_base_is_refused(base):
-    """Under a platform the runs are on shared levels and ordered runs are not, so the study is refused by
-    name. Fails without the platform check (checked: the points then run on one thread's view)."""
-    with pytest.raises(InputError, match="--platform is not supported"):
-        order_whatif(replace(base, platform="apple-m1"), {"L1.size": [4096]})
+def test_platform_points_run_on_its_shared_levels(base):
+    """Under a platform a point's runs are on its shared levels, an ``<level>.size`` the size of one whole
+    level, interleaved at the base's ``interleave_cycles``: the point's rows equal the section on those
+    levels. Fails if the point's size were not applied to the shared levels (``_point_levels(...)`` made
+    ``machine.hierarchy`` in ``_levels_of``) (checked)."""
+    from analyses.order_whatif import _levels_of
+
+    platform = replace(base, platform="apple-m1", interleave_cycles=500)
+    levels = _levels_of(platform, {"L2.size": 6 << 20})
+    assert levels.machine.hierarchy.levels[1].size == 6 << 20 and levels.interleave_cycles == 500
+    assert levels.machine.shared_by == platform.study_hierarchy().machine.shared_by
+    table = order_whatif(platform, {"L2.size": [6 << 20]}, orders=ORDERS)
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=8, workload="pathtrace", spp=1)).trace
+    layout, cost, machine, mappings = (platform.layout_object(), platform.cost_model(), platform.machine(),
+                                       platform.mapping_objects())
+    runs = study(trace, mappings, [1, 4], hierarchy=levels, layout=layout, cost=cost, machine=machine,
+                 scene=scene, progress=False).runs
+    setup = {"mappings": mappings, "hierarchy": levels, "placed": place_layout(layout, trace, scene),
+             "cost": cost, "machine": machine, "scene": scene}
+    expected = order_section(trace, runs, setup, 4, ORDERS)
+    pd.testing.assert_frame_equal(table[expected.columns], expected, check_exact=False, rtol=1e-12)
 
 
 def test_cli_writes_the_api_table(base, tmp_path):

@@ -168,3 +168,83 @@ def test_buffer_records_are_placed_and_read(setup):
     per_process_rays = [int(np.isin(trace.segments.ints[:, SegmentColumn.PIXEL], pixels).sum())
                         for pixels in unit_pixels(distribution)]
     assert (run.processes[f"{first}_accesses"] - plain.processes[f"{first}_accesses"]).tolist() == per_process_rays
+
+
+@pytest.fixture(scope="module")
+def platform_setup(setup):
+    """The 8x8 trace on apple-m1's shared levels (4 cores, a shared L2), no background load."""
+
+    trace, _, placed, _, _ = setup
+    experiment = Experiment(scene="balls", size=8, workload="pathtrace", platform="apple-m1", background=0)
+    return trace, experiment.study_hierarchy(), placed, experiment.cost_model(), experiment.machine()
+
+
+@pytest.mark.parametrize("mapping", ["S", "P", "DB"])
+def test_depth_first_on_shared_levels_is_the_platform_run(platform_setup, mapping):
+    """On a platform's shared levels, the depth-first order gives the processes and real time of
+    ``simulate_shared_run`` of the mapping itself, cycle for cycle, as a platform report's runs are made. Fails
+    if the pieces' compute cycles were not given to the run (``compute=work.compute`` dropped: the run then
+    costs each piece from its counters, which sit on a unit's first piece) (checked)."""
+    from coherence.ordered_runs import simulate_ordered_shared
+    from coherence.shared_run import simulate_shared_run
+
+    trace, shared, placed, cost, machine = platform_setup
+    chosen = DynamicBlock(block=2, dispatch_cycles=300.0) if mapping == "DB" else get_mapping(mapping)
+    distribution = chosen.build(trace.width, trace.height, 3)
+    expected = simulate_shared_run(trace, distribution, shared.machine, placed, cost, machine,
+                                   interleave_cycles=shared.interleave_cycles)
+    run, work = simulate_ordered_shared(trace, distribution, depth_first, shared, placed, cost, machine,
+                                        name="depth-first")
+    assert work.n_aux == 0
+    assert run.run.processes.equals(expected.run.processes)
+    assert run.run.real_cycles == expected.run.real_cycles
+    np.testing.assert_array_equal(run.shared.counts, expected.shared.counts)
+
+
+def _with_state_writes(segments, rows, n_records):
+    """Depth-first, each ray preceded by a write of its process's ray-state slot 0."""
+    unit = _with_state_reads(segments, rows, n_records)
+    return unit._replace(aux=pack_aux(AuxKind.RAY_STATE, np.zeros(len(rows), np.int64), True))
+
+
+def test_buffers_on_shared_levels_are_each_process_own(platform_setup):
+    """Under DB on shared levels, every handed-out block's rays write the ray-state slots of the process that
+    took it: the slot rows lie one spacing below process 0's buffers, marked private with the spacing between
+    copies, and no buffer line moves between cores (no coherence invalidation or miss of the auxiliary kind)
+    while each process writes its rays' states. Fails if the buffer accesses were not private (``private =
+    pieces.private``: every process then shares one buffer) (checked, also with the flag assertion left out:
+    the kind's coherence misses)."""
+    from cachesim.multicore_state import ACCESSES, COHERENCE_INVALIDATIONS, COHERENCE_MISSES
+    from coherence.ordered_runs import shared_order_pieces, simulate_ordered_shared
+    from coherence.ray_order_base import OrderBuffers
+
+    trace, shared, placed, cost, machine = platform_setup
+    distribution = DynamicBlock(block=2, dispatch_cycles=300.0).build(trace.width, trace.height, 4)
+    run, work = simulate_ordered_shared(trace, distribution, _with_state_writes, shared, placed, cost, machine,
+                                        name="state writes")
+    buffers = OrderBuffers()
+    buffered, pieces = shared_order_pieces(work, placed, trace.n_records, shared.hierarchy.levels[0].line_size)
+    rows = slice(buffered.kind_first[AUXILIARY_KIND], buffered.kind_first[AUXILIARY_KIND + 1])
+    assert buffered.record_start[rows].tolist() == [buffers.base - buffers.spacing]  # slot 0, one row for all
+    aux = pieces.pieces.kinds == AUXILIARY_KIND
+    assert aux.sum() == trace.segments.n_segments and pieces.pieces.private[aux].all()
+    assert pieces.pieces.private_span == buffers.spacing
+    counts = run.shared.counts[:, :, AUXILIARY_KIND]
+    assert counts[0, :, ACCESSES].sum() == trace.segments.n_segments
+    assert counts[..., COHERENCE_INVALIDATIONS].sum() == 0 and counts[..., COHERENCE_MISSES].sum() == 0
+    assert (run.run.processes["tasks"] > 0).sum() > 1  # the blocks went to several processes
+
+
+def test_shared_buffers_below_their_spacing_are_refused(platform_setup):
+    """On shared levels process 0's buffer rows lie one spacing below its buffers, so buffers based below
+    their spacing are refused by name, not wrapped round to a huge address. Fails without the check (checked:
+    the run then goes through on wrapped addresses)."""
+    from coherence.ordered_runs import simulate_ordered_shared
+    from coherence.ray_order_base import OrderBuffers
+    from rtcommon.validate import InputError
+
+    trace, shared, placed, cost, machine = platform_setup
+    distribution = get_mapping("P").build(trace.width, trace.height, 2)
+    with pytest.raises(InputError, match="OrderBuffers.base .* at least its spacing"):
+        simulate_ordered_shared(trace, distribution, _with_state_writes, shared, placed, cost, machine,
+                                buffers=OrderBuffers(base=4096))

@@ -100,16 +100,63 @@ def test_report_of_a_path_traced_trace_has_the_section(tmp_path):
     assert "ray_orders" not in set(pd.read_csv(whitted / "results.csv")["section"])
 
 
-def test_a_report_under_a_platform_leaves_the_section_out(tmp_path):
-    """Under a platform the runs are on its shared levels, the ordered runs would be on one thread's view, so
-    the section is left out rather than compare two cache models. Fails without the platform condition in
-    build_report (checked: the section then appears)."""
+def test_a_report_under_a_platform_has_the_section(tmp_path):
+    """Under a platform the report has the section (results.csv and summary.json), every registered order,
+    its depth-first row the study's run on the shared levels, treelets of the platform's whole first level
+    (apple-m1: 128 KB L1 a core). Fails with the section left out under a platform (the condition
+    ``experiment.platform is None`` put back in build_report) (checked)."""
+    from coherence.ray_orders import RAY_ORDERS
+
     out = tmp_path / "out"
     assert main(["report", "tetra", "--size", "8", "--processes", "2", "--mappings", "S", "--workload",
                  "pathtrace", "--spp", "1", "--platform", "apple-m1", "--out", str(out),
                  "--cache", str(tmp_path / "cache")]) == 0
-    assert "ray_orders" not in set(pd.read_csv(out / "results.csv")["section"])
-    assert "ray_orders" not in json.loads((out / "summary.json").read_text())
+    results = pd.read_csv(out / "results.csv")
+    assert set(results[results["section"] == "ray_orders"]["item"]) == {*RAY_ORDERS, "treelet"}
+    summary = json.loads((out / "summary.json").read_text())
+    rows = {row["order"]: row for row in summary["ray_orders"]}
+    assert rows["treelet"]["treelet_bytes"] == 128 * 1024 and rows["treelet"]["queue_records"] > 0
+    def value(section, item, metric):
+        chosen = results[(results["section"] == section) & (results["mapping"] == "S")
+                         & (results["n_processes"] == 2) & (results["metric"] == metric)]
+        return chosen[chosen["item"].fillna("") == item]["value"].astype(float).tolist()
+
+    for metric in ("L1_misses_per_ray", "L2_misses_per_ray", "user_seconds_max"):
+        assert value("ray_orders", "depth-first", metric) == value("runs", "", metric) != []
+
+
+def test_orders_run_on_the_shared_levels_the_study_ran_on():
+    """Given a platform's SharedLevels (as the study's runs), each order's row is its run on those levels
+    (:func:`coherence.ordered_runs.simulate_ordered_shared`), not on one thread's private view. Fails if the
+    section ran the orders on private caches (``if shared is None`` made ``if True`` in ``_ordered_run``)
+    (checked)."""
+    from coherence.metrics import run_summary
+    from coherence.ordered_runs import simulate_ordered_shared
+    from coherence.ray_orders import scene_bounds_of
+    from analyses.report_orders import registry_orders
+
+    scene = load("balls")
+    trace = path_trace(scene, build_kdtree(scene), RenderOptions(size=8, workload="pathtrace", spp=1)).trace
+    experiment = Experiment(scene="balls", size=8, workload="pathtrace", platform="apple-m1", background=0)
+    shared, layout, cost, machine = (experiment.study_hierarchy(), experiment.layout_object(),
+                                     experiment.cost_model(), experiment.machine())
+    mappings = [get_mapping("P")]
+    placed = place_layout(layout, trace, scene)
+    runs = study(trace, mappings, [1, 4], hierarchy=shared, layout=layout, cost=cost, machine=machine,
+                 scene=scene, progress=False).runs
+    setup = {"mappings": mappings, "hierarchy": shared, "placed": placed, "cost": cost, "machine": machine,
+             "scene": scene}
+    table = order_section(trace, runs, setup, 4, ["depth-first", "wavefront"])
+    ordered, _ = registry_orders("wavefront", scene_bounds=scene_bounds_of(trace.segments))
+    run, _ = simulate_ordered_shared(trace, mappings[0].build(8, 8, 4), ordered, shared, placed, cost, machine)
+    levels = shared.hierarchy.level_names
+    expected = run_summary(run.run.processes, levels, cost.clock_hz, run.run.real_cycles)
+    row = table[table["order"] == "wavefront"].iloc[0]
+    for column in [f"{level}_misses_per_ray" for level in levels] + ["user_seconds_max"]:
+        assert row[column] == pytest.approx(float(expected[column]), rel=1e-12), column
+    depth_first = table[table["order"] == "depth-first"].iloc[0]
+    assert depth_first["user_seconds_max"] == pytest.approx(float(runs[runs["n_processes"] == 4]
+                                                                  ["user_seconds_max"].iloc[0]), rel=1e-12)
 
 
 def test_the_tree_is_built_again_as_the_trace_recorded_it():

@@ -54,8 +54,9 @@ renders a path-traced trace and reports, per mapping and ray order at the
 one process count, the reordering gain and overhead of the report's
 ray-order section and net_speedup (depth-first's slowest process time over
 the order's). Grid parameters: scene, scene_size, spp, max_depth,
-<level>.size; default base: balls 32x32, spp 1, P, 8 processes. Writes
-whatif-orders.csv with .meta.json (analyses.order_whatif).
+<level>.size; default base: balls 32x32, spp 1, P, 8 processes. Under
+--platform every order runs on its shared levels (a size is one whole
+level's). Writes whatif-orders.csv with .meta.json (analyses.order_whatif).
 
 examples:
   coherence whatif latency --size 64
