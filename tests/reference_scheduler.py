@@ -63,6 +63,145 @@ class ReferenceCaches:
         return served
 
 
+class ReferenceOS:
+    """The operating system's rules that do not touch caches: tasks and hand-outs, run queues, the decision at
+    a free CPU or a slice end, background streams and where each process ran."""
+
+    def __init__(self, distribution, machine, line_size):
+        self.distribution = distribution
+        self.machine = machine
+        n = self.n = distribution.n_processes
+        n_background = machine.background_load
+        self.tasks = [list(distribution.task(t)) for t in range(distribution.n_tasks)]
+        self.task_owner = [-1] * distribution.n_tasks
+        if distribution.dynamic:
+            self.handout = deque(range(distribution.n_tasks))
+            self.own = None
+        else:
+            self.own = [deque(t for t in range(distribution.n_tasks) if distribution.task_process[t] == p)
+                        for p in range(n)]
+            self.task_owner = [int(p) for p in distribution.task_process]
+        self.held = [deque() for _ in range(n)]
+        self.remaining = [deque() for _ in range(n)]  # pixels left of the current task
+        # Which queue each process waits in; background processes are n .. n+B-1.
+        if machine.scheduler == "static":
+            self.queue_of = {p: int(machine.cpu_of(n)[p]) for p in range(n)}
+            self.queue_of.update({n + b: (n + b) % machine.n_cpus for b in range(n_background)})
+        else:
+            self.queue_of = {p: 0 for p in range(n + n_background)}
+        self.queues = {}
+        for p in [n + b for b in range(n_background)] + list(range(n)):
+            self.queues.setdefault(self.queue_of[p], deque()).append(p)
+        rng = np.random.default_rng(machine.background_seed)
+        offsets = rng.integers(0, BACKGROUND_OFFSET_RANGE // line_size, n_background, dtype=np.int64)
+        self.stream_line = [(BACKGROUND_BASE + BACKGROUND_SPACING * b) // line_size + int(offsets[b])
+                            for b in range(n_background)]
+        self.footprint_lines = -(-machine.background_footprint // line_size)
+        self.last_cpu = [None] * n
+
+    def result(self):
+        """A fresh result dict: cycle lists, first CPU and migrations per process."""
+        result = {key: [0.0] * self.n for key in ("compute", "memory", "dispatch", "finish")}
+        result["cpu"] = [-1] * self.n
+        result["migrations"] = [0] * self.n
+        return result
+
+    def next_task(self, p):
+        """(task or None, cycles waited); empty tasks are skipped."""
+        distribution = self.distribution
+        waited = 0.0
+        while True:
+            if not distribution.dynamic:
+                task = self.own[p].popleft() if self.own[p] else None
+            elif self.held[p]:
+                task = self.held[p].popleft()
+            elif self.handout:
+                task = self.handout.popleft()
+                waited += distribution.dispatch_cycles
+            else:
+                task = None
+            if task is None:
+                return None, waited
+            if distribution.dynamic:
+                while len(self.held[p]) < distribution.take_ahead and self.handout:
+                    ahead = self.handout.popleft()
+                    self.held[p].append(ahead)
+                    self.task_owner[ahead] = p
+            self.task_owner[task] = p
+            if self.tasks[task]:
+                return task, waited
+
+    def next_pixel(self, p, state, result):
+        """Process ``p``'s next pixel, a new task asked for first if its task is done (the wait added to the
+        CPU's clock and slice and to its dispatch cycles); None when it has no pixel left."""
+        if not self.remaining[p]:
+            task, waited = self.next_task(p)
+            state["clock"] += waited
+            state["used"] += waited
+            result["dispatch"][p] += waited
+            if task is None:
+                return None
+            self.remaining[p] = deque(self.tasks[task])
+        return self.remaining[p].popleft()
+
+    def after_pixel(self, p, state):
+        """After a pixel of ``p``: (whether its CPU stops running it for now, whether it has finished). A
+        dynamic task's end goes back to the event loop (the next hand-out in time order); so does a slice's."""
+        if not self.remaining[p]:
+            if self.distribution.dynamic:
+                return True, False
+            if not any(self.tasks[t] for t in self.own[p]):
+                return True, True
+        quantum = self.machine.quantum_cycles
+        return quantum > 0 and state["used"] >= quantum, False
+
+    @staticmethod
+    def lowest_clock_cpu(cpus):
+        """The active CPU whose clock is lowest (lowest index on ties), or None."""
+        candidates = [c for c in range(len(cpus)) if cpus[c]["active"]]
+        return min(candidates, key=lambda c: (cpus[c]["clock"], c)) if candidates else None
+
+    def decide(self, cpu, state):
+        """At a free CPU or a slice's end: the process the CPU runs now (switch cycles added to its clock), or
+        None when the CPU goes idle for good."""
+        machine = self.machine
+        queue = self.queues.setdefault(cpu if machine.scheduler == "static" else 0, deque())
+        p = state["running"]
+        if p is None or (machine.quantum_cycles > 0 and state["used"] >= machine.quantum_cycles):
+            if queue:
+                if p is not None:
+                    self.queues[self.queue_of[p]].append(p)
+                p = queue.popleft()
+            elif p is None:
+                state["active"] = False
+                return None
+            if state["last"] is not None and state["last"] != p:
+                state["clock"] += machine.switch_cycles
+            state["running"], state["last"], state["used"] = p, p, 0.0
+        if p >= self.n and not any(other < self.n for other in queue) and (
+                machine.scheduler == "static" or not queue):
+            state["active"] = False  # none of ours can reach this CPU again
+            return None
+        return p
+
+    def background_slice(self, p, state):
+        """The line numbers background process ``p``'s next slice reads; the slice takes its CPU's whole quantum."""
+        state["clock"] += self.machine.quantum_cycles
+        state["used"] = self.machine.quantum_cycles
+        b = p - self.n
+        first = self.stream_line[b]
+        self.stream_line[b] += self.footprint_lines
+        return range(first, first + self.footprint_lines)
+
+    def place(self, p, cpu, result):
+        """Record that process ``p`` runs on ``cpu`` (its first CPU, or a migration)."""
+        if self.last_cpu[p] is None:
+            result["cpu"][p] = cpu
+        elif self.last_cpu[p] != cpu:
+            result["migrations"][p] += 1
+        self.last_cpu[p] = cpu
+
+
 def reference_schedule(trace, distribution, hierarchy, placed, compute, machine):
     """Per-process results of one run, as plain Python.
 
@@ -81,41 +220,11 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     on, and a miss of ours adds the TLB's ``miss_cycles`` to its memory.
     """
     n = distribution.n_processes
-    n_background = machine.background_load
     levels = hierarchy.levels
     n_levels = len(levels)
     latency = [level.latency for level in levels] + [hierarchy.memory_latency]
     line_size = min(level.line_size for level in levels)
-    quantum = machine.quantum_cycles
-
-    tasks = [list(distribution.task(t)) for t in range(distribution.n_tasks)]
-    task_owner = [-1] * distribution.n_tasks
-    if distribution.dynamic:
-        handout = deque(range(distribution.n_tasks))
-        own = None
-    else:
-        own = [deque(t for t in range(distribution.n_tasks) if distribution.task_process[t] == p)
-               for p in range(n)]
-        task_owner = [int(p) for p in distribution.task_process]
-    held = [deque() for _ in range(n)]
-    remaining = [deque() for _ in range(n)]  # pixels left of the current task
-    has_task = [False] * n
-
-    # Which queue each process waits in; background processes are n .. n+B-1.
-    if machine.scheduler == "static":
-        queue_of = {p: machine.cpu_of(n)[p] for p in range(n)}
-        queue_of.update({n + b: (n + b) % machine.n_cpus for b in range(n_background)})
-    else:
-        queue_of = {p: 0 for p in range(n + n_background)}
-    queues = {}
-    for p in [n + b for b in range(n_background)] + list(range(n)):
-        queues.setdefault(queue_of[p], deque()).append(p)
-
-    rng = np.random.default_rng(machine.background_seed)
-    offsets = rng.integers(0, BACKGROUND_OFFSET_RANGE // line_size, n_background, dtype=np.int64)
-    stream_line = [(BACKGROUND_BASE + BACKGROUND_SPACING * b) // line_size + int(offsets[b])
-                   for b in range(n_background)]
-    footprint_lines = -(-machine.background_footprint // line_size)
+    system = ReferenceOS(distribution, machine, line_size)
 
     n_cpus = machine.n_cpus
     tlb = hierarchy.tlb
@@ -125,99 +234,33 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     tlb_accesses = [0] * n
     tlb_misses = [0] * n
 
-    def queue_index(cpu):
-        return cpu if machine.scheduler == "static" else 0
-
-    result = {key: [0.0] * n for key in ("compute", "memory", "dispatch", "finish")}
+    result = system.result()
     result["hits"] = [[0] * n_levels for _ in range(n)]
     result["misses"] = [[0] * n_levels for _ in range(n)]
     result["pixel_misses"] = [[0] * n_levels for _ in range(trace.width * trace.height)]
-    result["cpu"] = [-1] * n
-    result["migrations"] = [0] * n
-    last_cpu = [None] * n
     finished = [False] * n
 
-    def next_task(p):
-        """(task or None, cycles waited); empty tasks are skipped."""
-        waited = 0.0
-        while True:
-            if not distribution.dynamic:
-                task = own[p].popleft() if own[p] else None
-            elif held[p]:
-                task = held[p].popleft()
-            elif handout:
-                task = handout.popleft()
-                waited += distribution.dispatch_cycles
-            else:
-                task = None
-            if task is None:
-                return None, waited
-            if distribution.dynamic:
-                while len(held[p]) < distribution.take_ahead and handout:
-                    ahead = handout.popleft()
-                    held[p].append(ahead)
-                    task_owner[ahead] = p
-            task_owner[task] = p
-            if tasks[task]:
-                return task, waited
-
-    def pixels_left(p):
-        if remaining[p]:
-            return True
-        if distribution.dynamic:
-            return True  # unknown until the master answers
-        return any(tasks[t] for t in own[p])
-
     while not all(finished):
-        candidates = [c for c in range(n_cpus) if cpus[c]["active"]]
-        if not candidates:
+        cpu = system.lowest_clock_cpu(cpus)
+        if cpu is None:
             break
-        cpu = min(candidates, key=lambda c: (cpus[c]["clock"], c))
         state = cpus[cpu]
-        queue = queues.setdefault(queue_index(cpu), deque())
-        p = state["running"]
-        if p is None or (quantum > 0 and state["used"] >= quantum):
-            if queue:
-                if p is not None:
-                    queues[queue_of[p]].append(p)
-                p = queue.popleft()
-            elif p is None:
-                state["active"] = False
-                continue
-            if state["last"] is not None and state["last"] != p:
-                state["clock"] += machine.switch_cycles
-            state["running"], state["last"], state["used"] = p, p, 0.0
+        p = system.decide(cpu, state)
+        if p is None:
+            continue
         if p >= n:
-            ours_waiting = any(q < n for q in queue)
-            if not ours_waiting and (machine.scheduler == "static" or not queue):
-                state["active"] = False
-                continue
-            b = p - n
-            for line in range(stream_line[b], stream_line[b] + footprint_lines):
+            for line in system.background_slice(p, state):
                 state["caches"].access(line * line_size)
                 if tlb:
                     state["tlb"].lookup(line * line_size)
-            stream_line[b] += footprint_lines
-            state["clock"] += quantum
-            state["used"] = quantum
             continue
-        if last_cpu[p] is None:
-            result["cpu"][p] = cpu
-        elif last_cpu[p] != cpu:
-            result["migrations"][p] += 1
-        last_cpu[p] = cpu
+        system.place(p, cpu, result)
         done = False
         while True:
-            if not remaining[p]:
-                task, waited = next_task(p)
-                state["clock"] += waited
-                state["used"] += waited
-                result["dispatch"][p] += waited
-                if task is None:
-                    done = True
-                    break
-                remaining[p] = deque(tasks[task])
-            pixel = remaining[p].popleft()
+            pixel = system.next_pixel(p, state, result)
+            if pixel is None:
+                done = True
+                break
             memory = 0.0
             records = trace.records[trace.pixel_offsets[pixel]:trace.pixel_offsets[pixel + 1]]
             for address, write in zip(placed.addresses(records, line_size), _line_writes(records, placed, line_size)):
@@ -238,20 +281,15 @@ def reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
             result["memory"][p] += memory
             state["clock"] += compute[pixel] + memory
             state["used"] += compute[pixel] + memory
-            if not remaining[p]:
-                if distribution.dynamic:
-                    break  # ask the master when this CPU moves next
-                if not pixels_left(p):
-                    done = True
-                    break
-            if quantum > 0 and state["used"] >= quantum:
+            stop, done = system.after_pixel(p, state)
+            if stop:
                 break
         if done:
             finished[p] = True
             result["finish"][p] = state["clock"]
             state["running"] = None
     result["user"] = [result["compute"][p] + result["memory"][p] + result["dispatch"][p] for p in range(n)]
-    result["task_owner"] = task_owner
+    result["task_owner"] = system.task_owner
     if tlb:
         result["tlb_accesses"], result["tlb_misses"] = tlb_accesses, tlb_misses
     result["real"] = max(result["finish"])

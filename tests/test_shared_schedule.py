@@ -12,8 +12,9 @@ from coherence.mappings import get_mapping
 from coherence.shared_run import pixel_pieces, simulate_shared_run
 from coherence.shared_schedule import cpu_threads
 from coherence.simulation import Machine
+from coherence.thread_streams import PRIVATE_KINDS
 from coherence.studies import place_layout
-from test_thread_streams import synthetic_trace
+from test_thread_streams import SCENE_KINDS, synthetic_trace
 from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
 
 COST = get_cost_model("modern")
@@ -220,7 +221,7 @@ def test_pixel_pieces_match_a_byte_by_byte_split(layout, line_size):
     """Each pixel's pieces (first byte, write flag, bytes, kind) are its records split byte by byte at the
     lines, private kinds at their layout address and flagged private. Mutation: ``np.full(..., -1, ...)`` ->
     ``np.full(..., 0, ...)`` in pixel_pieces (private kinds at the first process's copy) (checked)."""
-    from coherence.thread_streams import PRIVATE_KINDS, private_span
+    from coherence.thread_streams import private_span
     from test_thread_streams import slow_pixel
 
     trace = synthetic_trace(5, 4, seed=3)
@@ -235,3 +236,132 @@ def test_pixel_pieces_match_a_byte_by_byte_split(layout, line_size):
         assert got == expected
         assert pieces.private[span].tolist() == [kind in PRIVATE_KINDS for kind in pieces.kinds[span].tolist()]
     assert pieces.piece_offsets[-1] == pieces.addresses.size
+
+
+def random_shared_machine(rng):
+    """1-3 cores of 1 or 2 threads, two small levels (each sharing scope at least the one above), any policy."""
+    from cachesim.sharing import SHARING
+
+    policy = str(rng.choice(["lru", "fifo", "random"]))
+    l1_ways = int(rng.choice([1, 2]))
+    hierarchy = Hierarchy((CacheLevel("L1", 32 * 4 * l1_ways, 32, l1_ways, policy, latency=1),
+                           CacheLevel("L2", 2048, 32, 4, policy, latency=int(rng.integers(3, 9)))),
+                          memory_latency=int(rng.integers(20, 60)), name="random")
+    scopes = sorted(rng.choice(SHARING, 2), key=SHARING.index)
+    return SharedHierarchy(hierarchy, n_cores=int(rng.integers(1, 4)), smt=int(rng.choice([1, 2])),
+                           shared_by=tuple(str(scope) for scope in scopes))
+
+
+def whole_cycle_compute(trace, placed, rng):
+    """Compute cycles per pixel, a whole multiple of its accesses: every per-access share is a whole number."""
+    from reference_shared_schedule import pixel_accesses
+
+    counts = [len(pixel_accesses(trace, placed, pixel, 0, 32)) for pixel in range(trace.width * trace.height)]
+    return np.array([count * int(rng.integers(0, 12)) if count else int(rng.integers(0, 40)) for count in counts],
+                    dtype=np.float64)
+
+
+def run_both(seed, q, background=0):
+    """A seeded random tiny run through simulate_shared_run and the reference: (run, reference, pieces, machine)."""
+    from reference_shared_schedule import reference_shared_schedule
+
+    rng = np.random.default_rng(seed)
+    trace = synthetic_trace(int(rng.integers(2, 6)), int(rng.integers(2, 5)), seed=seed, reads=int(rng.integers(1, 6)))
+    placed = place_layout(get_layout("alpha1997"), trace)
+    machine = random_shared_machine(rng)
+    n_processes = int(rng.integers(1, 2 * machine.n_threads + 2))
+    distribution = get_mapping(str(rng.choice(["S", "P", "R", "B", "DB"]))).build(trace.width, trace.height,
+                                                                                   n_processes)
+    quantum = float(rng.choice([150, 600] if background else [0, 150, 600]))
+    os_machine = Machine(n_cpus=machine.n_threads, quantum_cycles=quantum,
+                         scheduler=str(rng.choice(["shared-queue", "static"])),
+                         switch_cycles=float(rng.integers(0, 5)), background_load=background,
+                         background_footprint=96, background_seed=seed)
+    compute = whole_cycle_compute(trace, placed, rng)
+    run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=q,
+                              compute=compute, log=not background)
+    reference = reference_shared_schedule(trace, distribution, machine, placed, compute, os_machine, q)
+    return run, reference, pixel_pieces(trace, placed, 32), machine
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("q", [1, 9, 80, 1e9])
+def test_event_loop_equals_the_plain_python_reference(seed, q):
+    """On seeded random tiny machines (1-3 cores, SMT on or off, shared or private levels, up to twice as many
+    processes as threads, static or dynamic mappings, either scheduler, slices, switches) every process's
+    compute, memory, dispatch and finish cycles, first CPU, migrations and tasks, every access in the order the
+    machine served it (so the turn order), each process's hits and misses per level and every instance's counts
+    equal tests/reference_shared_schedule.py. Mutation: ``clock + advance - turn_start < interleave_cycles`` ->
+    ``clock - turn_start < interleave_cycles`` in _event_loop's access loop (a turn runs its pixel to the end)."""
+    run, reference, pieces, machine = run_both(seed, q)
+    processes = run.run.processes
+    for column in ("compute", "memory", "dispatch", "finish"):
+        np.testing.assert_array_equal(processes[f"{column}_cycles"], reference[column], err_msg=column)
+    np.testing.assert_array_equal(processes["cpu"], reference["cpu"])
+    np.testing.assert_array_equal(processes["migrations"], reference["migrations"])
+    np.testing.assert_array_equal(run.run.task_owner, reference["task_owner"])
+    addresses, threads, piece = run.log
+    logged = [(int(a), int(t), int(k)) for a, t, k in zip(addresses, threads, piece)]
+    expected = [(a, t, int(pieces.piece_offsets[pixel]) + index) for a, t, pixel, index in reference["log"]]
+    assert logged == expected
+    np.testing.assert_array_equal(run.run.miss_counts.accesses, reference["accesses"])
+    np.testing.assert_array_equal(run.shared.counts[..., :11], reference["reference"].counts)
+    np.testing.assert_array_equal(run.shared.served, reference["reference"].served)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_background_slices_equal_the_reference(seed):
+    """With one background process (whole slices of reads through the thread's instances) the cycles and every
+    instance's counts equal the reference. Mutation: ``clock += quantum`` -> ``clock += quantum / 2`` in the
+    background branch of _event_loop."""
+    run, reference, _, _ = run_both(100 + seed, 40, background=1)
+    processes = run.run.processes
+    for column in ("compute", "memory", "dispatch", "finish"):
+        np.testing.assert_array_equal(processes[f"{column}_cycles"], reference[column], err_msg=column)
+    np.testing.assert_array_equal(run.shared.counts[..., :11], reference["reference"].counts)
+
+
+def scene_only_trace(width, height, seed):
+    """Each pixel reads random scene records and writes and reads its private records: no line is written by
+    two processes."""
+    rng = np.random.default_rng(seed)
+    records, lengths = [], []
+    for pixel in range(width * height):
+        reads = int(rng.integers(1, 8))
+        kinds = list(rng.choice(SCENE_KINDS, reads)) + list(PRIVATE_KINDS) * 2
+        indices = list(rng.integers(0, 60, reads)) + [int(rng.integers(0, 2))] * (2 * len(PRIVATE_KINDS))
+        flags = [False] * reads + [True] * len(PRIVATE_KINDS) + [False] * len(PRIVATE_KINDS)
+        records.append(pack(np.array(kinds), np.array(indices), np.array(flags)))
+        lengths.append(len(kinds))
+    offsets = np.concatenate(([0], np.cumsum(lengths))).astype(np.int64)
+    return AccessTrace(offsets, np.concatenate(records), np.zeros((width * height, len(COUNTER_NAMES)), np.int64),
+                       width, height, {})
+
+
+@pytest.mark.parametrize("seed, mapping, scheduler", [(0, "S", "static"), (1, "P", "shared-queue"),
+                                                      (2, "DB", "shared-queue"), (3, "R", "static")])
+def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(seed, mapping, scheduler):
+    """Every level per thread, one process per hardware thread, Q = 1e12 and no line written by two processes:
+    each process's cycles, hits and misses and the task owners equal coherence.simulation.simulate_run on
+    private caches (private copies lie a multiple of every level's set span apart, so they map to the same sets).
+    Mutation: ``level_served = 0`` -> ``level_served = 1`` in _event_loop's same-line read path."""
+    from coherence.simulation import simulate_run
+
+    rng = np.random.default_rng(seed)
+    trace = scene_only_trace(5, 4, seed)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    policy = ("lru", "fifo")[seed % 2]
+    hierarchy = Hierarchy((CacheLevel("L1", 256, 32, 2, policy, latency=1),
+                           CacheLevel("L2", 1024, 32, 4, policy, latency=5)), memory_latency=30, name="private")
+    machine = SharedHierarchy(hierarchy, n_cores=2, smt=2, shared_by=("thread", "thread"))
+    distribution = get_mapping(mapping).build(5, 4, 4)
+    os_machine = Machine(n_cpus=4, quantum_cycles=float(rng.choice([0, 300])), scheduler=scheduler)
+    compute = whole_cycle_compute(trace, placed, rng)
+    shared = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1e12,
+                                 compute=compute).run
+    private = simulate_run(trace, distribution, hierarchy, placed, COST, os_machine, compute=compute)
+    columns = ["cpu", "migrations", "tasks", "pixels", "compute_cycles", "memory_cycles", "dispatch_cycles",
+               "finish_cycles"] + [f"{level}_{what}" for level in ("L1", "L2") for what in ("hits", "misses")]
+    for column in columns:
+        np.testing.assert_array_equal(shared.processes[column], private.processes[column], err_msg=column)
+    np.testing.assert_array_equal(shared.task_owner, private.task_owner)
