@@ -348,13 +348,13 @@ def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(see
     from coherence.simulation import simulate_run
 
     rng = np.random.default_rng(seed)
-    trace = scene_only_trace(5, 4, seed)
+    trace = scene_only_trace(8, 6, seed)
     placed = place_layout(get_layout("alpha1997"), trace)
     policy = ("lru", "fifo")[seed % 2]
     hierarchy = Hierarchy((CacheLevel("L1", 256, 32, 2, policy, latency=1),
                            CacheLevel("L2", 1024, 32, 4, policy, latency=5)), memory_latency=30, name="private")
     machine = SharedHierarchy(hierarchy, n_cores=2, smt=2, shared_by=("thread", "thread"))
-    distribution = get_mapping(mapping).build(5, 4, 4)
+    distribution = get_mapping(mapping).build(8, 6, 4)
     os_machine = Machine(n_cpus=4, quantum_cycles=float(rng.choice([0, 300])), scheduler=scheduler)
     compute = whole_cycle_compute(trace, placed, rng)
     shared = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1e12,
