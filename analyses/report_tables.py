@@ -155,6 +155,24 @@ def miss_map_dtype(misses) -> np.dtype:
         else np.dtype(np.int64)
 
 
+def thread_view_note(inputs) -> str | None:
+    """Under a platform, what the miss map, miss-ratio curves and texture section were computed on: the
+    platform's thread view (``inputs.hierarchy``), named with its levels' sizes; None without a platform."""
+    if inputs.experiment.platform is None:
+        return None
+    sizes = ", ".join(f"{level.name} {_bytes_text(level.size)}" for level in inputs.hierarchy.levels)
+    return (f"thread view {inputs.hierarchy.name}: one hardware thread's private copy of each level, cut to its "
+            f"share ({sizes}), without coherence or prefetchers; the runs use the platform's shared levels")
+
+
+def _bytes_text(size: int) -> str:
+    """``32768`` -> ``32 KB``; sizes that are not whole kilobytes in bytes."""
+    for unit, factor in (("MB", 1 << 20), ("KB", 1 << 10)):
+        if size % factor == 0:
+            return f"{size // factor} {unit}"
+    return f"{size} B"
+
+
 def miss_map_summary(misses, dtype) -> dict:
     """What summary.json says about miss_map.npy."""
     return {"file": MISS_MAP_FILES[0], "figure": MISS_MAP_FILES[1], "mapping": misses.mapping,
@@ -259,6 +277,7 @@ def summary(inputs: ReportInputs) -> dict:
         headline[str(n)] = {name: {column: at_n.loc[name, column] for column in DECOMPOSITION_COLUMNS}
                             for name in names}
     shared = shared_levels_summary(runs, inputs.hierarchy.level_names, sorted({verdict_n, inputs.top_n}), names)
+    view = thread_view_note(inputs)
     return _clean({
         "report": "coherence report",
         "parameters": inputs.parameters,
@@ -270,7 +289,10 @@ def summary(inputs: ReportInputs) -> dict:
         "verdict": {"n_processes": verdict_n, "decided_by": verdict.decided_by, "headline": verdict.headline,
                     "sentences": verdict.sentences, "text": verdict.text,
                     "numbers": verdict.numbers.to_dict(orient="records")},
-        "miss_map": miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
+        "miss_map": {**miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
+                     **({} if view is None else {"caches": view})},
+        **({} if view is None else {"thread_view": {"sections": ["miss_map", "miss_curves", "texture"],
+                                                    "what": view, "hierarchy": inputs.hierarchy.to_dict()}}),
         **({} if inputs.ray_orders is None else {"ray_orders": inputs.ray_orders.to_dict(orient="records")}),
         "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
         **shared,
@@ -280,18 +302,20 @@ def summary(inputs: ReportInputs) -> dict:
 def shared_levels_summary(runs, level_names, counts, names) -> dict:
     """Under a platform, ``{"shared_levels": {n: {mapping: {level: counts}}}}``: each level's misses (the
     processes', summed) and the machine's coherence invalidations, coherence misses and false-sharing misses
-    at each process count of ``counts``; empty for runs on private caches (no such columns)."""
-    from coherence.shared_run import SHARED_RUN_COLUMNS
+    at each process count of ``counts``, and with prefetchers the prefetches issued, useful and useless; empty
+    for runs on private caches (no such columns)."""
+    from coherence.shared_run import PREFETCH_RUN_COLUMNS, SHARED_RUN_COLUMNS
 
     if f"{level_names[0]}_{SHARED_RUN_COLUMNS[0][0]}" not in runs:
         return {}
+    columns = [column for column, _ in SHARED_RUN_COLUMNS + PREFETCH_RUN_COLUMNS
+               if f"{level_names[0]}_{column}" in runs]
     table = {}
     for n in counts:
         at_n = runs[runs["n_processes"] == n].set_index("mapping")
         table[str(n)] = {name: {level: {"accesses": at_n.loc[name, f"{level}_accesses"],
                                         "hit_rate": at_n.loc[name, f"{level}_hit_rate"],
-                                        **{column: at_n.loc[name, f"{level}_{column}"]
-                                           for column, _ in SHARED_RUN_COLUMNS}}
+                                        **{column: at_n.loc[name, f"{level}_{column}"] for column in columns}}
                                 for level in level_names}
                          for name in names}
     return {"shared_levels": table}

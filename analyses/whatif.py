@@ -42,7 +42,11 @@ Under a platform (base ``platform``), its variants
 Under a platform every point's runs are simulated on the variant's shared
 levels (:func:`shared_levels`), the point's level changes applied to whole
 levels, interleaved every ``interleave_cycles`` of the base; each row then
-also gives, per level, the machine's coherence and false-sharing misses.
+also gives, per level, the machine's coherence and false-sharing misses,
+and the prefetches issued, useful and useless (0 at points without
+prefetchers). The texture columns take the variant's thread view
+(:meth:`coherence.platforms.Platform.thread_view`: each level cut to one
+thread's share, no prefetchers), not the shared levels.
 
 Each row of the result says, for one point, mapping and process count, how
 much efficiency was lost to imbalance and to coherence and which was larger
@@ -88,6 +92,10 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 #: :meth:`WhatIf.of` may set.
 BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
                "layout", "cost", "n_cpus", "background", "memory_budget", "platform", "frame_buffer_bytes")
+
+#: Ends of the per-level prefetch columns of a row under a platform with prefetchers
+#: (:data:`coherence.shared_run.PREFETCH_RUN_COLUMNS`); 0 at points without them.
+PREFETCH_SUFFIXES = ("_prefetches_issued", "_prefetches_useful", "_prefetches_useless")
 
 #: Grid parameters a platform sets, so a study under one may not vary them.
 PLATFORM_PARAMETERS = ("hierarchy", "cost", "n_cpus")
@@ -253,9 +261,6 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
     platform = platform_variant(study, point)
     if platform is not None:  # a grid may not vary the hierarchy under a platform
         hierarchy = platform.thread_view()
-        if hierarchy.prefetches:
-            raise InputError(f"what-if point {point}: prefetch on: the schedule simulation does not model "
-                             "prefetchers yet (cachesim.multicore.simulate_threads does); vary prefetch there")
     elif "hierarchy" in point:
         hierarchy = get_hierarchy(point["hierarchy"])
     else:
@@ -366,7 +371,8 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
                        machine=machine, scene=scene, progress=False, execution=Execution(n_jobs=1))
     runs = result.runs[result.runs["n_processes"] == n_processes]
     level_columns = [c for c in runs.columns
-                     if c.endswith(("_hit_rate", "_misses_per_ray", "_coherence_misses", "_false_sharing_misses"))]
+                     if c.endswith(("_hit_rate", "_misses_per_ray", "_coherence_misses", "_false_sharing_misses",
+                                    *PREFETCH_SUFFIXES))]
     table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *level_columns]].copy()
     if trace.metadata.get("textures"):
         texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)
@@ -431,7 +437,11 @@ def run_whatif(study: WhatIf, *, n_jobs: int | None = None, **choices) -> pd.Dat
                 futures = [pool.submit(evaluate_point, *task) for task in tasks]
                 frames = [future.result() for future in tqdm(futures, desc=study.name, disable=not progress,
                                                              leave=False, file=sys.stderr)]
-    return pd.concat(frames, ignore_index=True)
+    table = pd.concat(frames, ignore_index=True)
+    prefetched = [column for column in table.columns if column.endswith(PREFETCH_SUFFIXES)]
+    if prefetched:  # a point without prefetchers issued none
+        table[prefetched] = table[prefetched].fillna(0).astype(np.int64)
+    return table
 
 
 def exact_lru_curves(study: WhatIf, *, progress: bool = False, **choices) -> pd.DataFrame | None:

@@ -26,12 +26,15 @@ these additions for sharing:
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import _back_invalidate, _drop_ghost, _filter_slot, _invalidate_others, _set_of
+from cachesim.multicore import _back_invalidate, _byte_range, _drop_ghost, _filter_slot, _invalidate_others, _set_of
 from cachesim.multicore_state import COHERENCE_MISSES, FALSE_SHARING_MISSES
-from cachesim.prefetch import ISSUED, NO_PREFETCH, USEFUL, _candidates
+from cachesim.prefetch import (ISSUED, N_PREFETCH_COUNTERS, NO_PREFETCH, USEFUL, PrefetchArrays, PrefetchGeometry,
+                              _candidates)
 from cachesim.prefetch_config import MAX_DEGREE
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
                            _find, _insert)
@@ -74,60 +77,145 @@ def simulate_threads_prefetching(stream, geometry, machine, state, clock, prefet
     return clock
 
 
+class ThreadPrefetchers(NamedTuple):
+    """The prefetchers of a machine of shared levels and the work buffers of :func:`prefetching_access`.
+
+    Attributes
+    ----------
+    geometry : PrefetchGeometry
+        With the stride tables laid out per instance.
+    arrays : PrefetchArrays
+        ``marks`` (W,) over the ways of all instances, ``counts`` (L, G, N_PREFETCH_COUNTERS); updated in place.
+        With no prefetcher on any level (:func:`no_thread_prefetchers`), ``marks`` is empty.
+    lines, fetch_lines : ndarray of int64, shape (L,)
+        A demand access's and a prefetch's line at each level.
+    candidates : ndarray of int64, shape (MAX_DEGREE,)
+        One trigger's candidate lines.
+    """
+
+    geometry: object
+    arrays: object
+    lines: np.ndarray
+    fetch_lines: np.ndarray
+    candidates: np.ndarray
+
+
+def thread_prefetchers(state) -> ThreadPrefetchers:
+    """The bundle :func:`prefetching_access` takes for a :class:`~cachesim.multicore_state.SharedState`:
+    its prefetchers' geometry and arrays (shared with the state, so updated in place), or, when its
+    hierarchy has none, :func:`no_thread_prefetchers`."""
+    n_levels = state.geometry.rel_shift.shape[0]
+    if state.prefetch is None:
+        return no_thread_prefetchers(n_levels)
+    return ThreadPrefetchers(state.prefetch_geometry, state.prefetch, np.empty(n_levels, dtype=np.int64),
+                             np.empty(n_levels, dtype=np.int64), np.empty(MAX_DEGREE, dtype=np.int64))
+
+
+def no_thread_prefetchers(n_levels: int) -> ThreadPrefetchers:
+    """A bundle of the same types as :func:`thread_prefetchers`' for a machine without prefetchers
+    (every level NO_PREFETCH, empty ``marks``): a caller tests ``arrays.marks.shape[0] > 0``."""
+    zeros = np.zeros(n_levels, dtype=np.int64)
+    geometry = PrefetchGeometry(zeros, zeros, zeros, zeros, zeros, zeros)
+    arrays = PrefetchArrays(np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int64),
+                            np.zeros((n_levels, 1, N_PREFETCH_COUNTERS), dtype=np.int64))
+    return ThreadPrefetchers(geometry, arrays, np.empty(n_levels, dtype=np.int64), np.empty(n_levels, dtype=np.int64),
+                             np.empty(MAX_DEGREE, dtype=np.int64))
+
+
 @njit(cache=True, **NO_REFCOUNTS)
 def _walk(stream, geometry, machine, state, clock, prefetch_geometry, prefetch, work):
     """The loop of :func:`simulate_threads_prefetching`; ``work`` holds its buffers: the demand
     access's and a prefetch's line per level, and one trigger's candidates."""
     lines, fetch_lines, candidates = work
+    prefetchers = ThreadPrefetchers(prefetch_geometry, prefetch, lines, fetch_lines, candidates)
     addresses, writes, sizes, kinds = stream.addresses, stream.writes, stream.sizes, stream.kinds
     has_writes = writes.shape[0] > 0
     has_sizes = sizes.shape[0] > 0
     has_kinds = kinds.shape[0] > 0
-    n_levels = geometry.rel_shift.shape[0]
-    shift = geometry.line_shift
-    line_bytes = np.int64(1) << shift
-    marks = prefetch.marks
-    kind_of = prefetch_geometry.kind
     for i in range(addresses.shape[0]):
         clock += 1
-        address = np.int64(addresses[i])
-        thread = np.int64(stream.threads[i])
         is_write = has_writes and writes[i]
         kind = np.int64(kinds[i]) if has_kinds else np.int64(0)
-        line0 = address >> shift
-        if has_sizes:
-            first = address
-            end = first + sizes[i]
-        else:
-            first = line0 << shift
-            end = first + line_bytes
-        access = (thread, kind, first, end, np.int64(is_write))
-        served = _walk_down(line0, 0, access, True, geometry, machine, state, clock, lines)
-        state.served[thread, served] += 1
-        first_use = False
-        if served < n_levels and kind_of[served] != NO_PREFETCH:
-            line = lines[served]
-            instance = machine.instance_of[served, thread]
-            base = _set_of(line, served, instance, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
-                           machine.level_ways)
-            slot = _find(state.tags, base, geometry.ways[served], line)
-            if marks[slot] == line:
-                marks[slot] = -1
-                prefetch.counts[served, instance, USEFUL] += 1
-                first_use = True
-        _fill_up(served, 0, access, geometry, machine, state, clock, lines, marks, kind_of)
-        for level in range(min(served + 1, n_levels)):
-            if kind_of[level] == NO_PREFETCH:
-                continue
-            rows = prefetch.table[machine.instance_of[level, thread] * prefetch_geometry.table_size[level]:]
-            n_candidates = _candidates(level, shift + geometry.rel_shift[level], address, kind, level < served,
-                                       first_use and level == served, prefetch_geometry, rows, candidates)
-            for k in range(n_candidates):
-                clock = _issue(candidates[k], level, access, geometry, machine, state, clock, prefetch, fetch_lines,
-                               kind_of)
-        if is_write:
-            _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+        size = np.int64(sizes[i]) if has_sizes else np.int64(0)
+        _, clock = prefetching_access(np.int64(stream.threads[i]), addresses[i], is_write, size, kind, geometry,
+                                      machine, state, clock, prefetchers)
     return clock
+
+
+@njit(cache=True, inline="always")
+def prefetching_access(thread, address, is_write, size, kind, geometry, machine, state, clock, prefetchers):
+    """One access of one hardware thread, with coherence and the prefetchers of the levels it reaches.
+
+    :func:`cachesim.multicore.shared_access` with this module's rules: the
+    demand walk and fills, then each level with a prefetcher that the access
+    reached trains and issues its candidates (each issued prefetch advances
+    the clock by one), then, for a write, the invalidation of the line in the
+    instances that do not serve ``thread``. ``ACCESSES`` and ``WRITES`` are
+    not counted here (a caller adds them once at the end).
+
+    Parameters
+    ----------
+    thread : int
+        Hardware thread making the access.
+    address : uint64
+        First byte of the access, below 2**63.
+    is_write : bool
+    size : int
+        Bytes the access touches from ``address``; 0: its whole first-level line.
+    kind : int
+        Record kind, also the stride tables' PC-like id.
+    geometry : CacheGeometry
+    machine : MachineGeometry
+    state : SharedArrays
+        Updated in place, ``served[thread]`` included.
+    clock : int
+        The access clock of this access.
+    prefetchers : ThreadPrefetchers
+        Updated in place.
+
+    Returns
+    -------
+    (int, int)
+        The level that served the access (the number of levels: memory) and
+        the clock after its prefetches.
+    """
+    lines = prefetchers.lines
+    prefetch_geometry = prefetchers.geometry
+    prefetch = prefetchers.arrays
+    n_levels = geometry.rel_shift.shape[0]
+    shift = geometry.line_shift
+    marks = prefetch.marks
+    kind_of = prefetch_geometry.kind
+    signed = np.int64(address)
+    line0 = signed >> shift
+    first, end = _byte_range(signed, size, line0, shift)
+    access = (thread, kind, first, end, np.int64(is_write))
+    served = _walk_down(line0, 0, access, True, geometry, machine, state, clock, lines)
+    state.served[thread, served] += 1
+    first_use = False
+    if served < n_levels and kind_of[served] != NO_PREFETCH:
+        line = lines[served]
+        instance = machine.instance_of[served, thread]
+        base = _set_of(line, served, instance, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
+                       machine.level_ways)
+        slot = _find(state.tags, base, geometry.ways[served], line)
+        if marks[slot] == line:
+            marks[slot] = -1
+            prefetch.counts[served, instance, USEFUL] += 1
+            first_use = True
+    _fill_up(served, 0, access, geometry, machine, state, clock, lines, marks, kind_of)
+    for level in range(min(served + 1, n_levels)):
+        if kind_of[level] == NO_PREFETCH:
+            continue
+        rows = prefetch.table[machine.instance_of[level, thread] * prefetch_geometry.table_size[level]:]
+        n_candidates = _candidates(level, shift + geometry.rel_shift[level], signed, kind, level < served,
+                                   first_use and level == served, prefetch_geometry, rows, prefetchers.candidates)
+        for k in range(n_candidates):
+            clock = _issue(prefetchers.candidates[k], level, access, geometry, machine, state, clock, prefetch,
+                           prefetchers.fetch_lines, kind_of)
+    if is_write:
+        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+    return served, clock
 
 
 @njit(cache=True, inline="always")

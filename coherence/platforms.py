@@ -38,9 +38,10 @@ MAX_DEFAULT_PROCESSES = 32
 #: What runs under a platform say about their shared levels, in their parameters.
 SHARED_LEVELS_NOTE = ("shared levels interleaved: processes run on the hardware threads and every access goes "
                       "through the one state of the machine's caches (write-invalidate coherence on), the thread "
-                      "whose clock is lowest running interleave_cycles at a time; the report's miss map, "
-                      "miss-ratio curves and texture section take one thread's share of every level; see "
-                      "docs/platforms.md")
+                      "whose clock is lowest running interleave_cycles at a time, the levels' prefetchers, if any, "
+                      "trained by every access; the report's miss map, miss-ratio curves and texture section take "
+                      "the thread view instead: one thread's share of every level, private, no coherence, no "
+                      "prefetchers; see docs/platforms.md")
 
 #: The prefetchers of a platform variant with prefetching on (:meth:`Platform.variant`), for its first
 #: levels in order: next-line on a miss at L1 (Smith 1982), a stride table at L2 fetching two strides
@@ -106,7 +107,9 @@ class Platform:
 
         A level shared by ``k`` threads keeps its line size, ways and
         latency and gets ``size // k`` bytes, rounded down to whole sets
-        (at least one). Named ``<platform>-thread``.
+        (at least one). The levels' prefetchers are left out: the analyses
+        that take this view (miss maps, miss-ratio curves, texture misses)
+        simulate private caches without them. Named ``<platform>-thread``.
         """
         machine = self.hierarchy
         levels = []
@@ -114,7 +117,7 @@ class Platform:
             sharing = machine.threads_per_instance(index)
             set_bytes = level.line_size * level.ways
             size = max(level.size // sharing // set_bytes, 1) * set_bytes
-            levels.append(replace(level, size=size))
+            levels.append(replace(level, size=size, prefetcher=None))
         return replace(machine.hierarchy, levels=tuple(levels), name=f"{self.name}-thread")
 
     def variant(self, *, cores: int | None = None, smt=None, l3_size: int | None = None,

@@ -17,7 +17,9 @@ import numpy as np
 import pandas as pd
 
 from cachesim import multicore as MC
+from cachesim.multicore_prefetch import pending_by_instance, thread_prefetchers
 from cachesim.multicore_state import SharedResult, SharedState
+from cachesim.prefetch import ISSUED, USEFUL
 from cachesim.sharing import SharedHierarchy
 from coherence.cost import CostModel
 from coherence.distribution import Distribution
@@ -30,8 +32,8 @@ from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, 
 from coherence.thread_streams import record_places, split_records
 from rtcommon.validate import InputError, require_bool, require_number
 
-__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun", "pixel_pieces",
-           "shared_run_row", "simulate_shared_run"]
+__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "PREFETCH_RUN_COLUMNS", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun",
+           "pixel_pieces", "shared_run_row", "simulate_shared_run"]
 
 #: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
@@ -75,12 +77,25 @@ SHARED_RUN_COLUMNS = (("machine_misses", MC.MISSES), ("coherence_invalidations",
                       ("coherence_misses", MC.COHERENCE_MISSES), ("false_sharing_misses", MC.FALSE_SHARING_MISSES))
 
 
+#: Per level, a run's prefetch counts (:attr:`SharedResult.prefetch_counts` columns), as ``<level>_<name>``; a
+#: row has them only when the machine has prefetchers (0 at its levels without one).
+PREFETCH_RUN_COLUMNS = (("prefetches_issued", 0), ("prefetches_useful", 1), ("prefetches_useless", 2))
+
+
 def shared_run_row(shared: SharedResult) -> dict:
     """``<level>_machine_misses``, ``_coherence_invalidations``, ``_coherence_misses`` and
-    ``_false_sharing_misses`` of a run, summed over the level's instances and record kinds."""
+    ``_false_sharing_misses`` of a run, summed over the level's instances and record kinds; on a machine with
+    prefetchers also ``<level>_prefetches_issued``, ``_useful`` and ``_useless`` (:data:`PREFETCH_RUN_COLUMNS`),
+    summed over the level's instances."""
     totals = shared.level_counts()
-    return {f"{name}_{column}": int(totals[level, index])
-            for level, name in enumerate(shared.machine.hierarchy.level_names) for column, index in SHARED_RUN_COLUMNS}
+    names = shared.machine.hierarchy.level_names
+    row = {f"{name}_{column}": int(totals[level, index])
+           for level, name in enumerate(names) for column, index in SHARED_RUN_COLUMNS}
+    if shared.prefetch_counts is not None:
+        prefetched = shared.prefetch_counts.sum(axis=1)
+        row.update({f"{name}_{column}": int(prefetched[level, index])
+                    for level, name in enumerate(names) for column, index in PREFETCH_RUN_COLUMNS})
+    return row
 
 
 @dataclass(frozen=True)
@@ -173,8 +188,6 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     if not isinstance(hierarchy, SharedHierarchy):
         raise InputError(f"simulate_shared_run needs a SharedHierarchy, got {type(hierarchy).__name__}")
     levels = hierarchy.hierarchy.levels
-    if hierarchy.hierarchy.prefetches:
-        raise InputError(f"hierarchy {hierarchy.name!r} has prefetchers, which the schedule does not model")
     if machine.n_cpus != hierarchy.n_threads:
         raise InputError(f"Machine.n_cpus is {machine.n_cpus}; on shared hierarchy {hierarchy.name!r} it must be its "
                          f"{hierarchy.n_threads} hardware threads")
@@ -213,7 +226,7 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
                         np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
     state.clock = int(run_shared_schedule(
         pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift,
-                      cpu_threads(hierarchy.n_cores, hierarchy.smt)),
+                              cpu_threads(hierarchy.n_cores, hierarchy.smt), thread_prefetchers(state)),
         PixelCost(compute, latency),
         schedule_of(distribution),
         queues, background, out, float(q)))
@@ -222,12 +235,25 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     if not distribution.dynamic:
         task_owner[:] = distribution.task_process
     run = _run(trace, distribution, hierarchy, cost, machine, counters, out)
-    shared = SharedResult(hierarchy, state.counts.copy(), state.served.copy(), True, state)
+    shared = SharedResult(hierarchy, state.counts.copy(), state.served.copy(), True, state,
+                          *_prefetch_counts(state))
     logged = None
     if log:
         length = int(out.log_length[0])
         logged = (out.log_addresses[:length], out.log_threads[:length], out.log_pieces[:length])
     return SharedRun(run, shared, logged)
+
+
+def _prefetch_counts(state: SharedState) -> tuple:
+    """``(prefetch_counts, prefetch_pending)`` of a run's :class:`SharedResult` (None, None without prefetchers):
+    per level and instance the prefetches issued, useful and useless (issued - useful - pending), and those
+    still pending."""
+    if state.prefetch is None:
+        return None, None
+    counts = state.prefetch.counts
+    pending = pending_by_instance(state.prefetch, state.tags, state.geometry, state.machine_geometry)
+    useless = counts[..., ISSUED] - counts[..., USEFUL] - pending
+    return np.concatenate([counts, useless[..., None]], axis=-1), pending
 
 
 def _log_room(pieces: PixelPieces, machine: Machine, log: bool) -> int:

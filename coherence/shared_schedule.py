@@ -12,7 +12,11 @@ machine's one state (:func:`cachesim.multicore.shared_access`): the instances
 of each level that serve the thread, write-invalidate coherence between
 instances on, so processes running on different cores at the same time warm
 and evict each other's lines at the levels they share and take lines from
-each other's private levels.
+each other's private levels. On a machine whose levels have prefetchers
+every access goes through
+:func:`cachesim.multicore_prefetch.prefetching_access` instead, which also
+trains and issues the prefetchers of the levels it reaches (each issued
+prefetch advances the access clock by one, and costs no cycles).
 
 **Interleaving granularity** ``interleave_cycles`` (``Q``): the hardware
 thread whose clock is lowest (ties: the lowest index) takes a *turn*: it
@@ -53,6 +57,7 @@ import numpy as np
 from numba import njit
 
 from cachesim.multicore import HITS, shared_access
+from cachesim.multicore_prefetch import prefetching_access
 from coherence.recost import READ_HITS, WRITE_HITS
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
                                  MIGRATIONS, NO_PROCESS, _has_pixels, _lowest_clock_cpu, _next_task, _pop,
@@ -103,6 +108,8 @@ class SharedMachine(NamedTuple):
         log2 of the first level's line size.
     thread_of : ndarray of int64, shape (C,)
         The hardware thread that is the scheduler's CPU ``c``.
+    prefetchers : cachesim.multicore_prefetch.ThreadPrefetchers
+        The levels' prefetchers (updated in place); with empty ``arrays.marks``, none.
     """
 
     geometry: object
@@ -110,6 +117,7 @@ class SharedMachine(NamedTuple):
     state: object
     line_shift: int
     thread_of: np.ndarray
+    prefetchers: object
 
 
 class SharedOutputs(NamedTuple):
@@ -306,6 +314,8 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     first_instance = machine.instance_of[0]
     allocate0 = geometry.write_allocate[0]
     first_shift = np.uint64(geometry.line_shift)
+    prefetchers = shared.prefetchers
+    prefetching = prefetchers.arrays.marks.shape[0] > 0
 
     for process in queues.start_order:
         _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
@@ -347,7 +357,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 for i in range(footprint_lines):  # one turn: the slice's reads at once
                     address = np.uint64((start + i) << line_shift)
                     access_clock += 1
-                    shared_access(thread, address, False, 0, 0, geometry, machine, state, access_clock, scratch)
+                    if prefetching:
+                        _, access_clock = prefetching_access(thread, address, False, 0, 0, geometry, machine, state,
+                                                             access_clock, prefetchers)
+                    else:
+                        shared_access(thread, address, False, 0, 0, geometry, machine, state, access_clock, scratch)
                     if logging:
                         log_addresses[logged] = address
                         log_threads[logged] = thread
@@ -408,7 +422,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 kind = np.int64(piece_kinds[k])
                 line0 = np.int64(address >> first_shift)
                 access_clock += 1
-                if line0 == previous_line and not is_write:
+                if prefetching:  # every access trains the prefetchers: no shortcut
+                    level_served, access_clock = prefetching_access(thread, address, is_write, piece_sizes[k], kind,
+                                                                    geometry, machine, state, access_clock,
+                                                                    prefetchers)
+                elif line0 == previous_line and not is_write:
                     # a read hit that changes nothing but the counts (nothing else ran since)
                     counts[0, instance0, kind, HITS] += 1
                     served[thread, 0] += 1

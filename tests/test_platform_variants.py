@@ -73,7 +73,7 @@ def test_whatif_grid_varies_the_platform_and_the_pixel_size():
 @pytest.mark.parametrize("grid, base, message", [
     ({"cores": [4]}, {}, r"grid\['cores'\] varies a platform: give the base one"),
     ({"smt": ["maybe"]}, {"platform": "zen4-7950x"}, "smt must be on or off or threads per core, got 'maybe'"),
-    ({"prefetch": ["on"]}, {"platform": "zen4-7950x"}, "prefetch on: the schedule simulation does not model"),
+    ({"prefetch": ["sometimes"]}, {"platform": "zen4-7950x"}, "prefetch must be on or off, got 'sometimes'"),
     ({"frame_buffer_bytes": [5]}, {}, "frame-buffer pixel size must be one of 3, 4, 16"),
     ({"l3_size": ["1MB"]}, {"platform": "apple-m1"}, "apple-m1 has no L3"),
 ])
@@ -109,3 +109,79 @@ def test_whatif_cli_varies_a_platform(tmp_path, capsys):
     table = pd.read_csv(tmp_path / "out" / "whatif-grid.csv")
     assert sorted(set(zip(table["cores"], table["mapping"]))) == [(2, "P"), (2, "S"), (4, "P"), (4, "S")]
     assert "L1_false_sharing_misses" in set(table["metric"])
+
+
+def test_whatif_prefetch_on_and_off_run_on_the_shared_levels(tmp_path, capsys):
+    """``coherence whatif --platform apple-m1 --grid prefetch=on,off``: the "on" point's prefetch columns are
+    those of simulate_shared_run on the variant's shared levels (issued > 0, issued >= useful + useless), the
+    "off" point's are 0, and its hit rates are the base platform's run. Mutations: ``if prefetching:`` ->
+    ``if False:`` before the access loop's prefetching_access in coherence/shared_schedule.py (no prefetch
+    issued); drop ``table[prefetched] = ...fillna(0)`` in run_whatif (the off point's columns are empty)."""
+    import numpy as np
+    import pandas as pd
+
+    from analyses.cli import main
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.shared_run import simulate_shared_run
+    from coherence.simulation import Machine
+    from coherence.studies import place_layout
+    from tracer.scenes.catalog import load
+
+    argv = ["whatif", "--platform", "apple-m1", "--grid", "prefetch=on,off", "--scene", "tetra", "--size", "8",
+            "--mappings", "P", "--processes", "4", "--jobs", "1",
+            "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert main(argv) == 0, capsys.readouterr().err
+    long = pd.read_csv(tmp_path / "out" / "whatif-grid.csv")
+    table = long.pivot_table(index="prefetch", columns="metric", values="value", aggfunc="first")
+    from analyses.traces import cached_trace
+    from analyses.experiment import Experiment
+
+    experiment = Experiment(scene="tetra", size=8, platform="apple-m1")
+    scene, trace, _ = cached_trace("tetra", 8, cache_dir=tmp_path / "cache", workload=experiment.trace_workload(),
+                                   progress=False)
+    placed = place_layout(get_layout(experiment.layout), trace, scene)
+    m1 = get_platform("apple-m1")
+    for switch in ("on", "off"):
+        machine = m1.variant(prefetch=switch == "on").hierarchy
+        run = simulate_shared_run(trace, get_mapping("P").build(8, 8, 4), machine, placed, m1.cost,
+                                  Machine(n_cpus=4, background_load=0), interleave_cycles=experiment.interleave_cycles)
+        row = table.loc[switch]
+        for level, name in enumerate(("L1", "L2")):
+            issued, useful, useless = (row[f"{name}_prefetches_{what}"] for what in ("issued", "useful", "useless"))
+            if switch == "on":
+                assert (issued, useful, useless) == tuple(run.shared.prefetch_counts[level].sum(axis=0))
+                assert issued >= useful + useless and issued > 0
+            else:
+                assert issued == useful == useless == 0
+            processes = run.run.processes
+            assert row[f"{name}_hit_rate"] == pytest.approx(
+                processes[f"{name}_hits"].sum() / processes[f"{name}_accesses"].sum())
+    assert np.isfinite(table.loc["on", "L1_hit_rate"])
+
+
+def test_report_under_a_prefetching_variant_counts_prefetches_and_names_the_thread_view(tmp_path):
+    """A report on apple-m1 with prefetch on: summary.json's shared_levels carry each level's prefetches issued,
+    useful and useless (those of the run's row, issued > 0 at L1), and the miss map, curves and texture
+    section say they took the thread view (its levels recorded, without prefetchers) in summary.json and on
+    the page; the page's caches are the platform's. Mutations: drop ``+ PREFETCH_RUN_COLUMNS`` in
+    shared_levels_summary; ``view = None`` in report_tables.summary."""
+    from analyses.experiment import Experiment
+    from analyses.report import build_report
+
+    m1 = get_platform("apple-m1").variant(prefetch=True)
+    experiment = Experiment(scene="tetra", size=8, mappings=("S", "P"), n_processes=(1, 4), platform=m1,
+                            cache_dir=tmp_path / "cache", progress=False)
+    report = build_report(experiment)
+    row = report.runs[(report.runs["n_processes"] == 4) & (report.runs["mapping"] == "P")].iloc[0]
+    shared = report.summary["shared_levels"]["4"]["P"]
+    for name in ("L1", "L2"):
+        for what in ("issued", "useful", "useless"):
+            assert shared[name][f"prefetches_{what}"] == row[f"{name}_prefetches_{what}"]
+    assert shared["L1"]["prefetches_issued"] > 0
+    view = report.summary["thread_view"]
+    assert view["hierarchy"] == m1.thread_view().to_dict() and not m1.thread_view().prefetches
+    assert report.summary["miss_map"]["caches"] == view["what"]
+    assert view["what"].startswith(f"thread view {m1.name}-thread") and "L2 3 MB" in view["what"]
+    assert f"on its thread view {m1.name}-thread" in report.html
+    assert f"{m1.name} caches" in report.html

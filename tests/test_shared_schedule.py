@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from cachesim import CacheLevel, Hierarchy
+from cachesim import CacheLevel, Hierarchy, Prefetcher
 from cachesim.multicore import simulate_threads
 from cachesim.multicore_state import COHERENCE_INVALIDATIONS, COHERENCE_MISSES, FALSE_SHARING_MISSES
 from cachesim.sharing import SharedHierarchy
@@ -20,12 +20,15 @@ from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
 COST = get_cost_model("modern")
 
 
-def tiny_machine(smt, shared_by, seed):
-    """Two cores of ``smt`` threads with a small L1 and L2, so that lines are evicted and shared."""
+def tiny_machine(smt, shared_by, seed, prefetchers=(None, None)):
+    """Two cores of ``smt`` threads with a small L1 and L2, so that lines are evicted and shared; ``prefetchers``
+    of L1 and L2."""
     rng = np.random.default_rng(seed)
     l1_ways = int(rng.choice([1, 2, 4]))
-    hierarchy = Hierarchy((CacheLevel("L1", 32 * 4 * l1_ways, 32, l1_ways, "lru", latency=1),
-                           CacheLevel("L2", 4096, 32, 4, "lru", latency=6)), memory_latency=40, name="tiny")
+    hierarchy = Hierarchy((CacheLevel("L1", 32 * 4 * l1_ways, 32, l1_ways, "lru", latency=1,
+                                      prefetcher=prefetchers[0]),
+                           CacheLevel("L2", 4096, 32, 4, "lru", latency=6, prefetcher=prefetchers[1])),
+                          memory_latency=40, name="tiny")
     return SharedHierarchy(hierarchy, n_cores=2, smt=smt, shared_by=shared_by)
 
 
@@ -36,21 +39,32 @@ def replay_log(run, machine, pieces):
                             kinds=pieces.kinds[piece])
 
 
-@pytest.mark.parametrize("seed, mapping, n_processes, smt, shared_by, scheduler", [
-    (0, "P", 3, 1, ("thread", "machine"), "shared-queue"),
-    (1, "S", 4, 2, ("thread", "machine"), "static"),
-    (2, "DB", 5, 2, ("core", "machine"), "shared-queue"),
-    (3, "B", 2, 2, ("thread", "core"), "shared-queue"),
-    (4, "R", 6, 1, ("thread", "thread"), "static"),
+NEXT_LINE = Prefetcher("next-line", degree=2, distance=1, trigger="access")
+STRIDE = Prefetcher("stride", degree=2, distance=1, trigger="access", table_size=8)
+
+
+@pytest.mark.parametrize("seed, mapping, n_processes, smt, shared_by, scheduler, prefetchers", [
+    (0, "P", 3, 1, ("thread", "machine"), "shared-queue", (None, None)),
+    (1, "S", 4, 2, ("thread", "machine"), "static", (None, None)),
+    (2, "DB", 5, 2, ("core", "machine"), "shared-queue", (None, None)),
+    (3, "B", 2, 2, ("thread", "core"), "shared-queue", (None, None)),
+    (4, "R", 6, 1, ("thread", "thread"), "static", (None, None)),
+    (5, "P", 3, 2, ("thread", "machine"), "shared-queue", (NEXT_LINE, STRIDE)),
+    (6, "S", 4, 2, ("core", "machine"), "static", (Prefetcher("next-line", trigger="tagged"), None)),
+    (7, "DB", 5, 1, ("thread", "machine"), "shared-queue", (STRIDE, NEXT_LINE)),
+    (8, "R", 3, 2, ("thread", "core"), "static", (None, Prefetcher("next-line", degree=3, trigger="miss"))),
 ])
-def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processes, smt, shared_by, scheduler):
-    """At Q = 1 every count of every instance (and the accesses each thread had served by each level) equals
-    simulate_threads replaying the order the kernel served the accesses in; each process's per-level counts
-    sum to the machine's. Mutation: ``shared_access(thread, address, is_write, ...`` ->
-    ``shared_access(0, address, is_write, ...`` in _event_loop."""
+def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processes, smt, shared_by, scheduler,
+                                                       prefetchers):
+    """At Q = 1 every count of every instance (and the accesses each thread had served by each level, and the
+    prefetches issued, useful, useless and pending of each instance) equals simulate_threads replaying the order
+    the kernel served the accesses in, with the same prefetchers; each process's per-level counts sum to the
+    machine's. Mutations: ``shared_access(thread, address, is_write, ...`` -> ``shared_access(0, address,
+    is_write, ...`` in _event_loop; ``if prefetching:`` -> ``if False:`` before the access loop's
+    prefetching_access (the prefetch cases then fail)."""
     trace = synthetic_trace(7, 5, seed=seed)
     placed = place_layout(get_layout("alpha1997"), trace)
-    machine = tiny_machine(smt, shared_by, seed)
+    machine = tiny_machine(smt, shared_by, seed, prefetchers)
     distribution = get_mapping(mapping).build(trace.width, trace.height, n_processes)
     os_machine = Machine(n_cpus=machine.n_threads, quantum_cycles=400.0, scheduler=scheduler, switch_cycles=3.0)
     compute = np.random.default_rng(seed).uniform(0, 50, trace.width * trace.height)
@@ -61,6 +75,12 @@ def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processe
     reference = replay_log(run, machine, pieces)
     np.testing.assert_array_equal(run.shared.counts, reference.counts)
     np.testing.assert_array_equal(run.shared.served, reference.served)
+    if machine.hierarchy.prefetches:
+        np.testing.assert_array_equal(run.shared.prefetch_counts, reference.prefetch_counts)
+        np.testing.assert_array_equal(run.shared.prefetch_pending, reference.prefetch_pending)
+        assert run.shared.prefetch_counts[..., 0].sum() > 0
+    else:
+        assert run.shared.prefetch_counts is None
     processes = run.run.processes
     totals = run.shared.level_counts()
     for level, name in enumerate(machine.hierarchy.level_names):
