@@ -77,12 +77,19 @@ HELD_AT = 0.5
 #: The paths a sample's run can take (:class:`coherence.recost.RunStore`), counted per scene and design.
 RUN_PATHS = ("simulated", "re_costed", "reused")
 
+#: Bytes a scene's runs may share in line addresses worked out once per placement
+#: (:class:`coherence.studies.Execution` ``shared_lines_budget``): the study replays each placement in every
+#: run of many samples, so it holds them for every study scene at the verdict's size under every memory image
+#: (up to 9 bytes a line access); a larger trace is converted per run, with the same counts.
+LINES_BUDGET = 3 << 30
+
 #: What the summary's parameters say of re-costing.
 RE_COSTED = ("a run whose schedule does not depend on cycles (coherence.recost.fixed_schedule: a static mapping or "
              "one process, with ours and the other users' processes each on a CPU of its own) is re-costed from the "
              "miss counts of an earlier sample of the same trace that differed from it only in costs (latencies, "
-             "DTB miss cost, operation costs, time slice); a run identical to an earlier one is reused; every other "
-             "run is simulated")
+             "DTB miss cost, operation costs, time slice) or in the other users' count and footprint, which such a "
+             "run does not see; a run identical to an earlier one (the other users' footprint aside when there are "
+             "none) is reused; every other run is simulated")
 
 #: Columns of the samples table before the per-mapping losses and the factors' values.
 SAMPLE_COLUMNS = ("scene", "sample", "trajectory", "seed", "b_minus_s", "db_minus_s", "decided_by",
@@ -266,7 +273,7 @@ class _Replays:
             self.store = RunStore()
             self.key = key
             self.replay = (scene, trace, Execution(executor=self.executor, trace_folder=f"{info['path']}/trace",
-                                                   store=self.store))
+                                                   shared_lines_budget=LINES_BUDGET, store=self.store))
         return self.replay
 
     def paths(self) -> dict:

@@ -133,12 +133,22 @@ def tlb_lookup(addresses, geometry, tlb):
     next_fill = cursor[NEXT_FILL]
     last = cursor[LAST_USED]
     last_page = pages[last] if last >= 0 else np.int64(-1)
+    # The entry used before the last one: streams that alternate between two
+    # pages (tree nodes and primitives, say) find it here without a scan. A
+    # page is held by one entry at most, so a check of that entry is exact.
+    before = np.int64(0)
+    before_page = np.int64(-1)
     misses = np.int64(0)
     for i in range(addresses.shape[0]):
         page = np.int64(addresses[i] >> shift)
         clock += 1
         if page == last_page:
             stamps[last] = clock
+            continue
+        if page == before_page and pages[before] == page:
+            stamps[before] = clock
+            before, last = last, before
+            before_page, last_page = last_page, page
             continue
         # One pass without early exit over the entries: the host vectorises it.
         found = -1
@@ -161,6 +171,8 @@ def tlb_lookup(addresses, geometry, tlb):
                 next_fill = (found + 1) % entries
             pages[found] = page
         stamps[found] = clock
+        before = last if last >= 0 else np.int64(0)
+        before_page = last_page
         last = found
         last_page = page
     n = addresses.shape[0]

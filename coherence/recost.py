@@ -33,7 +33,8 @@ Everything else (DB with more than one process, more processes than CPUs,
 background load that time-slices with ours) is simulated again: a latency
 changes when slices end and which process takes which DB block. A change to
 the caches' geometry, the memory layout, the page placement, the
-background or the trace is never a cost change.
+background (for a run whose schedule depends on cycles) or the trace is
+never a cost change.
 
 :class:`RunStore` keeps the runs of one trace between studies
 (:class:`coherence.studies.Execution` ``store``) and counts which path each
@@ -49,7 +50,8 @@ import numpy as np
 from rtcommon.validate import InputError
 
 __all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts",
-           "fixed_schedule", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT"]
+           "fixed_schedule", "first_cpus", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT",
+           "BACKGROUND_FIELDS"]
 
 #: Columns of :attr:`MissCounts.accesses`: read hits and misses, write hits and misses.
 READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES = 0, 1, 2, 3
@@ -60,6 +62,9 @@ CYCLE_COLUMNS = ("tlb_cycles", "compute_cycles", "memory_cycles", "user_cycles",
 
 #: Placed layouts whose pixels' line addresses a :class:`RunStore` keeps (the most recently used ones).
 LINES_KEPT = 2
+
+#: Fields of :class:`coherence.simulation.Machine` that describe the other users' processes.
+BACKGROUND_FIELDS = ("background_load", "background_footprint", "background_seed")
 
 
 @dataclass(frozen=True)
@@ -98,8 +103,12 @@ def fixed_schedule(distribution, machine) -> bool:
     distribution : coherence.distribution.Distribution
     machine : coherence.simulation.Machine
     """
-    n = int(distribution.n_processes)
-    if distribution.dynamic and n > 1:
+    return _fixed(bool(distribution.dynamic), int(distribution.n_processes), machine)
+
+
+def _fixed(dynamic: bool, n: int, machine) -> bool:
+    """:func:`fixed_schedule` of ``n`` processes, dynamic or static, on ``machine``."""
+    if dynamic and n > 1:
         return False
     if machine.scheduler == "static":
         ours = machine.cpu_of(n)
@@ -165,13 +174,37 @@ def recost_run(run, hierarchy, cost):
     return replace(run, processes=frame, real_cycles=float(frame["finish_cycles"].max()))
 
 
+def first_cpus(n_processes: int, machine) -> np.ndarray:
+    """The CPU each of ``n_processes`` of ours starts on when the run has a fixed schedule, int64 (n,).
+
+    Static scheduler: the CPU it is pinned to. Shared queue: the other
+    users' processes enter the queue first and take CPUs ``0 .. B-1`` at
+    time 0, ours the next ``n`` (all fit the CPUs).
+    """
+    if machine.scheduler == "static":
+        return machine.cpu_of(n_processes)
+    return machine.background_load + np.arange(n_processes, dtype=np.int64)
+
+
+def _on_cpus(run, cpus):
+    """``run`` with the ``cpu`` column ``cpus`` (unchanged when None or equal)."""
+    if cpus is None or run.processes["cpu"].tolist() == list(cpus):
+        return run
+    return replace(run, processes=run.processes.assign(cpu=np.asarray(cpus, dtype=np.int64)))
+
+
 class RunStore:
     """Runs of one trace kept between studies, to re-cost or reuse instead of simulating.
 
     A run is stored under what decides its counts: the distribution's
     replay (see :func:`coherence.studies.study`), the cache hierarchy
     without its latencies and TLB penalty, the placed memory layout and the
-    machine without its time slice. A later run with the
+    machine without its time slice; without the other users' footprint and
+    seed when there are none; and without any of :data:`BACKGROUND_FIELDS`
+    when the run has a fixed schedule (:func:`fixed_schedule`): the other
+    users then run on CPUs of their own, and only the CPU each of our
+    processes starts on depends on how many there are
+    (:func:`first_cpus`, set on the run served). A later run with the
     same key is
 
     - *reused* as stored when its costs are identical too (latencies, TLB
@@ -210,29 +243,44 @@ class RunStore:
 
     @staticmethod
     def keys(replay_key, hierarchy, layout, machine, cost, compute) -> tuple:
-        """The key of what decides a run's counts, and the key of its costs."""
+        """The key of what decides a run's counts, the key of its costs, and its processes' first CPUs.
+
+        ``replay_key`` is :func:`coherence.studies.study`'s: its first two
+        items say whether the distribution is dynamic and how many processes
+        it has. The first CPUs are :func:`first_cpus` for a run with a fixed
+        schedule, None for any other.
+        """
         levels = tuple(replace(level, latency=0.0) for level in hierarchy.levels)
         tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=0.0)
+        dynamic, n = replay_key[0] == "dynamic", int(replay_key[1])
+        fixed = _fixed(dynamic, n, machine)
+        fields = {k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}
+        if fixed:  # the other users run on CPUs of their own
+            fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS}
+            fields["fixed_schedule"] = True
+        elif machine.background_load == 0:  # no other users: their footprint and seed do nothing
+            fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS[1:]}
         counts_key = (replay_key, repr(replace(hierarchy, levels=levels, memory_latency=0.0, tlb=tlb, name="")),
-                      repr(layout), repr({k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}))
+                      repr(layout), repr(fields))
         compute_digest = hashlib.blake2b(np.ascontiguousarray(compute, dtype=np.float64).tobytes(),
                                          digest_size=16).digest()
         cost_key = (repr(hierarchy), float(machine.quantum_cycles), float(cost.clock_hz), compute_digest)
-        return counts_key, cost_key
+        return counts_key, cost_key, (tuple(first_cpus(n, machine).tolist()) if fixed else None)
 
     def find(self, keys, hierarchy, cost):
         """The run for ``keys`` (:meth:`keys`) without simulating it, or None; counts the path taken."""
-        counts_key, cost_key = keys
+        counts_key, cost_key, cpus = keys
         if counts_key not in self._runs:
             return None
         stored_cost_key, run = self._runs[counts_key]
         if stored_cost_key == cost_key:
             self.reused += 1
-            return run
+            return _on_cpus(run, cpus)
         recosted = recost_run(run, hierarchy, cost)
         if recosted is not None:
             self.re_costed += 1
-        return recosted
+            return _on_cpus(recosted, cpus)
+        return None
 
     def add(self, keys, run) -> None:
         """Keep a simulated run under ``keys``."""
@@ -258,8 +306,8 @@ class RunStore:
         if key in self._lines:
             self._lines[key] = self._lines.pop(key)  # most recently used last
             return self._lines[key]
+        while len(self._lines) >= LINES_KEPT:  # let go first: at most LINES_KEPT are ever held
+            self._lines.pop(next(iter(self._lines)))
         lines = pixel_lines(trace, placed, line_size, budget_bytes)
         self._lines[key] = lines
-        while len(self._lines) > LINES_KEPT:
-            self._lines.pop(next(iter(self._lines)))
         return lines

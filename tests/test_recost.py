@@ -160,6 +160,35 @@ def test_study_recosts_qualifying_runs_and_resimulates_db_with_background():
         run(*setups[1], Execution(store=_bound_elsewhere()))
 
 
+def test_store_serves_fixed_runs_whatever_the_other_users():
+    """A run with a fixed schedule does not depend on the other users (they run on CPUs of their own) but for
+    the CPU ours starts on, and without other users their footprint does nothing: a study with five instead
+    of two background processes reuses the one-process runs (and simulates the 8-process ones), and two
+    studies without any that differ only in the footprint share every run; each equals a study without a
+    store, cpu column included. Fails if the store serves a run with its stored cpu column (``return run``
+    in RunStore.find; the one-process runs then start on CPU 2, not 5) (checked)."""
+    trace = written_trace(128, 64, seed=3)
+    machine = Machine(n_cpus=8, quantum_cycles=2000, background_load=2, background_footprint=2048)
+    store = RunStore()
+    hierarchy, cost = random_costs(np.random.default_rng(11), SMALL_TLB)
+
+    def run(machine, execution):
+        return study(trace, ["S", "DB"], [1, 8], hierarchy=hierarchy, cost=cost, machine=machine, progress=False,
+                     execution=execution)
+
+    run(machine, Execution(store=store))
+    expected = [(4, 0, 0), (6, 0, 2), (8, 0, 4), (8, 0, 8)]
+    for machine, paths in zip([replace(machine, background_load=5, background_footprint=4096),
+                               replace(machine, background_load=0, background_footprint=8192),
+                               replace(machine, background_load=0, background_footprint=1 << 20)], expected[1:]):
+        served = run(machine, Execution(store=store))
+        assert (store.simulated, store.re_costed, store.reused) == paths
+        fresh = run(machine, None)
+        pd.testing.assert_frame_equal(served.processes, fresh.processes)
+        pd.testing.assert_frame_equal(served.runs, fresh.runs)
+    assert served.processes["cpu"].iloc[0] == 0
+
+
 def _bound_elsewhere() -> RunStore:
     store = RunStore()
     store.bind(random_trace())

@@ -71,11 +71,19 @@ def page_streams(rng, entries, page_size):
     hot = rng.integers(0, entries // 2 * page_size + 1, n)
     yield "hot and cold", np.where(rng.random(n) < 0.85, hot, rng.integers(0, 1 << 30, n))
     yield "runs of one page", np.repeat(rng.integers(0, 3 * entries, n // 5), 5) * page_size
+    # mostly back to the page used before the last (tree nodes and primitives), now and then a new page that
+    # may evict it: the kernel's check of that entry must agree with a scan
+    pair = np.where(np.arange(n) % 2 == 0, rng.integers(0, 2, n), rng.integers(2, 4, n))
+    yield "ping-pong between pages", np.where(rng.random(n) < 0.9, pair, rng.integers(0, 2 * entries + 4, n)) \
+        * page_size + rng.integers(0, page_size, n)
 
 
 @pytest.mark.parametrize("policy", ["nlu", "lru", "fifo"])
 @pytest.mark.parametrize("entries, page_size", [(64, 8192), (1, 4096), (2, 512), (7, 65536), (48, 8192)])
 def test_tlb_matches_reference(policy, entries, page_size):
+    """Counts and held pages equal the reference's on every stream (the ping-pong one exercises the kernel's
+    check of the entry used before the last). Fails when that check drops ``pages[before] == page`` (checked).
+    """
     hierarchy = with_tlb(entries, policy, page_size)
     rng = np.random.default_rng(entries * 31 + page_size)
     for name, stream in page_streams(rng, entries, page_size):
