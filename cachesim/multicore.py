@@ -37,6 +37,12 @@ counts, per record kind:
   disjoint. Later writes by other threads find no copy to remove and change
   nothing.
 
+A write looks for copies to remove in every other instance unless a table
+of lately written lines (``SharedArrays.owners``) knows that only its own
+thread's instances may hold the line: none has been filled by another
+thread since this thread's last write removed the others. The counts are
+the same either way.
+
 Supported: every replacement policy (random draws use the global access
 clock and the level's seed, the same for every instance), non-inclusive and
 inclusive hierarchies, prefetchers (:mod:`cachesim.multicore_prefetch`, a
@@ -51,7 +57,8 @@ from numba import njit
 from cachesim import prefetch as P
 from cachesim.inputs import as_addresses, as_writes, small_integers
 from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
-                                      FALSE_SHARING_MISSES, N_KINDS, SharedResult, SharedState, ThreadStream)
+                                      FALSE_SHARING_MISSES, N_KINDS, SEVERAL_THREADS, SharedResult, SharedState,
+                                      ThreadStream)
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, RANDOM, WRITE_HITS, WRITE_MISSES,
                            WRITES, _find, _random_way)
 from cachesim.sharing import SharedHierarchy
@@ -169,6 +176,41 @@ def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state
                 state.ghost_filter[_filter_slot(line, machine.instance_base[level] + other,
                                                 state.ghost_filter)] += 1
                 state.counts[level, other, kind, COHERENCE_INVALIDATIONS] += 1
+
+
+@njit(cache=True, inline="always")
+def _owner_slot(line, owners):
+    """The entry of ``owners`` (rows a power of two) for first-level line ``line``: the top bits of a
+    Fibonacci hash of it."""
+    mixed = (np.uint64(line) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
+    return np.int64(mixed & np.uint64(owners.shape[0] - 1))
+
+
+@njit(cache=True, inline="always")
+def _note_fill(line0, thread, owners):
+    """A fill of first-level line ``line0`` by ``thread``: the line's owners entry, if it names
+    another thread, names several."""
+    if owners.shape[0] > 0:
+        entry = _owner_slot(line0, owners)
+        if owners[entry, 0] == line0 and owners[entry, 1] != thread:
+            owners[entry, 1] = SEVERAL_THREADS
+
+
+@njit(cache=True, inline="always")
+def _write_invalidate(line0, thread, kind, first, end, geometry, machine, state):
+    """:func:`_invalidate_others` for a write by ``thread``, skipped when the owners table says only
+    the thread's own instances may hold the line (there is then no copy to remove); after it, the
+    table says so."""
+    owners = state.owners
+    if owners.shape[0] == 0:
+        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+        return
+    entry = _owner_slot(line0, owners)
+    if owners[entry, 0] == line0 and owners[entry, 1] == thread:
+        return
+    _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+    owners[entry, 0] = line0
+    owners[entry, 1] = thread
 
 
 @njit(cache=True)
@@ -308,9 +350,10 @@ def shared_access(thread, address, is_write, size, kind, geometry, machine, stat
                     if end <= ghost_bytes[ghost, 0] or ghost_bytes[ghost, 1] <= first:
                         counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
         _fill(served, is_write, kind, geometry, machine, state, clock, scratch)
+        _note_fill(line0, thread, state.owners)
     state.served[thread, served] += 1
     if is_write:
-        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+        _write_invalidate(line0, thread, kind, first, end, geometry, machine, state)
     return served
 
 
@@ -385,7 +428,7 @@ def _replay(stream, geometry, machine, state, clock, scratch):
             if is_write:
                 counts[0, instance0, kind, WRITE_HITS] += 1
                 first, end = _byte_range(address, size, line0, geometry.line_shift)
-                _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+                _write_invalidate(line0, thread, kind, first, end, geometry, machine, state)
             continue
         served = shared_access(thread, address, is_write, size, kind, geometry, machine, state, clock, scratch)
         resident = served == 0 or not (is_write and not allocate0)

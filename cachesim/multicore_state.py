@@ -23,7 +23,7 @@ from cachesim.simulate import cache_geometry
 from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
-           "GHOST_FILTER_SIZE", "N_KINDS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult",
+           "GHOST_FILTER_SIZE", "N_KINDS", "OWNERS_SIZE", "SEVERAL_THREADS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult",
            "SharedState", "ThreadStream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
@@ -114,6 +114,18 @@ class SharedArrays(NamedTuple):
         kind and counter column (:data:`COHERENCE_MISSES` ...).
     served : ndarray of int64, shape (T, L + 1)
         Accesses of each hardware thread served by each level (``L``: memory).
+    owners : ndarray of int64, shape (D, 2) or (0, 2)
+        Lines whose copies only one hardware thread's instances may hold,
+        so that its writes need not look for copies elsewhere: entry ``e``
+        (a hash of the first-level line, :func:`cachesim.multicore._owner_slot`)
+        is ``(line, t)`` after a write by ``t`` removed the line from every
+        instance that does not serve ``t``, until a fill of the line by
+        another thread makes ``t`` :data:`SEVERAL_THREADS`; ``(-1, -1)``:
+        unused. Only a write's look-up and fills read or change it. ``D``
+        is a power of two, :data:`OWNERS_SIZE` in a :class:`SharedState`;
+        (0, 2), every write looks: levels with lines of different sizes
+        (a fill there covers several first-level lines) or prefetchers
+        (whose fills are not noted).
     """
 
     tags: np.ndarray
@@ -123,10 +135,15 @@ class SharedArrays(NamedTuple):
     ghost_filter: np.ndarray
     counts: np.ndarray
     served: np.ndarray
+    owners: np.ndarray
 
 
 #: Entries of SharedArrays.ghost_filter (a power of two).
 GHOST_FILTER_SIZE = 1 << 13
+#: Entries of SharedArrays.owners (a power of two; 16 bytes each).
+OWNERS_SIZE = 1 << 14
+#: The thread of an owners entry whose line other threads filled since its last write.
+SEVERAL_THREADS = -2
 
 
 def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tuple[CacheGeometry, MachineGeometry]:
@@ -188,6 +205,8 @@ class SharedState:
         self.counts = np.zeros((n_levels, most, N_KINDS, N_SHARED_COUNTERS), dtype=np.int64)
         self.served = np.zeros((machine.n_threads, n_levels + 1), dtype=np.int64)
         self.ghost_filter = np.zeros(GHOST_FILTER_SIZE, dtype=np.int32)
+        uniform = not self.geometry.rel_shift.any() and self.prefetch_geometry is None
+        self.owners = np.full((OWNERS_SIZE if uniform else 0, 2), -1, dtype=np.int64)
         self.clock = 0
         self.prefetch = None if self.prefetch_geometry is None else P.empty_prefetch_arrays(
             self.prefetch_geometry, total_ways, self.machine_geometry.n_instances)
@@ -196,13 +215,13 @@ class SharedState:
     def arrays(self) -> SharedArrays:
         """The contents and counters as one bundle for :func:`simulate_threads_stream` (updated in place)."""
         return SharedArrays(self.tags, self.stamps, self.ghosts, self.ghost_bytes, self.ghost_filter, self.counts,
-                            self.served)
+                            self.served, self.owners)
 
     def copy(self) -> "SharedState":
         """An independent clone: continuing either leaves the other untouched."""
         clone = SharedState.__new__(SharedState)
         clone.machine, clone.geometry, clone.machine_geometry = self.machine, self.geometry, self.machine_geometry
-        for name in ("tags", "stamps", "ghosts", "ghost_bytes", "ghost_filter", "counts", "served"):
+        for name in ("tags", "stamps", "ghosts", "ghost_bytes", "ghost_filter", "counts", "served", "owners"):
             setattr(clone, name, getattr(self, name).copy())
         clone.prefetch_geometry = self.prefetch_geometry
         clone.prefetch = None if self.prefetch is None else P.PrefetchArrays(*(array.copy() for array in self.prefetch))

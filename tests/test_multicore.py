@@ -68,6 +68,59 @@ def test_random_machines_match_the_reference(seed):
     np.testing.assert_array_equal(first.counts + second.counts, expected)
 
 
+def uniform_machine(rng):
+    """:func:`random_machine` with every level's lines of the first level's size (the owners table is on) and
+    the first level private to a thread or a core (SMT threads sharing it), so that writes invalidate."""
+    machine = random_machine(rng)
+    first = SHARING.index(str(rng.choice(["thread", "core"])))
+    scopes = tuple(SHARING[min(first, SHARING.index(scope))] if index == 0 else scope
+                   for index, scope in enumerate(machine.shared_by))
+    line = machine.hierarchy.levels[0].line_size
+    levels = tuple(CacheLevel(level.name, line * level.ways * level.n_sets, line, level.ways, level.policy,
+                              seed=level.seed, write_allocate=level.write_allocate)
+                   for level in machine.hierarchy.levels)
+    return SharedHierarchy(Hierarchy(levels, inclusion=machine.hierarchy.inclusion), n_cores=machine.n_cores,
+                           smt=machine.smt, cores_per_complex=machine.cores_per_complex, shared_by=scopes)
+
+
+def owned_stream(rng, machine, n):
+    """Runs of 1-30 accesses by one thread to 2-6 of a few dozen lines, half of them writes: writes to lines
+    the thread alone holds, then reads and writes by others (many sharers)."""
+    line = machine.hierarchy.levels[0].line_size
+    runs = rng.integers(1, 31, n)
+    starts = np.cumsum(runs)[np.cumsum(runs) < n]
+    run_of = np.zeros(n, dtype=np.int64)
+    run_of[starts] = 1
+    run_of = np.cumsum(run_of)
+    threads = rng.integers(0, machine.n_threads, run_of[-1] + 1)[run_of]
+    pools = rng.integers(0, 30, (run_of[-1] + 1, 6))
+    lines = pools[run_of, rng.integers(0, 6, n) % rng.integers(2, 7, run_of[-1] + 1)[run_of]]
+    addresses = lines * line + rng.integers(0, line, n)
+    sizes = np.minimum(rng.integers(1, 9, n), line - addresses % line)
+    return addresses, threads, rng.random(n) < 0.5, sizes, rng.integers(0, 16, n)
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("owners_size", [0, 2, None])
+def test_owned_writes_match_the_reference(seed, owners_size):
+    """Writes that skip the search for other copies (the owners table), on machines whose levels all have
+    one line size: counts and served equal the reference's, with the table off (0 entries), crowded
+    (2 entries) and as made. Mutations: drop ``_note_fill`` in shared_access (a line another thread
+    filled is still owned); ``owners[entry, 1] = thread`` -> ``= 0`` in _write_invalidate (checked)."""
+    rng = np.random.default_rng(100 + seed)
+    machine = uniform_machine(rng)
+    addresses, threads, writes, sizes, kinds = owned_stream(rng, machine, 2000)
+    state = SharedState(machine)
+    assert state.owners.shape[0] > 0
+    if owners_size is not None:
+        state.owners = np.full((owners_size, 2), -1, dtype=np.int64)
+    result = simulate_threads(addresses, threads, state, writes=writes, sizes=sizes, kinds=kinds)
+    expected, served = reference_threads(addresses, threads, machine, writes, sizes, kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    np.testing.assert_array_equal(result.served, served)
+    assert expected[..., COHERENCE_INVALIDATIONS].sum() > 0
+
+
 def test_a_crowded_ghost_filter_stays_exact():
     """With a filter of two entries nearly every miss and fill collides with some ghost's entry;
     the counts still equal the reference's.
