@@ -10,10 +10,14 @@ typed in. Per scene: the 5th, 50th and 95th percentiles of the one-process
 B - S and DB - S time differences (in % of S's time), of the verdict's
 margin and of every mapping's coherence and imbalance losses, the verdict's
 probability, the three unknowns of largest Morris
-``mu*`` with their indices and flip regions. Overall: which mechanism
+``mu*`` with their indices and flip regions, and the size check (the
+one-process differences at half and twice the size) when the study ran it.
+Overall: which mechanism
 (:data:`MECHANISMS`) matters most, by the rule of :func:`mechanism_shares`.
 It names the command, seed and commit the summary records, states the image
-size against :data:`analyses.robustness_size.VERDICT_MIN_SIZE`, and says which of the study's figures
+size against :data:`analyses.robustness_size.VERDICT_MIN_SIZE` and the scenes,
+trajectories and Sobol design against the budgeted study
+(:func:`analyses.robustness_output.study_budget`), and says which of the study's figures
 the project holds (:class:`tracer.scenes.study.StudyScene`) and which it
 does not.
 
@@ -128,6 +132,46 @@ def _check(summary) -> None:
             raise InputError(f"faithfulness: scene {scene!r} of the robustness summary has no {', '.join(missing)}")
 
 
+def _run_paragraph(summary: dict) -> list[str]:
+    """What the study ran against the budgeted study (:func:`analyses.robustness_output.study_budget`)."""
+    from analyses.robustness_output import study_budget
+
+    p = summary["parameters"]
+    budget = study_budget(p)
+    ran = (f"This study ran {p['trajectories']} Morris trajectories on {', '.join(p['scenes'])}, "
+           + (f"then Sobol with N = {p['sobol']}" if p["sobol"] else "and no Sobol design") + ".")
+    asked = (f"The study the verdict is budgeted for runs {budget['trajectories']} Morris trajectories "
+             f"({budget['morris_evaluations']} evaluations) on each of {', '.join(budget['scenes'])}, then Sobol "
+             f"with N = {budget['sobol_base_samples']} over the top unknowns, at {VERDICT_MIN_SIZE} x "
+             f"{VERDICT_MIN_SIZE} pixels or more.")
+    if budget["met"]:
+        return [f"{ran} {asked} This study is that study or larger.", ""]
+    short = [f"not run on {', '.join(budget['scenes_not_run'])}"] if budget["scenes_not_run"] else []
+    if p["trajectories"] < budget["trajectories"]:
+        short.append(f"{p['trajectories']} trajectories instead of {budget['trajectories']}")
+    if p["sobol"] < budget["sobol_base_samples"]:
+        short.append("no Sobol indices" if not p["sobol"] else f"Sobol with N = {p['sobol']}")
+    return [f"{ran} {asked} So this page is short of it: {'; '.join(short)}. Its ranges and rankings hold for "
+            "the scenes and design it names, not for the whole study.", ""]
+
+
+def _size_check_lines(check: dict) -> list[str]:
+    """The size check of one scene (:mod:`analyses.robustness_size`) as a table."""
+    small, reference = check["small_size"], check["reference_size"]
+    lines = [f"Size check: the one-process differences (%) of {len(check['samples'])} samples at {small} x {small} "
+             f"against {reference} x {reference}; a quantity passes when every point is within "
+             f"{_percent(check['tolerance'])}% of the larger image's value.",
+             "",
+             f"| quantity | sample | at {small} | at {reference} | relative difference | quantity passed |",
+             "|---|---:|---:|---:|---:|---|"]
+    for name, entry in check["quantities"].items():
+        for sample, low, high, relative in zip(check["samples"], entry["small"], entry["reference"],
+                                               entry["relative_difference"]):
+            lines.append(f"| {name} | {sample} | {_percent(low)} | {_percent(high)} | {_number(relative)} | "
+                         f"{'yes' if entry['passed'] else 'no'} |")
+    return lines + [""]
+
+
 def _study_paragraph(n_processes: int) -> list[str]:
     from tracer.scenes.study import StudyScene
 
@@ -156,6 +200,8 @@ def faithfulness_markdown(summary: dict) -> str:
         If the summary lacks a key the section reads (one written by an
         older ``coherence robustness``, say).
     """
+    from analyses.robustness_output import study_budget
+
     _check(summary)
     p = summary["parameters"]
     scenes = summary["scenes"]
@@ -175,6 +221,7 @@ def faithfulness_markdown(summary: dict) -> str:
         f"{len(p.get('factors', []))} unknowns; the verdict at {p['verdict_n_processes']} processes.",
         "",
     ]
+    lines += _run_paragraph(summary)
     if size < VERDICT_MIN_SIZE:  # a smaller study is a first look
         lines += [f"This is a first look: the {p['verdict_n_processes']}-process losses and the verdict are meant "
                   f"at {VERDICT_MIN_SIZE} x {VERDICT_MIN_SIZE} pixels or more, and this study ran at {size} x {size}. "
@@ -204,7 +251,8 @@ def faithfulness_markdown(summary: dict) -> str:
         lines += [
             f"### {scene}",
             "",
-            f"P(load balance) = {_number(s['p_load_balance'])} over {s['n_evaluations']} evaluations.",
+            f"P(load balance) = {_number(s['p_load_balance'])} over {s['n_evaluations']} evaluations "
+            f"(budgeted: {study_budget(p)['morris_evaluations']}).",
             "",
             "| quantity | 5th | 50th | 95th |",
             "|---|---:|---:|---:|",
@@ -225,6 +273,8 @@ def faithfulness_markdown(summary: dict) -> str:
                          for q in (5, 50, 95)]
                 lines.append(f"| {mapping} | " + " | ".join(cells) + " |")
             lines.append("")
+        if s.get("size_check"):
+            lines += _size_check_lines(s["size_check"])
         lines += ["| rank | unknown | mechanism | mu* | flip region |",
                   "|---:|---|---|---:|---|"]
         for rank, factor in enumerate(s["top"], start=1):

@@ -13,8 +13,10 @@ then renamed (:func:`rtcommon.files.write_files_atomic`):
 ``robustness.json``
     Parameters, seed, package versions (SALib's included), the command that
     reproduces the study (:func:`robustness_command`), the commit of the
-    code that ran it (:func:`rtcommon.versions.source_commit`) and per scene
-    the summary of :func:`analyses.robustness.scene_summary`.
+    code that ran it (:func:`rtcommon.versions.source_commit`), the budgeted
+    design beside the one run (:func:`study_budget`) and per scene the
+    summary of :func:`analyses.robustness.scene_summary` with
+    ``n_evaluations_budgeted``.
 ``index.html``
     One self-contained page: per scene the verdict's probability, the
     percentiles, the flip region and a tornado chart of ``mu_star``.
@@ -33,11 +35,41 @@ from analyses.output import csv_text, prepare_output_folder
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
-__all__ = ["ROBUSTNESS_FILES", "robustness_command", "robustness_summary", "plot_tornado", "write_robustness"]
+__all__ = ["ROBUSTNESS_FILES", "BUDGET_TRAJECTORIES", "BUDGET_SOBOL", "study_budget", "robustness_command",
+           "robustness_summary", "plot_tornado", "write_robustness"]
 
 #: The files :func:`write_robustness` writes, by what they hold.
 ROBUSTNESS_FILES = {"samples": "samples.csv", "indices": "indices.csv", "summary": "robustness.json",
                     "page": "index.html"}
+
+
+#: Morris trajectories the verdict's study is budgeted for, per study scene.
+BUDGET_TRAJECTORIES = 10
+
+#: Base samples of the budgeted Sobol design over the top unknowns.
+BUDGET_SOBOL = 64
+
+
+def study_budget(parameters: dict) -> dict:
+    """The budgeted study beside the one ``parameters`` (a ``robustness.json``'s) ran.
+
+    Returns
+    -------
+    dict
+        ``scenes`` (every study scene, :data:`tracer.scenes.catalog.PAPER_SCENES`),
+        ``scenes_not_run``, ``trajectories`` (:data:`BUDGET_TRAJECTORIES`),
+        ``morris_evaluations`` per scene (``trajectories (k + 1)`` over the
+        ``k`` unknowns the study varied), ``sobol_base_samples``
+        (:data:`BUDGET_SOBOL`) and ``met``: every study scene run with at
+        least the budgeted trajectories and Sobol base samples.
+    """
+    from tracer.scenes.catalog import PAPER_SCENES
+
+    not_run = [scene for scene in PAPER_SCENES if scene not in parameters["scenes"]]
+    met = not not_run and parameters["trajectories"] >= BUDGET_TRAJECTORIES and parameters["sobol"] >= BUDGET_SOBOL
+    return {"scenes": list(PAPER_SCENES), "scenes_not_run": not_run, "trajectories": BUDGET_TRAJECTORIES,
+            "morris_evaluations": BUDGET_TRAJECTORIES * (len(parameters["factors"]) + 1),
+            "sobol_base_samples": BUDGET_SOBOL, "met": bool(met)}
 
 
 def robustness_command(parameters: dict) -> str:
@@ -61,9 +93,12 @@ def robustness_summary(result) -> dict:
 
     meta = provenance(**result.summary["parameters"])
     versions = {**meta["versions"], "SALib": version("SALib")}
+    budget = study_budget(meta["parameters"])
+    scenes = {scene: {**summary, "n_evaluations_budgeted": budget["morris_evaluations"]}
+              for scene, summary in result.summary["scenes"].items()}
     return plain({"parameters": meta["parameters"], "versions": versions,
                   "command": robustness_command(meta["parameters"]), "commit": source_commit(),
-                  "scenes": result.summary["scenes"]}, 10)
+                  "budget": budget, "scenes": scenes}, 10)
 
 
 def plot_tornado(df, ax=None, *, title=None):
@@ -133,7 +168,7 @@ def write_robustness(result, out) -> Path:
     for scene, scene_summary in summary["scenes"].items():
         scenes.append({"name": scene, "summary": scene_summary, "tables": _scene_tables(scene_summary),
                        "tornado": _tornado_png(result.indices, scene)})
-    page = render_page("robustness.html.j2", p=summary["parameters"], scenes=scenes)
+    page = render_page("robustness.html.j2", p=summary["parameters"], budget=summary["budget"], scenes=scenes)
     files = {path / ROBUSTNESS_FILES["samples"]: csv_text(result.samples),
              path / ROBUSTNESS_FILES["indices"]: csv_text(result.indices),
              path / ROBUSTNESS_FILES["summary"]: json.dumps(summary, indent=2, allow_nan=False) + "\n",

@@ -106,6 +106,57 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
     assert re.search(r"Overall: \*\*(.+?)\*\*", text).group(1) == best
 
 
+def test_the_page_states_the_run_against_the_budgeted_study(summary):
+    """robustness.json records the budget (10 trajectories, 17 samples each over the 16 unknowns, Sobol N = 64,
+    all five study scenes) and each scene's budgeted evaluations; the page of the 2-trajectory tetra study
+    without Sobol names the four scenes not run, the trajectories and the missing Sobol design, and a summary
+    of the full design says it is that study. Fails if study_budget leaves out the scenes not run
+    (``not_run = []``)."""
+    budget = summary["budget"]
+    assert budget["scenes"] == ["balls", "tetra", "shell", "room", "fluid"]
+    assert budget["scenes_not_run"] == ["balls", "shell", "room", "fluid"] and budget["met"] is False
+    assert budget["morris_evaluations"] == 10 * (len(FACTORS) + 1)
+    assert summary["scenes"]["tetra"]["n_evaluations_budgeted"] == budget["morris_evaluations"]
+    text = faithfulness_markdown(summary)
+    short = re.search(r"So this page is short of it: (.*?)\. ", text).group(1)
+    assert short == "not run on balls, shell, room, fluid; 2 trajectories instead of 10; no Sobol indices"
+    found = re.search(r"over (\d+) evaluations \(budgeted: (\d+)\)", text)
+    assert [int(g) for g in found.groups()] == [summary["scenes"]["tetra"]["n_evaluations"], 10 * (len(FACTORS) + 1)]
+
+    scenes = ["balls", "tetra", "shell", "room", "fluid"]
+    full = {**summary, "parameters": {**summary["parameters"], "scenes": scenes, "trajectories": 10, "sobol": 64},
+            "scenes": {scene: summary["scenes"]["tetra"] for scene in scenes}}
+    text = faithfulness_markdown(full)
+    assert "This study is that study or larger." in text and "short of it" not in text
+    one_short = {**full, "parameters": {**full["parameters"], "scenes": scenes[1:]},
+                 "scenes": {scene: summary["scenes"]["tetra"] for scene in scenes[1:]}}
+    assert re.search(r"short of it: (.*?)\. ", faithfulness_markdown(one_short)).group(1) == "not run on balls"
+
+
+def test_the_size_check_table_is_the_summarys(summary):
+    """Each row of a scene's size-check table gives the quantity, its sample and both sizes' values (in %) and
+    relative difference as robustness.json holds them, with the smaller size's column first. Fails if
+    _size_check_lines zips the reference values before the small ones."""
+    check = summary["scenes"]["tetra"]["size_check"]
+    lines = faithfulness_markdown(summary).splitlines()
+    section = lines[lines.index("### tetra"):]
+    header = next(line for line in section if line.startswith("| quantity | sample |"))
+    assert _cells(header)[2:4] == [f"at {check['small_size']}", f"at {check['reference_size']}"]
+    rows = _table(section, "| quantity | sample |")
+    expected = [(name, sample, small, reference, relative, entry["passed"])
+                for name, entry in check["quantities"].items()
+                for sample, small, reference, relative in zip(check["samples"], entry["small"], entry["reference"],
+                                                              entry["relative_difference"])]
+    assert len(rows) == len(expected) == 2 * len(check["samples"])
+    # the mutation must be able to bite: the two sizes differ at some point
+    assert any(small != reference for _, _, small, reference, _, _ in expected)
+    for row, (name, sample, small, reference, relative, passed) in zip(rows, expected):
+        assert row[0] == name and int(row[1]) == sample
+        for cell, value, scale in ((row[2], small, 100.0), (row[3], reference, 100.0), (row[4], relative, 1.0)):
+            assert cell == "n/a" if value is None else _close(cell, value, scale), (name, sample, cell, value)
+        assert row[5] == ("yes" if passed else "no")
+
+
 def test_mechanism_shares_by_hand():
     """Two scenes, mu* set by hand: in scene a the node-visit cost has the largest mu* (4), the memory
     latency 2 and the B-cache latency 3, so memory latencies take 3/4; in scene b memory latency leads (1)
