@@ -33,8 +33,7 @@ from numba import njit
 
 from cachesim.multicore import _back_invalidate, _byte_range, _drop_ghost, _filter_slot, _invalidate_others, _set_of
 from cachesim.multicore_state import COHERENCE_MISSES, FALSE_SHARING_MISSES
-from cachesim.prefetch import (ISSUED, N_PREFETCH_COUNTERS, NO_PREFETCH, USEFUL, PrefetchArrays, PrefetchGeometry,
-                              _candidates)
+from cachesim.prefetch import ISSUED, NO_PREFETCH, USEFUL, _candidates
 from cachesim.prefetch_config import MAX_DEGREE
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
                            _find, _insert)
@@ -86,7 +85,6 @@ class ThreadPrefetchers(NamedTuple):
         With the stride tables laid out per instance.
     arrays : PrefetchArrays
         ``marks`` (W,) over the ways of all instances, ``counts`` (L, G, N_PREFETCH_COUNTERS); updated in place.
-        With no prefetcher on any level (:func:`no_thread_prefetchers`), ``marks`` is empty.
     lines, fetch_lines : ndarray of int64, shape (L,)
         A demand access's and a prefetch's line at each level.
     candidates : ndarray of int64, shape (MAX_DEGREE,)
@@ -100,26 +98,14 @@ class ThreadPrefetchers(NamedTuple):
     candidates: np.ndarray
 
 
-def thread_prefetchers(state) -> ThreadPrefetchers:
-    """The bundle :func:`prefetching_access` takes for a :class:`~cachesim.multicore_state.SharedState`:
-    its prefetchers' geometry and arrays (shared with the state, so updated in place), or, when its
-    hierarchy has none, :func:`no_thread_prefetchers`."""
-    n_levels = state.geometry.rel_shift.shape[0]
+def thread_prefetchers(state) -> ThreadPrefetchers | None:
+    """The bundle :func:`prefetching_access` takes for a :class:`~cachesim.multicore_state.SharedState`: its
+    prefetchers' geometry and arrays (shared with the state, so updated in place); None when it has none."""
     if state.prefetch is None:
-        return no_thread_prefetchers(n_levels)
+        return None
+    n_levels = state.geometry.rel_shift.shape[0]
     return ThreadPrefetchers(state.prefetch_geometry, state.prefetch, np.empty(n_levels, dtype=np.int64),
                              np.empty(n_levels, dtype=np.int64), np.empty(MAX_DEGREE, dtype=np.int64))
-
-
-def no_thread_prefetchers(n_levels: int) -> ThreadPrefetchers:
-    """A bundle of the same types as :func:`thread_prefetchers`' for a machine without prefetchers
-    (every level NO_PREFETCH, empty ``marks``): a caller tests ``arrays.marks.shape[0] > 0``."""
-    zeros = np.zeros(n_levels, dtype=np.int64)
-    geometry = PrefetchGeometry(zeros, zeros, zeros, zeros, zeros, zeros)
-    arrays = PrefetchArrays(np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int64),
-                            np.zeros((n_levels, 1, N_PREFETCH_COUNTERS), dtype=np.int64))
-    return ThreadPrefetchers(geometry, arrays, np.empty(n_levels, dtype=np.int64), np.empty(n_levels, dtype=np.int64),
-                             np.empty(MAX_DEGREE, dtype=np.int64))
 
 
 @njit(cache=True, **NO_REFCOUNTS)

@@ -226,10 +226,10 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
                         np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
     state.clock = int(run_shared_schedule(
         pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift,
-                              cpu_threads(hierarchy.n_cores, hierarchy.smt), thread_prefetchers(state)),
+                              cpu_threads(hierarchy.n_cores, hierarchy.smt)),
         PixelCost(compute, latency),
         schedule_of(distribution),
-        queues, background, out, float(q)))
+        queues, background, out, float(q), thread_prefetchers(state)))
     state.counts[..., MC.ACCESSES] = state.counts[..., MC.HITS] + state.counts[..., MC.MISSES]
     state.counts[..., MC.WRITES] = state.counts[..., MC.WRITE_HITS] + state.counts[..., MC.WRITE_MISSES]
     if not distribution.dynamic:

@@ -108,8 +108,6 @@ class SharedMachine(NamedTuple):
         log2 of the first level's line size.
     thread_of : ndarray of int64, shape (C,)
         The hardware thread that is the scheduler's CPU ``c``.
-    prefetchers : cachesim.multicore_prefetch.ThreadPrefetchers
-        The levels' prefetchers (updated in place); with empty ``arrays.marks``, none.
     """
 
     geometry: object
@@ -117,7 +115,6 @@ class SharedMachine(NamedTuple):
     state: object
     line_shift: int
     thread_of: np.ndarray
-    prefetchers: object
 
 
 class SharedOutputs(NamedTuple):
@@ -210,7 +207,7 @@ class _LoopState(NamedTuple):
 
 
 @njit(cache=True, nogil=True)
-def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out, interleave_cycles):
+def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, prefetchers):
     """The event loop on shared levels (see the module docstring).
 
     Parameters
@@ -228,6 +225,9 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     out : SharedOutputs
     interleave_cycles : float
         ``Q`` >= 1: the cycles a turn lasts at least (unless its pixel ends).
+    prefetchers : cachesim.multicore_prefetch.ThreadPrefetchers or None
+        The levels' prefetchers (updated in place); None: the machine has none
+        (the loop is then compiled without the prefetching path).
 
     Returns
     -------
@@ -248,11 +248,11 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
         np.zeros(n_ours, dtype=np.int64), np.zeros(n_ours, dtype=np.int64),
         np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64), np.zeros(1, dtype=np.int64),
         np.zeros(n_all - n_ours, dtype=np.int64), np.empty((3, cost.latency.shape[0] - 1), dtype=np.int64))
-    return _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop)
+    return _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop, prefetchers)
 
 
 @njit(cache=True, nogil=True, **NO_REFCOUNTS)
-def _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop):
+def _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop, prefetchers):
     """:func:`run_shared_schedule`'s loop, on the arrays of ``loop`` (a :class:`_LoopState`)."""
     geometry = shared.geometry
     machine = shared.machine
@@ -314,8 +314,6 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     first_instance = machine.instance_of[0]
     allocate0 = geometry.write_allocate[0]
     first_shift = np.uint64(geometry.line_shift)
-    prefetchers = shared.prefetchers
-    prefetching = prefetchers.arrays.marks.shape[0] > 0
 
     for process in queues.start_order:
         _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
@@ -357,7 +355,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 for i in range(footprint_lines):  # one turn: the slice's reads at once
                     address = np.uint64((start + i) << line_shift)
                     access_clock += 1
-                    if prefetching:
+                    if prefetchers is not None:  # a branch numba prunes when compiling for None
                         _, access_clock = prefetching_access(thread, address, False, 0, 0, geometry, machine, state,
                                                              access_clock, prefetchers)
                     else:
@@ -422,7 +420,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 kind = np.int64(piece_kinds[k])
                 line0 = np.int64(address >> first_shift)
                 access_clock += 1
-                if prefetching:  # every access trains the prefetchers: no shortcut
+                if prefetchers is not None:  # every access trains the prefetchers: no shortcut
                     level_served, access_clock = prefetching_access(thread, address, is_write, piece_sizes[k], kind,
                                                                     geometry, machine, state, access_clock,
                                                                     prefetchers)
