@@ -42,9 +42,9 @@ Under a platform (base ``platform``), its variants
 Under a platform every point's runs are simulated on the variant's shared
 levels (:func:`shared_levels`), the point's level changes applied to whole
 levels, interleaved every ``interleave_cycles`` of the base; each row then
-also gives, per level, the machine's coherence and false-sharing misses,
-and the prefetches issued, useful and useless (0 at points without
-prefetchers). The texture columns take the variant's thread view
+also gives the run's times (:data:`PLATFORM_TIMES`) and, per level, the
+machine's coherence and false-sharing misses, and the prefetches issued,
+useful and useless (0 at points without prefetchers). The texture columns take the variant's thread view
 (:meth:`coherence.platforms.Platform.thread_view`: each level cut to one
 thread's share, no prefetchers), not the shared levels.
 
@@ -96,6 +96,10 @@ BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "
 #: Ends of the per-level prefetch columns of a row under a platform with prefetchers
 #: (:data:`coherence.shared_run.PREFETCH_RUN_COLUMNS`); 0 at points without them.
 PREFETCH_SUFFIXES = ("_prefetches_issued", "_prefetches_useful", "_prefetches_useless")
+
+#: Columns a row under a platform adds beside the efficiency decomposition: the slowest process's user
+#: seconds, the run's real seconds and its memory cycles summed over processes.
+PLATFORM_TIMES = ("user_seconds_max", "real_seconds", "memory_cycles")
 
 #: Grid parameters a platform sets, so a study under one may not vary them.
 PLATFORM_PARAMETERS = ("hierarchy", "cost", "n_cpus")
@@ -373,7 +377,9 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     level_columns = [c for c in runs.columns
                      if c.endswith(("_hit_rate", "_misses_per_ray", "_coherence_misses", "_false_sharing_misses",
                                     *PREFETCH_SUFFIXES))]
-    table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *level_columns]].copy()
+    # under a platform also the run's times, so that variants (prefetch on and off, say) compare in seconds
+    timing = list(PLATFORM_TIMES) if study.experiment.platform is not None else []
+    table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *timing, *level_columns]].copy()
     if trace.metadata.get("textures"):
         texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)
                                 for mapping in table["mapping"]], index=table.index)

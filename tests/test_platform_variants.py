@@ -116,7 +116,8 @@ def test_whatif_prefetch_on_and_off_run_on_the_shared_levels(tmp_path, capsys):
     those of simulate_shared_run on the variant's shared levels (issued > 0, issued >= useful + useless), the
     "off" point's are 0, and its hit rates are the base platform's run. Mutations: ``if prefetching:`` ->
     ``if False:`` before the access loop's prefetching_access in coherence/shared_schedule.py (no prefetch
-    issued); drop ``table[prefetched] = ...fillna(0)`` in run_whatif (the off point's columns are empty)."""
+    issued); drop ``table[prefetched] = ...fillna(0)`` in run_whatif (the off point's columns are empty); ``timing
+    = []`` in evaluate_point (no user_seconds_max)."""
     import numpy as np
     import pandas as pd
 
@@ -155,6 +156,7 @@ def test_whatif_prefetch_on_and_off_run_on_the_shared_levels(tmp_path, capsys):
             else:
                 assert issued == useful == useless == 0
             processes = run.run.processes
+            assert row["user_seconds_max"] == pytest.approx(processes["user_seconds"].max())
             assert row[f"{name}_hit_rate"] == pytest.approx(
                 processes[f"{name}_hits"].sum() / processes[f"{name}_accesses"].sum())
     assert np.isfinite(table.loc["on", "L1_hit_rate"])

@@ -38,8 +38,9 @@ line_size, hierarchy, compute_scale, cost, layout, texture_layout
 (linear, tiled<k>, morton, blocked<k>x<s>), scene_size, n_processes,
 n_cpus, background, frame_buffer_bytes (3, 4, 16). Under --platform
 also its variants: cores (complexes keep their size), smt (on, off or
-threads per core), l3_size (the whole shared L3), prefetch (on, off;
-refused by the schedule simulation for now). Sizes take KB/MB suffixes. On a textured scene the
+threads per core), l3_size (the whole shared L3), prefetch (on, off:
+next-line at L1, stride at L2; rows add <level>_prefetches_issued,
+_useful, _useless). Sizes take KB/MB suffixes. On a textured scene the
 CSV also has texel_<level>_misses_per_access and texture_<level>_miss_share.
 
 outputs in --out DIR: whatif-<name>.csv (long form: the grid's columns,
@@ -64,6 +65,7 @@ examples:
   coherence whatif --grid L1.size=4KB,8KB,32KB --grid memory_latency=80,300 --scene tetra
   coherence whatif caches --dask tcp://scheduler:8786
   coherence whatif --platform zen4-7950x --grid cores=4,8,16 --grid smt=on,off
+  coherence whatif --scene balls --platform zen4-7950x --grid prefetch=on,off
 """
 
 

@@ -47,6 +47,8 @@ JOBS = {
                      "--processes", "8", "16", "32"],
     "today-sharing": ["python", "docs/results/today_sharing.py", "--size", "{today_size}", "--platform",
                       "zen4-7950x"],
+    "today-prefetch": ["whatif", "--scene", "balls", "--platform", "zen4-7950x", "--grid", "prefetch=on,off",
+                       "--size", "{today_size}"],
 }
 
 

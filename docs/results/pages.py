@@ -224,8 +224,52 @@ access the counter.""")
 packs thread pairs onto half the cores, sharing their L1 and L2; off, every
 thread has a core. Below 1, neighbouring threads sharing a core's caches
 gained more than the halved capacity cost.""")
+    prefetch_folder = work / "today-prefetch"
+    if (prefetch_folder / "stamp.json").exists():
+        _prefetch_section(page, prefetch_folder)
     page.write(pages / "today.md")
     return "today"
+
+
+def _prefetch_section(page: _Page, folder: Path) -> None:
+    """The prefetchers on/off what-if of the today page (job today-prefetch: ``whatif-grid.csv``)."""
+    stamp = _stamp(folder)
+    long = pd.read_csv(folder / "whatif-grid.csv")
+    wide = long.pivot_table(index=["prefetch", "mapping", "n_processes"], columns="metric", values="value",
+                            sort=False).reset_index()
+    wide["n_processes"] = wide["n_processes"].astype(int)
+    from coherence.platforms import PREFETCHERS_ON
+
+    levels = [column.removesuffix("_misses_per_ray") for column in wide.columns if column.endswith("_misses_per_ray")]
+    prefetching = levels[:len(PREFETCHERS_ON)]  # the levels prefetch=on gives a prefetcher
+    n = int(wide["n_processes"].iloc[0])
+    page.text(f"## Prefetchers on and off, at {n} processes")
+    page.text("""`prefetch=on` puts the generic prefetchers of `coherence.platforms.PREFETCHERS_ON` on the
+platform (next-line on a miss at L1, a stride table two strides ahead at L2; `docs/prefetch.md`); every
+access of the schedule trains them. A prefetch completes at once and costs no cycles or memory bandwidth, so
+the gains below are an upper bound of what these prefetchers give. Misses are demand misses (a line a
+prefetch brought from memory is no demand miss); a useful prefetch is one a demand access hit before it left
+the level.""")
+    columns = ["prefetch", "mapping", "user_seconds_max", "speedup_user", "imbalance_loss", "coherence_loss",
+               *[f"{level}_misses_per_ray" for level in levels]]
+    page.table(wide[columns].sort_values(["mapping", "prefetch"], kind="stable"), stamp)
+    on = wide[wide["prefetch"] == "on"].set_index("mapping")
+    off = wide[wide["prefetch"] == "off"].set_index("mapping")
+    counts = on[[f"{level}_prefetches_{what}" for level in prefetching
+                 for what in ("issued", "useful", "useless")]].astype("int64").reset_index()
+    page.text("Prefetches at `prefetch=on`, summed over each level's instances (a prefetched line still "
+              "unused at the end is neither useful nor useless):")
+    page.table(counts, stamp)
+    gain = (off["user_seconds_max"] / on["user_seconds_max"]).sort_values()
+    lines = [f"- {mapping}: the slowest process {ratio:.3f} times as fast with prefetchers"
+             for mapping, ratio in gain.items()]
+    verdicts = []
+    for switch, rows in (("on", on), ("off", off)):
+        larger = (rows["coherence_loss"] > rows["imbalance_loss"]).sum()
+        verdicts.append(f"prefetch {switch}: coherence costs more than imbalance for {larger} of "
+                        f"{len(rows)} mappings (largest imbalance {rows['imbalance_loss'].max():.1%}, largest "
+                        f"coherence loss {rows['coherence_loss'].max():.1%})")
+    page.text("\n".join(lines) + "\n\n" + "; ".join(verdicts) + ".")
 
 
 def write_pages(work: Path, pages: Path) -> list[str]:
