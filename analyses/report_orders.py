@@ -10,7 +10,9 @@ the efficiency (speed-up over ``n``), with ``T1`` and ``D1`` the mapping's
 one-process user and dispatch cycles (depth-first), ``W0`` the run's work
 without dispatch, ``W0_df`` the same for the depth-first order and ``W0'``
 for the order without its own costs (its buffer and queue records and its
-sorting cycles left out; a second run):
+sorting cycles left out; a second run, since the order's buffer lines share
+the caches with the scene's and evict some of them, so the scene's misses
+without the buffers are not the ordered run's scene misses):
 
 * ``load_balance`` = ``W / (n max u)``, as the study's;
 * ``coherence_factor`` = ``(T1 - D1) / W0_df``: the mapping's, as the study's;
