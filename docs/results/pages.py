@@ -265,10 +265,11 @@ the level.""")
              for mapping, ratio in gain.items()]
     verdicts = []
     for switch, rows in (("on", on), ("off", off)):
-        larger = (rows["coherence_loss"] > rows["imbalance_loss"]).sum()
-        verdicts.append(f"prefetch {switch}: coherence costs more than imbalance for {larger} of "
-                        f"{len(rows)} mappings (largest imbalance {rows['imbalance_loss'].max():.1%}, largest "
-                        f"coherence loss {rows['coherence_loss'].max():.1%})")
+        larger = rows.index[rows["coherence_loss"] > rows["imbalance_loss"]]
+        verdicts.append(f"prefetch {switch}: coherence costs more than imbalance for "
+                        f"{', '.join(larger) if len(larger) else 'no mapping'} (largest imbalance "
+                        f"{rows['imbalance_loss'].max():.1%}, largest coherence loss "
+                        f"{rows['coherence_loss'].max():.1%})")
     page.text("\n".join(lines) + "\n\n" + "; ".join(verdicts) + ".")
 
 
