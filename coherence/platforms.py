@@ -39,9 +39,9 @@ MAX_DEFAULT_PROCESSES = 32
 SHARED_LEVELS_NOTE = ("shared levels interleaved: processes run on the hardware threads and every access goes "
                       "through the one state of the machine's caches (write-invalidate coherence on), the thread "
                       "whose clock is lowest running interleave_cycles at a time, the levels' prefetchers, if any, "
-                      "trained by every access; the report's miss map, miss-ratio curves and texture section take "
-                      "the thread view instead: one thread's share of every level, private, no coherence, no "
-                      "prefetchers; see docs/platforms.md")
+                      "trained by every access; the report's miss map, miss-ratio curves and texture section, and "
+                      "a what-if's texture columns, take the thread view instead: one thread's share of every "
+                      "level, private, no coherence, no prefetchers; see docs/platforms.md")
 
 #: The prefetchers of a platform variant with prefetching on (:meth:`Platform.variant`), for its first
 #: levels in order: next-line on a miss at L1 (Smith 1982), a stride table at L2 fetching two strides
