@@ -23,8 +23,8 @@ from cachesim.simulate import cache_geometry
 from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
-           "GHOST_FILTER_SIZE", "N_KINDS", "OWNERS_SIZE", "SEVERAL_THREADS", "N_SHARED_COUNTERS", "MachineGeometry", "SharedArrays", "SharedResult",
-           "SharedState", "ThreadStream"]
+           "GHOST_FILTER_SIZE", "N_KINDS", "N_SHARED_COUNTERS", "OWNERS_SIZE", "SEVERAL_THREADS",
+           "MachineGeometry", "SharedArrays", "SharedResult", "SharedState", "ThreadStream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
 # cachesim.kernels (accesses ... write misses, back-invalidations at 4).

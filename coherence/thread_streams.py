@@ -205,6 +205,10 @@ def split_records(records, group_offsets, group_threads, places: RecordPlaces, *
     records = np.ascontiguousarray(records, dtype=np.uint32)
     group_offsets = np.ascontiguousarray(group_offsets, dtype=np.int64)
     group_threads = np.ascontiguousarray(group_threads, dtype=np.int64)
+    if (group_offsets.ndim != 1 or group_offsets.size != group_threads.size + 1 or group_offsets[0] != 0
+            or group_offsets[-1] != records.size or np.any(np.diff(group_offsets) < 0)):
+        raise InputError(f"split_records: group_offsets must rise from 0 to the {records.size} records with one "
+                         f"entry more than group_threads ({group_threads.size}), got shape {group_offsets.shape}")
     counts = _count_pieces(records, group_offsets, group_threads, places)
     n = int(counts.sum())
     out = ThreadStream(np.empty(n, dtype=np.uint64), np.zeros(0, dtype=np.int64), np.empty(n, dtype=np.bool_),
@@ -219,6 +223,9 @@ def _pieces(records, threads, placed: PlacedLayout, line_size: int) -> tuple[Thr
     records = np.ascontiguousarray(records, dtype=np.uint32)
     places = record_places(records, placed, line_size)
     threads = np.asarray(threads, dtype=np.int64)
+    if threads.shape != records.shape:
+        raise InputError(f"record_pieces: threads must have one entry per record ({records.shape}), "
+                         f"got shape {threads.shape}")
     # records in runs of one thread
     runs = np.flatnonzero(threads[1:] != threads[:-1]) + 1
     offsets = np.concatenate(([0], runs, [threads.size]) if threads.size else ([0],)).astype(np.int64)

@@ -10,7 +10,7 @@ from coherence.layout import get_layout
 from coherence.mappings import get_mapping
 from coherence.studies import place_layout
 from coherence.thread_streams import (COUNTER_BYTES, PRIVATE_KINDS, counter_address, private_span, record_pieces,
-                                      thread_stream)
+                                      record_places, split_records, thread_stream)
 from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
 from tracer.trace.records import AUXILIARY_KIND
 
@@ -98,6 +98,30 @@ def test_a_bad_turn_is_refused():
     placed = place_layout(get_layout("compact"), trace)
     with pytest.raises(ValueError, match="pixels_per_turn must be"):
         thread_stream(trace, placed, "P", 2, pixels_per_turn=0)
+
+
+def test_threads_of_another_length_than_the_records_are_refused():
+    """Fewer or more thread ids than records: a named error, not a short stream or a read past the end.
+    Mutation: drop the shape check in thread_streams._pieces (5 ids for 6 records gave a silent short
+    stream)."""
+    trace = synthetic_trace(2, 1)
+    placed = place_layout(get_layout("compact"), trace)
+    records = trace.records[:6]
+    for n_ids in (5, 7):
+        with pytest.raises(ValueError, match="threads must have one entry per record"):
+            record_pieces(records, np.zeros(n_ids, dtype=np.int64), placed, 64)
+
+
+def test_group_offsets_must_cover_the_records():
+    """Mutation: drop the group_offsets check in split_records (offsets ending short of the records)."""
+    trace = synthetic_trace(2, 1)
+    placed = place_layout(get_layout("compact"), trace)
+    records = trace.records[:6]
+    places = record_places(records, placed, 64)
+    for offsets in ([0, 3, 5], [0, 4, 2, 6], [1, 6]):
+        offsets = np.asarray(offsets, dtype=np.int64)
+        with pytest.raises(ValueError, match="group_offsets must rise"):
+            split_records(records, offsets, np.zeros(offsets.size - 1, dtype=np.int64), places)
 
 
 def test_p_shares_3_byte_pixels_falsely_more_than_s_at_8_threads():
