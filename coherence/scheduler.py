@@ -35,6 +35,10 @@ scheduler. Its rules, in the order it applies them:
   background's, is looked up in the TLB of the CPU it runs on, and a miss of
   ours costs a fixed penalty on top of its memory cycles.
 
+The rules that do not touch caches (:class:`OsState` and the helpers that
+take it: decisions, background slices, placement, hand-outs, a pixel's end)
+are shared with :mod:`coherence.shared_schedule`'s event loop.
+
 User time of a process = its compute cycles + its memory cycles (on whichever
 CPU's caches it ran, TLB misses included) + its dispatch waits; real time =
 when the last of ours finished.
@@ -170,6 +174,199 @@ class RunOutputs(NamedTuple):
     pixel_misses: np.ndarray
 
 
+class OsState(NamedTuple):
+    """The operating system's state in an event loop (:func:`run_schedule`, :mod:`coherence.shared_schedule`).
+
+    Attributes
+    ----------
+    queue_items : ndarray of int64, shape (Q, n + B)
+        Run queues as FIFO rings, one row per queue.
+    queue_head, queue_length, ours_waiting : ndarray of int64, shape (Q,)
+        Each queue's head, length and how many of ours wait in it.
+    cpu_clock, slice_used : ndarray of float64, shape (C,)
+        Each CPU's clock and the cycles of its current slice.
+    running, last_ran : ndarray of int64, shape (C,)
+        The process each CPU runs and the one it ran last (:data:`NO_PROCESS`: none).
+    active : ndarray of bool, shape (C,)
+        False once none of ours can reach the CPU again.
+    previous_cpu, own_next, current_task, position, held_count : ndarray of int64, shape (n,)
+        Per process of ours: last CPU, next own task (static), task rendered (-1: none), next pixel of it
+        (index into ``task_pixels``), take-ahead tasks held.
+    held : ndarray of int64, shape (n, max(take_ahead, 1))
+        Take-ahead tasks held, a small ring per process.
+    next_task : ndarray of int64, shape (1,)
+        The dynamic queue's next task.
+    background_slices : ndarray of int64, shape (B,)
+        Slices each background process has run.
+    """
+
+    queue_items: np.ndarray
+    queue_head: np.ndarray
+    queue_length: np.ndarray
+    ours_waiting: np.ndarray
+    cpu_clock: np.ndarray
+    slice_used: np.ndarray
+    running: np.ndarray
+    last_ran: np.ndarray
+    active: np.ndarray
+    previous_cpu: np.ndarray
+    own_next: np.ndarray
+    current_task: np.ndarray
+    position: np.ndarray
+    held_count: np.ndarray
+    held: np.ndarray
+    next_task: np.ndarray
+    background_slices: np.ndarray
+
+
+@njit(cache=True)
+def os_state(queues, schedule, n_ours, n_cpus):
+    """A fresh :class:`OsState` for ``n_ours`` processes of ours on ``n_cpus`` CPUs, every process in its run
+    queue in ``queues.start_order``, every CPU free at clock 0.
+
+    Parameters
+    ----------
+    queues : RunQueues
+    schedule : coherence.simulation.Schedule
+    n_ours : int
+    n_cpus : int
+
+    Returns
+    -------
+    OsState
+    """
+    n_queues = queues.n_queues
+    n_all = queues.process_queue.shape[0]
+    state = OsState(
+        np.empty((n_queues, n_all), dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
+        np.zeros(n_queues, dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
+        np.zeros(n_cpus), np.zeros(n_cpus),
+        np.full(n_cpus, NO_PROCESS, dtype=np.int64), np.full(n_cpus, NO_PROCESS, dtype=np.int64),
+        np.ones(n_cpus, dtype=np.bool_),
+        np.full(n_ours, -1, dtype=np.int64), schedule.own_offsets[:n_ours].copy(), np.full(n_ours, -1, dtype=np.int64),
+        np.zeros(n_ours, dtype=np.int64), np.zeros(n_ours, dtype=np.int64),
+        np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+        np.zeros(n_all - n_ours, dtype=np.int64))
+    for process in queues.start_order:
+        _push(state.queue_items, state.queue_head, state.queue_length, state.ours_waiting,
+              queues.process_queue[process], process, n_ours)
+    return state
+
+
+@njit(cache=True, inline="always")
+def _decide(system, queues, cpu, clock, n_ours):
+    """At a free CPU or between two pixels: the process ``cpu`` runs now and its clock.
+
+    A free CPU, or one whose slice is over while another process waits in
+    its queue, takes the queue's head (the slice's process goes to the tail);
+    starting a process other than the last one costs ``switch_cycles``.
+    Returns :data:`NO_PROCESS` when the CPU goes idle for good: nothing waits
+    for a free CPU, or it would run a background process while none of ours
+    can reach it again.
+    """
+    queue = cpu if queues.n_queues > 1 else 0
+    queue_items = system.queue_items
+    queue_head = system.queue_head
+    queue_length = system.queue_length
+    ours_waiting = system.ours_waiting
+    process = system.running[cpu]
+    slice_over = process >= 0 and queues.quantum > 0 and system.slice_used[cpu] >= queues.quantum
+    if process < 0 or slice_over:
+        if queue_length[queue] > 0:
+            if process >= 0:
+                _push(queue_items, queue_head, queue_length, ours_waiting, queues.process_queue[process], process,
+                      n_ours)
+            process = _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours)
+        elif process < 0:
+            system.active[cpu] = False  # nothing will ever wait here again
+            return NO_PROCESS, clock
+        system.running[cpu] = process
+        system.slice_used[cpu] = 0.0
+        if system.last_ran[cpu] >= 0 and system.last_ran[cpu] != process:
+            clock += queues.switch_cycles
+        system.last_ran[cpu] = process
+    if process >= n_ours and ours_waiting[queue] == 0 and (queues.n_queues > 1 or queue_length[queue] == 0):
+        system.active[cpu] = False  # none of ours can reach this CPU again
+        return NO_PROCESS, clock
+    return process, clock
+
+
+@njit(cache=True, inline="always")
+def _background_slice(system, queues, background, process, n_ours, cpu, clock):
+    """Background ``process`` takes a whole slice on ``cpu`` from ``clock`` (the CPU's clock is set past it);
+    returns the first line its slice reads (``footprint_lines`` of them)."""
+    b = process - n_ours
+    start = background.first_line[b] + system.background_slices[b] * background.footprint_lines
+    system.background_slices[b] += 1
+    system.slice_used[cpu] = queues.quantum
+    system.cpu_clock[cpu] = clock + queues.quantum
+    return start
+
+
+@njit(cache=True, inline="always")
+def _place(system, placement, process, cpu):
+    """Record that ``process`` of ours runs on ``cpu``: its first CPU, or a migration."""
+    if system.previous_cpu[process] < 0:
+        placement[process, FIRST_CPU] = cpu
+    elif system.previous_cpu[process] != cpu:
+        placement[process, MIGRATIONS] += 1
+    system.previous_cpu[process] = cpu
+
+
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
+def _next_pixel(system, schedule, out, process, cpu, clock):
+    """The next pixel of ``process`` (-1: it has none left) and the clock after any hand-out.
+
+    Called once per pixel and compiled without reference counting, not
+    inlined: inlined into :func:`run_schedule` (which counts references),
+    each read of a bundle's field takes and drops a reference per pixel.
+
+    A process without a task takes its next one first (:func:`_next_task`);
+    the wait counts as its dispatch cycles and in the CPU's slice.
+    """
+    task = system.current_task[process]
+    if task < 0:
+        task, waited = _next_task(process, schedule, system.own_next, system.held, system.held_count, system.next_task,
+                                  out.task_owner)
+        clock += waited
+        out.cycles[process, DISPATCH_CYCLES] += waited
+        system.slice_used[cpu] += waited
+        if task < 0:
+            return -1, clock
+        system.current_task[process] = task
+        system.position[process] = schedule.task_offsets[task]
+    pixel = schedule.task_pixels[system.position[process]]
+    system.position[process] += 1
+    return pixel, clock
+
+
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
+def _after_pixel(system, schedule, queues, process, cpu):
+    """After a pixel of ``process`` on ``cpu``: (whether the CPU goes back to the event loop, whether the
+    process has finished). Compiled as :func:`_next_pixel` is, for the same reason.
+
+    A dynamic task's end goes back (the next hand-out comes in time order);
+    a static process is done with its last pixel, not when it next gets the
+    CPU; a slice over goes back.
+    """
+    task = system.current_task[process]
+    if system.position[process] == schedule.task_offsets[task + 1]:
+        system.current_task[process] = -1
+        if schedule.dynamic:
+            return True, False
+        if system.own_next[process] == schedule.own_offsets[process + 1] or not _has_pixels(
+                schedule, system.own_next[process], schedule.own_offsets[process + 1]):
+            return True, True
+    return queues.quantum > 0 and system.slice_used[cpu] >= queues.quantum, False
+
+
+@njit(cache=True, inline="always")
+def _finish(system, out, process, cpu, clock):
+    """``process`` finished at ``clock`` on ``cpu``, which is free again."""
+    out.cycles[process, FINISH_CYCLES] = clock
+    system.running[cpu] = NO_PROCESS
+
+
 @njit(cache=True, inline="always")
 def _tlb_misses(tlbs, cpu, process, addresses):
     # look the addresses up in the CPU's TLB, counting for the process
@@ -218,13 +415,6 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     shared = line_offsets.shape[0] > 0
     compute = cost.compute
     latency = cost.latency
-    task_offsets = schedule.task_offsets
-    task_pixels = schedule.task_pixels
-    own_offsets = schedule.own_offsets
-    dynamic = schedule.dynamic
-    process_queue = queues.process_queue
-    quantum = queues.quantum
-    switch_cycles = queues.switch_cycles
     first_line = background.first_line
     footprint_lines = background.footprint_lines
     skip_background = background.skip
@@ -232,43 +422,18 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     place_background = background_pages.colour_bits >= 0
     out_cycles = out.cycles
     out_placement = out.placement
-    task_owner = out.task_owner
     pixel_misses = out.pixel_misses
     record_pixel_misses = pixel_misses.shape[0] > 0
     tlb_miss_cycles = tlbs.miss_cycles
     n_ours = out_cycles.shape[0]
-    n_all = process_queue.shape[0]
     n_cpus = tags.shape[0]
-    n_queues = queues.n_queues
     n_levels = counts.shape[1]
 
-    # Run queues: FIFO rings, one row per queue.
-    queue_items = np.empty((n_queues, n_all), dtype=np.int64)
-    queue_head = np.zeros(n_queues, dtype=np.int64)
-    queue_length = np.zeros(n_queues, dtype=np.int64)
-    ours_waiting = np.zeros(n_queues, dtype=np.int64)
-    for process in queues.start_order:
-        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
-
-    cpu_clock = np.zeros(n_cpus)
+    system = os_state(queues, schedule, n_ours, n_cpus)
+    cpu_clock = system.cpu_clock
+    slice_used = system.slice_used
     cache_clock = np.zeros(n_cpus, dtype=np.int64)
-    running = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
-    last_ran = np.full(n_cpus, NO_PROCESS, dtype=np.int64)
-    slice_used = np.zeros(n_cpus)
-    active = np.ones(n_cpus, dtype=np.bool_)
-    previous_cpu = np.full(n_ours, -1, dtype=np.int64)
-    background_slices = np.zeros(n_all - n_ours, dtype=np.int64)
     ours_left = n_ours
-
-    own_next = own_offsets[:n_ours].copy()
-    # The task each process renders (-1: none) and where it is in it.
-    current_task = np.full(n_ours, -1, dtype=np.int64)
-    position = np.zeros(n_ours, dtype=np.int64)
-    # Dynamic take-ahead: tasks held, a small ring per process; and the
-    # global queue's next task (an array, so that _take_task can advance it).
-    held = np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64)
-    held_count = np.zeros(n_ours, dtype=np.int64)
-    next_task = np.zeros(1, dtype=np.int64)
     # Room for any pixel's lines, so that record_lines_and_writes need not
     # count them before it fills the buffer (within a cap: a pixel beyond it
     # is counted, and the buffer grown, when it comes).
@@ -284,35 +449,15 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     record_served = served.shape[0] > 0  # False, but not a literal: no kernel specialised for it
     hits_before = np.zeros(n_levels, dtype=np.int64)
     while ours_left > 0:
-        cpu = _lowest_clock_cpu(cpu_clock, active)
+        cpu = _lowest_clock_cpu(cpu_clock, system.active)
         if cpu < 0:
             break
-        clock = cpu_clock[cpu]
-        queue = cpu if n_queues > 1 else 0
-        process = running[cpu]
         # A decision point: a free CPU, or a slice that ended.
-        slice_over = process >= 0 and quantum > 0 and slice_used[cpu] >= quantum
-        if process < 0 or slice_over:
-            if queue_length[queue] > 0:
-                if process >= 0:
-                    _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process,
-                          n_ours)
-                process = _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours)
-            elif process < 0:
-                active[cpu] = False  # nothing will ever wait here again
-                continue
-            running[cpu] = process
-            slice_used[cpu] = 0.0
-            if last_ran[cpu] >= 0 and last_ran[cpu] != process:
-                clock += switch_cycles
-            last_ran[cpu] = process
+        process, clock = _decide(system, queues, cpu, cpu_clock[cpu], n_ours)
+        if process < 0:
+            continue
         if process >= n_ours:
-            if ours_waiting[queue] == 0 and (n_queues > 1 or queue_length[queue] == 0):
-                active[cpu] = False  # none of ours can reach this CPU again
-                continue
-            b = process - n_ours
-            start = first_line[b] + background_slices[b] * footprint_lines
-            background_slices[b] += 1
+            start = _background_slice(system, queues, background, process, n_ours, cpu, clock)
             cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
             if skip_background:  # fresh lines: the state after them is known without walking them
                 cache_clock[cpu] = skip_fresh_lines(start, footprint_lines, geometry, cache, cache_clock[cpu])
@@ -320,37 +465,22 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
                 for i in range(footprint_lines):
                     buffer[i] = np.uint64((start + i) << line_shift)
                 if place_background:
+                    b = process - n_ours
                     translate_stream(buffer, footprint_lines, b, first_line[b] << line_shift, background_pages)
                 cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
                                                    served, record_served, work)
                 _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
-            clock += quantum
-            slice_used[cpu] = quantum
-            cpu_clock[cpu] = clock
             continue
 
-        if previous_cpu[process] < 0:
-            out_placement[process, FIRST_CPU] = cpu
-        elif previous_cpu[process] != cpu:
-            out_placement[process, MIGRATIONS] += 1
-        previous_cpu[process] = cpu
+        _place(system, out_placement, process, cpu)
         cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
         process_counts = counts[process]
         finished = False
         while True:
-            task = current_task[process]
-            if task < 0:
-                task, waited = _next_task(process, schedule, own_next, held, held_count, next_task, task_owner)
-                clock += waited
-                out_cycles[process, DISPATCH_CYCLES] += waited
-                slice_used[cpu] += waited
-                if task < 0:
-                    finished = True
-                    break
-                current_task[process] = task
-                position[process] = task_offsets[task]
-            pixel = task_pixels[position[process]]
-            position[process] += 1
+            pixel, clock = _next_pixel(system, schedule, out, process, cpu, clock)
+            if pixel < 0:
+                finished = True
+                break
             if shared:  # worked out once for the whole study
                 first = line_offsets[pixel]
                 n_addresses = line_offsets[pixel + 1] - first
@@ -382,21 +512,11 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             out_cycles[process, MEMORY_CYCLES] += memory
             clock += cycles
             slice_used[cpu] += cycles
-            if position[process] == task_offsets[task + 1]:
-                current_task[process] = -1
-                if dynamic:
-                    break  # back to the event loop: the next hand-out in time order
-                if own_next[process] == own_offsets[process + 1] or not _has_pixels(
-                        schedule, own_next[process], own_offsets[process + 1]):
-                    # A static process is done with its last pixel, not when
-                    # it next gets the CPU.
-                    finished = True
-                    break
-            if quantum > 0 and slice_used[cpu] >= quantum:
+            stop, finished = _after_pixel(system, schedule, queues, process, cpu)
+            if stop:
                 break
         if finished:
-            out_cycles[process, FINISH_CYCLES] = clock
-            running[cpu] = NO_PROCESS
+            _finish(system, out, process, cpu, clock)
             ours_left -= 1
         cpu_clock[cpu] = clock
 

@@ -59,9 +59,8 @@ from numba import njit
 from cachesim.multicore import HITS, shared_access
 from cachesim.multicore_prefetch import prefetching_access
 from coherence.recost import READ_HITS, WRITE_HITS
-from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
-                                 MIGRATIONS, NO_PROCESS, _has_pixels, _lowest_clock_cpu, _next_task, _pop,
-                                 _push)
+from coherence.scheduler import (COMPUTE_CYCLES, MEMORY_CYCLES, _after_pixel, _background_slice, _decide, _finish,
+                                 _lowest_clock_cpu, _next_pixel, _place, os_state)
 from rtcommon.jit import NO_REFCOUNTS
 
 
@@ -163,46 +162,20 @@ class _LoopState(NamedTuple):
 
     Attributes
     ----------
-    queue_items : ndarray of int64, shape (Q, n + B)
-        Run queues as FIFO rings, one row per queue; ``queue_head``,
-        ``queue_length``, ``ours_waiting`` (Q,) their heads, lengths and how
-        many of ours wait in each.
-    cpu_clock, slice_used, compute_share : ndarray of float64, shape (C,)
-        Each CPU's clock, cycles of its current slice, and compute cycles each access of its pixel carries.
-    running, last_ran, cpu_pixel, next_piece : ndarray of int64, shape (C,)
-        Each CPU's process, the process it ran last, its pixel and the pixel's next access (-1: between pixels).
-    active : ndarray of bool, shape (C,)
-    previous_cpu, own_next, current_task, position, held_count : ndarray of int64, shape (n,)
-        Per process of ours: last CPU, next own task (static), task rendered (-1: none), next pixel of it,
-        take-ahead tasks held.
-    held : ndarray of int64, shape (n, max(take_ahead, 1))
-    next_task : ndarray of int64, shape (1,)
-        The dynamic queue's next task.
-    background_slices : ndarray of int64, shape (B,)
+    system : coherence.scheduler.OsState
+        Run queues, clocks, slices, what each CPU runs and where each process is in its tasks.
+    compute_share : ndarray of float64, shape (C,)
+        Compute cycles each access of the CPU's pixel carries.
+    cpu_pixel, next_piece : ndarray of int64, shape (C,)
+        Each CPU's pixel and the pixel's next access (-1: between pixels).
     scratch : ndarray of int64, shape (3, L)
         Work space of :func:`cachesim.multicore.shared_access`.
     """
 
-    queue_items: np.ndarray
-    queue_head: np.ndarray
-    queue_length: np.ndarray
-    ours_waiting: np.ndarray
-    cpu_clock: np.ndarray
-    slice_used: np.ndarray
+    system: object
     compute_share: np.ndarray
-    running: np.ndarray
-    last_ran: np.ndarray
     cpu_pixel: np.ndarray
     next_piece: np.ndarray
-    active: np.ndarray
-    previous_cpu: np.ndarray
-    own_next: np.ndarray
-    current_task: np.ndarray
-    position: np.ndarray
-    held_count: np.ndarray
-    held: np.ndarray
-    next_task: np.ndarray
-    background_slices: np.ndarray
     scratch: np.ndarray
 
 
@@ -235,19 +208,9 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
         The access clock after the run (accesses made, ours and the background's).
     """
     n_ours = out.cycles.shape[0]
-    n_all = queues.process_queue.shape[0]
     n_cpus = shared.thread_of.shape[0]
-    n_queues = queues.n_queues
-    loop = _LoopState(
-        np.empty((n_queues, n_all), dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
-        np.zeros(n_queues, dtype=np.int64), np.zeros(n_queues, dtype=np.int64),
-        np.zeros(n_cpus), np.zeros(n_cpus), np.zeros(n_cpus),
-        np.full(n_cpus, NO_PROCESS, dtype=np.int64), np.full(n_cpus, NO_PROCESS, dtype=np.int64),
-        np.zeros(n_cpus, dtype=np.int64), np.full(n_cpus, -1, dtype=np.int64), np.ones(n_cpus, dtype=np.bool_),
-        np.full(n_ours, -1, dtype=np.int64), schedule.own_offsets[:n_ours].copy(), np.full(n_ours, -1, dtype=np.int64),
-        np.zeros(n_ours, dtype=np.int64), np.zeros(n_ours, dtype=np.int64),
-        np.full((n_ours, max(schedule.take_ahead, 1)), -1, dtype=np.int64), np.zeros(1, dtype=np.int64),
-        np.zeros(n_all - n_ours, dtype=np.int64), np.empty((3, cost.latency.shape[0] - 1), dtype=np.int64))
+    loop = _LoopState(os_state(queues, schedule, n_ours, n_cpus), np.zeros(n_cpus), np.zeros(n_cpus, dtype=np.int64),
+                      np.full(n_cpus, -1, dtype=np.int64), np.empty((3, cost.latency.shape[0] - 1), dtype=np.int64))
     return _event_loop(pieces, shared, cost, schedule, queues, background, out, interleave_cycles, loop, prefetchers)
 
 
@@ -268,46 +231,21 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     span = np.uint64(pieces.private_span)
     compute = cost.compute
     latency = cost.latency
-    task_offsets = schedule.task_offsets
-    task_pixels = schedule.task_pixels
-    own_offsets = schedule.own_offsets
-    dynamic = schedule.dynamic
-    process_queue = queues.process_queue
-    quantum = queues.quantum
-    switch_cycles = queues.switch_cycles
-    first_line = background.first_line
     footprint_lines = background.footprint_lines
     out_cycles = out.cycles
-    out_placement = out.placement
-    task_owner = out.task_owner
     accesses = out.accesses
     log_addresses = out.log_addresses
     log_threads = out.log_threads
     log_pieces = out.log_pieces
     logging = log_addresses.shape[0] > 0
-    queue_items = loop.queue_items
-    queue_head = loop.queue_head
-    queue_length = loop.queue_length
-    ours_waiting = loop.ours_waiting
-    cpu_clock = loop.cpu_clock
-    slice_used = loop.slice_used
+    system = loop.system
+    cpu_clock = system.cpu_clock
+    slice_used = system.slice_used
     compute_share = loop.compute_share
-    running = loop.running
-    last_ran = loop.last_ran
     cpu_pixel = loop.cpu_pixel
     next_piece = loop.next_piece
-    active = loop.active
-    previous_cpu = loop.previous_cpu
-    own_next = loop.own_next
-    current_task = loop.current_task
-    position = loop.position
-    held_count = loop.held_count
-    held = loop.held
-    next_task = loop.next_task
-    background_slices = loop.background_slices
     scratch = loop.scratch
     n_ours = out_cycles.shape[0]
-    n_queues = queues.n_queues
     n_levels = latency.shape[0] - 1
     counts = state.counts
     served = state.served
@@ -315,43 +253,23 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     allocate0 = geometry.write_allocate[0]
     first_shift = np.uint64(geometry.line_shift)
 
-    for process in queues.start_order:
-        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process], process, n_ours)
     ours_left = n_ours
     access_clock = 0
     logged = 0
     while ours_left > 0:
-        cpu = _lowest_clock_cpu(cpu_clock, active)
+        cpu = _lowest_clock_cpu(cpu_clock, system.active)
         if cpu < 0:
             break
         clock = cpu_clock[cpu]
         turn_start = clock
         thread = thread_of[cpu]
-        queue = cpu if n_queues > 1 else 0
-        process = running[cpu]
+        process = system.running[cpu]
         if next_piece[cpu] < 0:  # between pixels: the operating system decides
-            slice_over = process >= 0 and quantum > 0 and slice_used[cpu] >= quantum
-            if process < 0 or slice_over:
-                if queue_length[queue] > 0:
-                    if process >= 0:
-                        _push(queue_items, queue_head, queue_length, ours_waiting, process_queue[process],
-                              process, n_ours)
-                    process = _pop(queue_items, queue_head, queue_length, ours_waiting, queue, n_ours)
-                elif process < 0:
-                    active[cpu] = False
-                    continue
-                running[cpu] = process
-                slice_used[cpu] = 0.0
-                if last_ran[cpu] >= 0 and last_ran[cpu] != process:
-                    clock += switch_cycles
-                last_ran[cpu] = process
+            process, clock = _decide(system, queues, cpu, clock, n_ours)
+            if process < 0:
+                continue
             if process >= n_ours:
-                if ours_waiting[queue] == 0 and (n_queues > 1 or queue_length[queue] == 0):
-                    active[cpu] = False
-                    continue
-                b = process - n_ours
-                start = first_line[b] + background_slices[b] * footprint_lines
-                background_slices[b] += 1
+                start = _background_slice(system, queues, background, process, n_ours, cpu, clock)
                 for i in range(footprint_lines):  # one turn: the slice's reads at once
                     address = np.uint64((start + i) << line_shift)
                     access_clock += 1
@@ -365,15 +283,8 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                         log_threads[logged] = thread
                         log_pieces[logged] = -1
                         logged += 1
-                clock += quantum
-                slice_used[cpu] = quantum
-                cpu_clock[cpu] = clock
                 continue
-            if previous_cpu[process] < 0:
-                out_placement[process, FIRST_CPU] = cpu
-            elif previous_cpu[process] != cpu:
-                out_placement[process, MIGRATIONS] += 1
-            previous_cpu[process] = cpu
+            _place(system, out.placement, process, cpu)
 
         finished = False
         offset = np.uint64(process + 1) * span
@@ -383,19 +294,10 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
         previous_line = np.int64(-1)
         while True:
             if next_piece[cpu] < 0:  # the next pixel
-                task = current_task[process]
-                if task < 0:
-                    task, waited = _next_task(process, schedule, own_next, held, held_count, next_task, task_owner)
-                    clock += waited
-                    out_cycles[process, DISPATCH_CYCLES] += waited
-                    slice_used[cpu] += waited
-                    if task < 0:
-                        finished = True
-                        break
-                    current_task[process] = task
-                    position[process] = task_offsets[task]
-                pixel = task_pixels[position[process]]
-                position[process] += 1
+                pixel, clock = _next_pixel(system, schedule, out, process, cpu, clock)
+                if pixel < 0:
+                    finished = True
+                    break
                 cpu_pixel[cpu] = pixel
                 first = piece_offsets[pixel]
                 n_pieces = piece_offsets[pixel + 1] - first
@@ -454,22 +356,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
             if k < stop:
                 break  # the turn is over inside the pixel
             next_piece[cpu] = -1
-            task = current_task[process]
-            if position[process] == task_offsets[task + 1]:
-                current_task[process] = -1
-                if dynamic:
-                    break
-                if own_next[process] == own_offsets[process + 1] or not _has_pixels(
-                        schedule, own_next[process], own_offsets[process + 1]):
-                    finished = True
-                    break
-            if quantum > 0 and slice_used[cpu] >= quantum:
-                break
-            if clock - turn_start >= interleave_cycles:
+            back, finished = _after_pixel(system, schedule, queues, process, cpu)
+            if back or clock - turn_start >= interleave_cycles:
                 break
         if finished:
-            out_cycles[process, FINISH_CYCLES] = clock
-            running[cpu] = NO_PROCESS
+            _finish(system, out, process, cpu, clock)
             ours_left -= 1
         cpu_clock[cpu] = clock
     out.log_length[0] = logged
