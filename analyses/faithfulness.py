@@ -151,6 +151,8 @@ def _run_paragraph(summary: dict) -> list[str]:
         short.append(f"{p['trajectories']} trajectories instead of {budget['trajectories']}")
     if p["sobol"] < budget["sobol_base_samples"]:
         short.append("no Sobol indices" if not p["sobol"] else f"Sobol with N = {p['sobol']}")
+    if p["size"] < VERDICT_MIN_SIZE:
+        short.append(f"{p['size']} x {p['size']} pixels")
     return [f"{ran} {asked} So this page is short of it: {'; '.join(short)}. Its ranges and rankings hold for "
             "the scenes and design it names, not for the whole study.", ""]
 

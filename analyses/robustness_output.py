@@ -32,6 +32,7 @@ import pandas as pd
 
 from analyses.html import figure_png, render_page
 from analyses.output import csv_text, prepare_output_folder
+from analyses.robustness_size import VERDICT_MIN_SIZE
 from rtcommon.files import write_files_atomic
 from rtcommon.jsonio import plain
 
@@ -66,7 +67,8 @@ def study_budget(parameters: dict) -> dict:
     from tracer.scenes.catalog import PAPER_SCENES
 
     not_run = [scene for scene in PAPER_SCENES if scene not in parameters["scenes"]]
-    met = not not_run and parameters["trajectories"] >= BUDGET_TRAJECTORIES and parameters["sobol"] >= BUDGET_SOBOL
+    met = (not not_run and parameters["size"] >= VERDICT_MIN_SIZE and parameters["trajectories"] >= BUDGET_TRAJECTORIES
+           and parameters["sobol"] >= BUDGET_SOBOL)
     return {"scenes": list(PAPER_SCENES), "scenes_not_run": not_run, "trajectories": BUDGET_TRAJECTORIES,
             "morris_evaluations": BUDGET_TRAJECTORIES * (len(parameters["factors"]) + 1),
             "sobol_base_samples": BUDGET_SOBOL, "met": bool(met)}

@@ -13,7 +13,7 @@ from analyses.faithfulness import MECHANISMS, faithfulness_markdown, main, mecha
 from analyses.robustness_size import VERDICT_MIN_SIZE
 from analyses.robustness import ROBUSTNESS_EXPERIMENT, robustness
 from analyses.robustness_factors import FACTORS
-from analyses.robustness_output import robustness_summary
+from analyses.robustness_output import robustness_summary, study_budget
 
 
 @pytest.fixture(scope="module")
@@ -109,9 +109,10 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
 def test_the_page_states_the_run_against_the_budgeted_study(summary):
     """robustness.json records the budget (10 trajectories, 17 samples each over the 16 unknowns, Sobol N = 64,
     all five study scenes) and each scene's budgeted evaluations; the page of the 2-trajectory tetra study
-    without Sobol names the four scenes not run, the trajectories and the missing Sobol design, and a summary
-    of the full design says it is that study. Fails if study_budget leaves out the scenes not run
-    (``not_run = []``)."""
+    without Sobol names the four scenes not run, the trajectories, the missing Sobol design and the image below the verdict's
+    size, and a summary of the full design at 256 x 256 says it is that study, at half that size not. Fails
+    if study_budget leaves out the scenes not run (``not_run = []``) or the size
+    (``parameters["size"] >= VERDICT_MIN_SIZE and`` dropped)."""
     budget = summary["budget"]
     assert budget["scenes"] == ["balls", "tetra", "shell", "room", "fluid"]
     assert budget["scenes_not_run"] == ["balls", "shell", "room", "fluid"] and budget["met"] is False
@@ -119,15 +120,20 @@ def test_the_page_states_the_run_against_the_budgeted_study(summary):
     assert summary["scenes"]["tetra"]["n_evaluations_budgeted"] == budget["morris_evaluations"]
     text = faithfulness_markdown(summary)
     short = re.search(r"So this page is short of it: (.*?)\. ", text).group(1)
-    assert short == "not run on balls, shell, room, fluid; 2 trajectories instead of 10; no Sobol indices"
+    assert short == "not run on balls, shell, room, fluid; 2 trajectories instead of 10; no Sobol indices; 16 x 16 pixels"
     found = re.search(r"over (\d+) evaluations \(budgeted: (\d+)\)", text)
     assert [int(g) for g in found.groups()] == [summary["scenes"]["tetra"]["n_evaluations"], 10 * (len(FACTORS) + 1)]
 
     scenes = ["balls", "tetra", "shell", "room", "fluid"]
-    full = {**summary, "parameters": {**summary["parameters"], "scenes": scenes, "trajectories": 10, "sobol": 64},
+    full = {**summary, "parameters": {**summary["parameters"], "scenes": scenes, "trajectories": 10, "sobol": 64,
+                                      "size": VERDICT_MIN_SIZE},
             "scenes": {scene: summary["scenes"]["tetra"] for scene in scenes}}
     text = faithfulness_markdown(full)
     assert "This study is that study or larger." in text and "short of it" not in text
+    small = {**full, "parameters": {**full["parameters"], "size": VERDICT_MIN_SIZE // 2}}
+    assert study_budget(small["parameters"])["met"] is False
+    assert re.search(r"short of it: (.*?)\. ", faithfulness_markdown(small)).group(1) == (
+        f"{VERDICT_MIN_SIZE // 2} x {VERDICT_MIN_SIZE // 2} pixels")
     one_short = {**full, "parameters": {**full["parameters"], "scenes": scenes[1:]},
                  "scenes": {scene: summary["scenes"]["tetra"] for scene in scenes[1:]}}
     assert re.search(r"short of it: (.*?)\. ", faithfulness_markdown(one_short)).group(1) == "not run on balls"
