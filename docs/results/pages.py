@@ -93,6 +93,17 @@ per-process loads, so compare the verdicts, not the last digit.""")
 study's sequential time scaled to it, `fitted_seconds` what the fitted
 costs give, `relative_error` their relative difference (negative: the fit
 falls short).""")
+    page.text("## The fitted costs, and the time they leave unexplained")
+    calibration = summary["calibration"]
+    page.table(pd.DataFrame(calibration["fitted"])[["name", "reference", "cycles", "low", "high", "at_bound"]], stamp)
+    page.text("""Each fitted cost stays inside its prior range (`low` to `high` cycles,
+from the instruction count of its routine on the 21164; `docs/unknowns.md`);
+`at_bound` marks a cost the fit pushed against a bound of its range.""")
+    residuals = pd.DataFrame(calibration["residuals"])
+    page.table(residuals[["scene", "target_seconds", "fitted_seconds", "unexplained_seconds", "relative_error"]], stamp)
+    page.text("""`unexplained_seconds` is the study's time (scaled to this image) minus the
+fitted model's, with every cost inside its prior: the time our counters do not
+explain, shown here instead of being absorbed by one cost.""")
     page.text("## Verdicts at 8 processes")
     verdicts = pd.DataFrame(summary["verdicts"])
     page.table(verdicts[["scene", "best_mapping", "best_speedup_user", "best_speedup_real",
