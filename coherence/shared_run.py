@@ -29,11 +29,12 @@ from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES,
                                  MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
-from coherence.thread_streams import record_places, split_records
+from coherence.thread_streams import counter_address, record_places, split_records
 from rtcommon.validate import InputError, require_bool, require_number
+from tracer.trace.records import AUXILIARY_KIND
 
 __all__ = ["DEFAULT_INTERLEAVE_CYCLES", "PREFETCH_RUN_COLUMNS", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun",
-           "pixel_pieces", "shared_run_row", "simulate_shared_run"]
+           "TASK_COUNTER_COLUMNS", "pixel_pieces", "shared_run_row", "simulate_shared_run"]
 
 #: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
@@ -82,15 +83,27 @@ SHARED_RUN_COLUMNS = (("machine_misses", MC.MISSES), ("coherence_invalidations",
 PREFETCH_RUN_COLUMNS = (("prefetches_issued", 0), ("prefetches_useful", 1), ("prefetches_useless", 2))
 
 
+#: A run's task counter traffic (accesses of the auxiliary record kind: a dynamic mapping's hand-outs, see
+#: :mod:`coherence.shared_schedule`; ray-order runs' buffers are of that kind too): its accesses at the first
+#: level (one per task handed out), and its coherence invalidations and coherence misses summed over the levels.
+TASK_COUNTER_COLUMNS = (("task_counter_accesses", MC.ACCESSES),
+                        ("task_counter_invalidations", MC.COHERENCE_INVALIDATIONS),
+                        ("task_counter_coherence_misses", MC.COHERENCE_MISSES))
+
+
 def shared_run_row(shared: SharedResult) -> dict:
     """``<level>_machine_misses``, ``_coherence_invalidations``, ``_coherence_misses`` and
     ``_false_sharing_misses`` of a run, summed over the level's instances and record kinds; on a machine with
     prefetchers also ``<level>_prefetches_issued``, ``_useful`` and ``_useless`` (:data:`PREFETCH_RUN_COLUMNS`),
-    summed over the level's instances."""
+    summed over the level's instances; and the task counter's traffic (:data:`TASK_COUNTER_COLUMNS`; 0 under a
+    static mapping)."""
     totals = shared.level_counts()
     names = shared.machine.hierarchy.level_names
     row = {f"{name}_{column}": int(totals[level, index])
            for level, name in enumerate(names) for column, index in SHARED_RUN_COLUMNS}
+    counter = shared.counts[:, :, AUXILIARY_KIND].sum(axis=1)  # (L, counters)
+    row.update({column: int(counter[0, index] if column == "task_counter_accesses" else counter[:, index].sum())
+                for column, index in TASK_COUNTER_COLUMNS})
     if shared.prefetch_counts is not None:
         prefetched = shared.prefetch_counts.sum(axis=1)
         row.update({f"{name}_{column}": int(prefetched[level, index])
@@ -114,8 +127,9 @@ class SharedRun:
         instances (background reads included, as kind 0), with coherence
         invalidations, coherence misses and false-sharing misses.
     log : (ndarray, ndarray, ndarray) or None
-        With ``log=True``: address, hardware thread and piece index (-1: a
-        background read) of every access in the order the machine served it.
+        With ``log=True``: address, hardware thread and piece index
+        (:data:`coherence.shared_schedule.COUNTER_ACCESS`: a hand-out's access of
+        the task counter) of every access in the order the machine served it.
     """
 
     run: Run
@@ -220,13 +234,13 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     accesses = np.zeros((n_processes, n_levels, N_ACCESS_COLUMNS), dtype=np.int64)
     line_shift = line_size.bit_length() - 1
     background = machine.background(line_shift)
-    n_logged = _log_room(pieces, machine, log)
+    n_logged = _log_room(pieces, machine, log, distribution)
     out = SharedOutputs(out_cycles, out_placement, task_owner, accesses,
                         np.zeros(n_logged, dtype=np.uint64), np.zeros(n_logged, dtype=np.int64),
                         np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
     state.clock = int(run_shared_schedule(
         pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift,
-                              cpu_threads(hierarchy.n_cores, hierarchy.smt)),
+                              cpu_threads(hierarchy.n_cores, hierarchy.smt), counter_address(placed)),
         PixelCost(compute, latency),
         schedule_of(distribution),
         queues, background, out, float(q), thread_prefetchers(state)))
@@ -256,13 +270,13 @@ def _prefetch_counts(state: SharedState) -> tuple:
     return np.concatenate([counts, useless[..., None]], axis=-1), pending
 
 
-def _log_room(pieces: PixelPieces, machine: Machine, log: bool) -> int:
-    """Entries the access log needs: every piece once, plus background reads (0 without a log)."""
+def _log_room(pieces: PixelPieces, machine: Machine, log: bool, distribution: Distribution) -> int:
+    """Entries the access log needs: every piece once, plus a dynamic mapping's hand-outs (0 without a log)."""
     if not log:
         return 0
     if machine.background_load:
         raise InputError("simulate_shared_run: log=True is for runs without a background load")
-    return int(pieces.addresses.shape[0])
+    return int(pieces.addresses.shape[0]) + (distribution.n_tasks if distribution.dynamic else 0)
 
 
 def _run(trace, distribution, hierarchy: SharedHierarchy, cost: CostModel, machine: Machine, counters,

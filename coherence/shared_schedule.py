@@ -46,6 +46,19 @@ their layout address plus ``(p + 1) * span`` (``span`` from
 buffer are shared, and each record's accesses carry its bytes in the line
 (:func:`coherence.thread_streams.record_pieces`), so false sharing shows.
 
+**The task counter.** A dynamic mapping (DB) hands its tasks out through
+one shared counter: every task a process takes from the queue (take-ahead
+tasks included) is an atomic read-modify-write of the counter's
+:data:`coherence.thread_streams.COUNTER_BYTES` bytes at
+:attr:`SharedMachine.counter_address`, made at the hand-out on the thread
+the process runs on: one write access of the auxiliary record kind
+(:data:`tracer.trace.records.AUXILIARY_KIND`), so that the counter's line
+moves between cores (coherence misses and invalidations of that kind: DB's
+counter traffic). The operation waits for its line: it costs the latency of
+the level that served it (memory's if none did), counted as dispatch
+cycles, and is counted among the process's accesses. Static mappings never
+touch it.
+
 User time of a process = its compute cycles + its memory cycles + its
 dispatch waits; real time = when the last of ours finished.
 """
@@ -59,9 +72,16 @@ from numba import njit
 from cachesim.multicore import HITS, shared_access
 from cachesim.multicore_prefetch import prefetching_access
 from coherence.recost import READ_HITS, WRITE_HITS
-from coherence.scheduler import (COMPUTE_CYCLES, MEMORY_CYCLES, _after_pixel, _background_slice, _decide, _finish,
-                                 _lowest_clock_cpu, _next_pixel, _place, os_state)
+from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, MEMORY_CYCLES, _after_pixel, _background_slice,
+                                 _decide, _finish, _lowest_clock_cpu, _next_pixel, _place, os_state)
+from coherence.thread_streams import COUNTER_BYTES
 from rtcommon.jit import NO_REFCOUNTS
+from tracer.trace.records import AUXILIARY_KIND
+
+#: Piece index the access log gives a background read.
+BACKGROUND_READ = -1
+#: Piece index the access log gives an access of the task counter.
+COUNTER_ACCESS = -2
 
 
 
@@ -107,6 +127,9 @@ class SharedMachine(NamedTuple):
         log2 of the first level's line size.
     thread_of : ndarray of int64, shape (C,)
         The hardware thread that is the scheduler's CPU ``c``.
+    counter_address : int
+        First byte of the dynamic mappings' shared task counter
+        (:func:`coherence.thread_streams.counter_address`).
     """
 
     geometry: object
@@ -114,6 +137,7 @@ class SharedMachine(NamedTuple):
     state: object
     line_shift: int
     thread_of: np.ndarray
+    counter_address: int
 
 
 class SharedOutputs(NamedTuple):
@@ -135,7 +159,8 @@ class SharedOutputs(NamedTuple):
     log_threads : ndarray of int64, shape (M,) or (0,)
         Hardware thread of each logged access.
     log_pieces : ndarray of int64, shape (M,) or (0,)
-        Index into :class:`PixelPieces` of each logged access (-1: a background read).
+        Index into :class:`PixelPieces` of each logged access (:data:`BACKGROUND_READ`: a background read,
+        :data:`COUNTER_ACCESS`: a task hand-out's access of the counter).
     log_length : ndarray of int64, shape (1,)
         Accesses logged.
     """
@@ -229,14 +254,13 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     piece_writes = pieces.writes
     piece_private = pieces.private
     span = np.uint64(pieces.private_span)
+    counter = np.uint64(shared.counter_address)
     compute = cost.compute
     latency = cost.latency
     footprint_lines = background.footprint_lines
     out_cycles = out.cycles
     accesses = out.accesses
     log_addresses = out.log_addresses
-    log_threads = out.log_threads
-    log_pieces = out.log_pieces
     logging = log_addresses.shape[0] > 0
     system = loop.system
     cpu_clock = system.cpu_clock
@@ -246,7 +270,6 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     next_piece = loop.next_piece
     scratch = loop.scratch
     n_ours = out_cycles.shape[0]
-    n_levels = latency.shape[0] - 1
     counts = state.counts
     served = state.served
     first_instance = machine.instance_of[0]
@@ -279,10 +302,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                     else:
                         shared_access(thread, address, False, 0, 0, geometry, machine, state, access_clock, scratch)
                     if logging:
-                        log_addresses[logged] = address
-                        log_threads[logged] = thread
-                        log_pieces[logged] = -1
-                        logged += 1
+                        logged = _log(out, logged, address, thread, BACKGROUND_READ)
                 continue
             _place(system, out.placement, process, cpu)
 
@@ -294,7 +314,25 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
         previous_line = np.int64(-1)
         while True:
             if next_piece[cpu] < 0:  # the next pixel
+                handed_before = system.next_task[0]
                 pixel, clock = _next_pixel(system, schedule, out, process, cpu, clock)
+                for _ in range(system.next_task[0] - handed_before):  # each hand-out: the counter's atomic update
+                    access_clock += 1
+                    if prefetchers is not None:
+                        level_served, access_clock = prefetching_access(thread, counter, True, COUNTER_BYTES,
+                                                                        AUXILIARY_KIND, geometry, machine, state,
+                                                                        access_clock, prefetchers)
+                    else:
+                        level_served = shared_access(thread, counter, True, COUNTER_BYTES, AUXILIARY_KIND, geometry,
+                                                     machine, state, access_clock, scratch)
+                    if logging:
+                        logged = _log(out, logged, counter, thread, COUNTER_ACCESS)
+                    _count_access(accesses, process, level_served, True)
+                    wait = latency[level_served]
+                    clock += wait
+                    out_cycles[process, DISPATCH_CYCLES] += wait
+                    slice_used[cpu] += wait
+                    previous_line = np.int64(-1)
                 if pixel < 0:
                     finished = True
                     break
@@ -336,15 +374,8 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                                                  state, access_clock, scratch)
                 previous_line = line0 if (allocate0 or not is_write) else np.int64(-1)
                 if logging:
-                    log_addresses[logged] = address
-                    log_threads[logged] = thread
-                    log_pieces[logged] = k
-                    logged += 1
-                hit_column = WRITE_HITS if is_write else READ_HITS
-                for level in range(level_served):
-                    accesses[process, level, hit_column + 1] += 1
-                if level_served < n_levels:
-                    accesses[process, level_served, hit_column] += 1
+                    logged = _log(out, logged, address, thread, k)
+                _count_access(accesses, process, level_served, is_write)
                 cycles = latency[0] if is_write else latency[level_served]
                 memory += cycles
                 advance += share + cycles
@@ -367,4 +398,25 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     return access_clock
 
 
-__all__ = ["PixelPieces", "SharedMachine", "SharedOutputs", "cpu_threads", "run_shared_schedule"]
+@njit(cache=True, inline="always")
+def _log(out, logged, address, thread, piece):
+    """Log one access at entry ``logged`` of ``out``'s log; the next entry."""
+    out.log_addresses[logged] = address
+    out.log_threads[logged] = thread
+    out.log_pieces[logged] = piece
+    return logged + 1
+
+
+@njit(cache=True, inline="always")
+def _count_access(accesses, process, level_served, is_write):
+    """Count one access of ``process`` served by ``level_served`` (the level count: memory): a miss at
+    every level above, a hit there."""
+    hit_column = WRITE_HITS if is_write else READ_HITS
+    for level in range(level_served):
+        accesses[process, level, hit_column + 1] += 1
+    if level_served < accesses.shape[1]:
+        accesses[process, level_served, hit_column] += 1
+
+
+__all__ = ["BACKGROUND_READ", "COUNTER_ACCESS", "PixelPieces", "SharedMachine", "SharedOutputs", "cpu_threads",
+           "run_shared_schedule"]

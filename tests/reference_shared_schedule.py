@@ -18,6 +18,9 @@ instance per group of hardware threads sharing a level; no prefetcher here).
   accesses takes its compute cycles at once. After a pixel: a dynamic task that
   ended, a static process with nothing left, a slice over or Q reached end the turn.
 - Private kinds of process ``p`` lie at their layout address plus ``(p + 1) * span``.
+- Every task a dynamic process takes from the queue is a write of the task counter (4 bytes of the
+  auxiliary kind at coherence.thread_streams.counter_address) at the hand-out; it waits for the level
+  that served it (memory's if none), counted as dispatch cycles and among the process's accesses.
 
 Compute cycles in the tests are chosen so that every cost is a whole number of
 cycles: sums are then exact in any order and the clocks must agree exactly.
@@ -26,9 +29,11 @@ from collections import deque
 
 import numpy as np
 
-from coherence.thread_streams import record_pieces
+from coherence.shared_schedule import COUNTER_ACCESS
+from coherence.thread_streams import COUNTER_BYTES, counter_address, record_pieces
 from reference_multicore_prefetch import ReferenceThreads
 from reference_scheduler import ReferenceOS
+from tracer.trace.records import AUXILIARY_KIND
 
 
 def pixel_accesses(trace, placed, pixel, process, line_size):
@@ -58,7 +63,8 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
         ``compute``, ``memory``, ``dispatch``, ``finish`` (per process), ``cpu``,
         ``migrations``, ``task_owner``, ``accesses`` (n, L, 4: read hits, read misses,
         write hits, write misses), ``log`` (list of (address, thread, pixel, index in the
-        pixel) in the order the machine served them, pixel -1 for a background read: the
+        pixel) in the order the machine served them, pixel -1 for a background read and
+        COUNTER_ACCESS for a hand-out's write of the task counter: the
         turn order), ``reference`` (the ReferenceThreads: ``counts``, ``served``).
     """
     n = distribution.n_processes
@@ -85,6 +91,15 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
         caches.access(address, thread, write, kind, address, address + size)
         return int(np.flatnonzero(caches.served[thread] - before)[0])
 
+    def count(p, served, write):
+        """Process ``p``'s access served by level ``served``: a miss above, a hit there."""
+        column = 2 if write else 0
+        for level in range(min(served + 1, n_levels)):
+            result["accesses"][p, level, column + (level != served)] += 1
+        return latency[0] if write else latency[served]
+
+    counter = counter_address(placed)
+
     while not all(finished):
         cpu = system.lowest_clock_cpu(cpus)
         if cpu is None:
@@ -106,7 +121,15 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
         done = False
         while True:
             if state["pending"] is None:  # the next pixel
+                waiting = len(system.handout) if distribution.dynamic else 0
                 pixel = system.next_pixel(p, state, result)
+                for _ in range(waiting - (len(system.handout) if distribution.dynamic else 0)):
+                    served = access(thread, counter, COUNTER_BYTES, AUXILIARY_KIND, True)
+                    result["log"].append((counter, thread, COUNTER_ACCESS, -1))
+                    count(p, served, True)
+                    state["clock"] += latency[served]  # the atomic update waits for its line
+                    state["used"] += latency[served]
+                    result["dispatch"][p] += latency[served]
                 if pixel is None:
                     done = True
                     break
@@ -122,10 +145,7 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
                 index, (address, size, kind, write) = state["pending"].popleft()
                 served = access(thread, address, size, kind, write)
                 result["log"].append((address, thread, state["pixel"], index))
-                column = 2 if write else 0
-                for level in range(min(served + 1, n_levels)):
-                    result["accesses"][p, level, column + (level != served)] += 1
-                cycles = latency[0] if write else latency[served]
+                cycles = count(p, served, write)
                 result["memory"][p] += cycles
                 state["clock"] += state["share"] + cycles
                 state["used"] += state["share"] + cycles

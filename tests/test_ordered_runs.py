@@ -210,8 +210,8 @@ def _with_state_writes(segments, rows, n_records):
 def test_buffers_on_shared_levels_are_each_process_own(platform_setup):
     """Under DB on shared levels, every handed-out block's rays write the ray-state slots of the process that
     took it: the slot rows lie one spacing below process 0's buffers, marked private with the spacing between
-    copies, and no buffer line moves between cores (no coherence invalidation or miss of the auxiliary kind)
-    while each process writes its rays' states. Fails if the buffer accesses were not private (``private =
+    copies, and no buffer line moves between cores (no coherence invalidation or miss of the auxiliary kind
+    beyond the task counter's, at most one per hand-out) while each process writes its rays' states. Fails if the buffer accesses were not private (``private =
     pieces.private``: every process then shares one buffer) (checked, also with the flag assertion left out:
     the kind's coherence misses)."""
     from cachesim.multicore_state import ACCESSES, COHERENCE_INVALIDATIONS, COHERENCE_MISSES
@@ -230,8 +230,12 @@ def test_buffers_on_shared_levels_are_each_process_own(platform_setup):
     assert aux.sum() == trace.segments.n_segments and pieces.pieces.private[aux].all()
     assert pieces.pieces.private_span == buffers.spacing
     counts = run.shared.counts[:, :, AUXILIARY_KIND]
-    assert counts[0, :, ACCESSES].sum() == trace.segments.n_segments
-    assert counts[..., COHERENCE_INVALIDATIONS].sum() == 0 and counts[..., COHERENCE_MISSES].sum() == 0
+    # the auxiliary kind also holds the task counter's writes, one per hand-out (coherence.shared_schedule)
+    assert counts[0, :, ACCESSES].sum() == trace.segments.n_segments + distribution.n_tasks
+    # every counter access is a write, so one cache holds its line at a time: a hand-out invalidates one copy
+    # at most; all else of the kind is the buffers', which must move no line between cores
+    assert counts[..., COHERENCE_INVALIDATIONS].sum() <= distribution.n_tasks
+    assert counts[..., COHERENCE_MISSES].sum() <= distribution.n_tasks
     assert (run.run.processes["tasks"] > 0).sum() > 1  # the blocks went to several processes
 
 

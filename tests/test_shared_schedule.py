@@ -10,12 +10,13 @@ from coherence.cost import get_cost_model
 from coherence.layout import get_layout
 from coherence.mappings import get_mapping
 from coherence.shared_run import pixel_pieces, simulate_shared_run
-from coherence.shared_schedule import cpu_threads
+from coherence.shared_schedule import COUNTER_ACCESS, cpu_threads
 from coherence.simulation import Machine
-from coherence.thread_streams import PRIVATE_KINDS
+from coherence.thread_streams import COUNTER_BYTES, PRIVATE_KINDS
 from coherence.studies import place_layout
 from test_thread_streams import SCENE_KINDS, synthetic_trace
 from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack
+from tracer.trace.records import AUXILIARY_KIND
 
 COST = get_cost_model("modern")
 
@@ -33,10 +34,14 @@ def tiny_machine(smt, shared_by, seed, prefetchers=(None, None)):
 
 
 def replay_log(run, machine, pieces):
-    """The logged order replayed access by access through cachesim.multicore.simulate_threads."""
+    """The logged order replayed access by access through cachesim.multicore.simulate_threads (a task counter
+    access: a write of its 4 bytes, of the auxiliary kind)."""
     addresses, threads, piece = run.log
-    return simulate_threads(addresses, threads, machine, writes=pieces.writes[piece], sizes=pieces.sizes[piece],
-                            kinds=pieces.kinds[piece])
+    counter = piece == COUNTER_ACCESS
+    writes = np.where(counter, True, pieces.writes[piece])
+    sizes = np.where(counter, COUNTER_BYTES, pieces.sizes[piece])
+    kinds = np.where(counter, AUXILIARY_KIND, pieces.kinds[piece]).astype(np.uint8)
+    return simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes, kinds=kinds)
 
 
 NEXT_LINE = Prefetcher("next-line", degree=2, distance=1, trigger="access")
@@ -71,7 +76,9 @@ def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processe
     run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1,
                               compute=compute, log=True)
     pieces = pixel_pieces(trace, placed, 32)
-    assert run.log[0].shape == pieces.addresses.shape  # every access once
+    hand_outs = distribution.n_tasks if distribution.dynamic else 0
+    assert np.array_equal(np.sort(run.log[2][run.log[2] >= 0]), np.arange(pieces.addresses.size))  # each once
+    assert (run.log[2] == COUNTER_ACCESS).sum() == hand_outs
     reference = replay_log(run, machine, pieces)
     np.testing.assert_array_equal(run.shared.counts, reference.counts)
     np.testing.assert_array_equal(run.shared.served, reference.served)
@@ -322,7 +329,8 @@ def test_event_loop_equals_the_plain_python_reference(seed, q):
     np.testing.assert_array_equal(run.run.task_owner, reference["task_owner"])
     addresses, threads, piece = run.log
     logged = [(int(a), int(t), int(k)) for a, t, k in zip(addresses, threads, piece)]
-    expected = [(a, t, int(pieces.piece_offsets[pixel]) + index) for a, t, pixel, index in reference["log"]]
+    expected = [(a, t, pixel if pixel == COUNTER_ACCESS else int(pieces.piece_offsets[pixel]) + index)
+                for a, t, pixel, index in reference["log"]]
     assert logged == expected
     np.testing.assert_array_equal(run.run.miss_counts.accesses, reference["accesses"])
     np.testing.assert_array_equal(run.shared.counts[..., :11], reference["reference"].counts)
@@ -359,9 +367,10 @@ def scene_only_trace(width, height, seed):
 
 
 @pytest.mark.parametrize("seed, mapping, scheduler", [(0, "S", "static"), (1, "P", "shared-queue"),
-                                                      (2, "DB", "shared-queue"), (3, "R", "static")])
+                                                      (2, "B", "shared-queue"), (3, "R", "static")])
 def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(seed, mapping, scheduler):
-    """Every level per thread, one process per hardware thread, Q = 1e12 and no line written by two processes:
+    """Every level per thread, one process per hardware thread, Q = 1e12, static mappings (a dynamic one also
+    writes the shared task counter, which private caches do not model) and no line written by two processes:
     each process's cycles, hits and misses and the task owners equal coherence.simulation.simulate_run on
     private caches (private copies lie a multiple of every level's set span apart, so they map to the same sets).
     Mutation: ``level_served = 0`` -> ``level_served = 1`` in _event_loop's same-line read path."""
@@ -385,3 +394,28 @@ def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(see
     for column in columns:
         np.testing.assert_array_equal(shared.processes[column], private.processes[column], err_msg=column)
     np.testing.assert_array_equal(shared.task_owner, private.task_owner)
+
+
+@pytest.mark.parametrize("mapping", ["DB", "S"])
+def test_db_hands_out_every_task_through_the_shared_counter(mapping):
+    """Four cores with private L1s and a shared L2, 8x8 pixels, 4 processes: under DB (2x2 blocks) every task is one access of
+    the task counter (shared_run_row's task_counter_accesses = the tasks) and its line moves between the L1s
+    (coherence invalidations of the auxiliary kind > 0); a static mapping never touches it. Mutation:
+    ``range(system.next_task[0] - handed_before)`` -> ``range(0)`` in _event_loop."""
+    from coherence.shared_run import shared_run_row
+    from coherence.study_mappings import DynamicBlock
+
+    trace = synthetic_trace(8, 8, seed=5)
+    placed = place_layout(get_layout("alpha1997"), trace)
+    hierarchy = Hierarchy((CacheLevel("L1", 1024, 32, 2, "lru", latency=1),
+                           CacheLevel("L2", 8192, 32, 4, "lru", latency=6)), memory_latency=40, name="four")
+    machine = SharedHierarchy(hierarchy, n_cores=4, smt=1, shared_by=("thread", "machine"))
+    distribution = (DynamicBlock(block=2) if mapping == "DB" else get_mapping(mapping)).build(8, 8, 4)
+    run = simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=4, quantum_cycles=0),
+                              interleave_cycles=50, compute=np.full(64, 40.0))
+    row = shared_run_row(run.shared)
+    if mapping == "S":
+        assert row["task_counter_accesses"] == row["task_counter_coherence_misses"] == 0
+        return
+    assert row["task_counter_accesses"] == distribution.n_tasks
+    assert row["task_counter_invalidations"] > 0
