@@ -219,8 +219,9 @@ so at 8 threads a thread returns to a line it shared, at 32 its next pixel
 lies on another line and it never returns. DB's counter is written once per
 task; a copy evicted before another thread's write is a capacity miss, not a
 coherence miss. These counter figures come from the thread streams' idealised
-round-robin hand-outs; DB's runs in `coherence report --platform` do not yet
-access the counter.""")
+round-robin hand-outs; the schedule's own DB runs follow.""")
+    if "task_counter_accesses" in wide:
+        _counter_section(page, wide, stamp)
     page.text("## Frame-buffer pixel size (S and P)")
     page.table(sharing[sharing["mapping"].isin(["S", "P"])][["frame_buffer_bytes", "mapping", "threads", "smt",
                                                              "false_sharing_misses", "memory_cycles"]]
@@ -240,6 +241,19 @@ gained more than the halved capacity cost.""")
         _prefetch_section(page, prefetch_folder)
     page.write(pages / "today.md")
     return "today"
+
+
+def _counter_section(page: _Page, wide: pd.DataFrame, stamp: dict) -> None:
+    """DB's task-counter traffic in the report's runs on the shared levels (its ``task_counter_*`` columns)."""
+    db = wide[wide["mapping"] == "DB"]
+    page.text("## DB's counter in the schedule's runs")
+    page.table(db[["n_processes", "task_counter_accesses", "task_counter_invalidations",
+                   "task_counter_coherence_misses", "dispatch_loss", "speedup_user"]], stamp)
+    page.text("""In the report's runs every task a DB process takes is an atomic read-modify-write of the
+shared counter's line on its hardware thread, through the shared levels: the accesses are the hand-outs, the
+invalidations the copies other threads' caches lost to them, and a coherence miss a hand-out that found its
+line taken away by another thread's (both summed over the levels, so a hand-out can count at L1 and L2). The
+hand-out waits for the line, so its latency is dispatch time.""")
 
 
 def _prefetch_section(page: _Page, folder: Path) -> None:
