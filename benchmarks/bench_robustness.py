@@ -57,6 +57,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from analyses.robustness import ROBUSTNESS_EXPERIMENT, SOBOL_FACTORS, robustness  # noqa: E402
 from analyses.robustness_factors import FACTORS  # noqa: E402
+from analyses.robustness_output import BUDGET_SOBOL, BUDGET_TRAJECTORIES  # noqa: E402
 from analyses.robustness_size import check_sizes  # noqa: E402
 from coherence.unknowns import TREE_VARIANTS  # noqa: E402
 from tracer.scenes.catalog import PAPER_SCENES  # noqa: E402
@@ -110,8 +111,6 @@ def makespan(durations, cores: int) -> float:
 
 MORRIS_TARGET_SECONDS = 20 * 60.0
 SOBOL_TARGET_SECONDS = 60 * 60.0
-BUDGET_TRAJECTORIES = 10
-BUDGET_SOBOL = 64
 CORES = 2
 #: What is projected per phase: wall seconds at the measured rate, CPU seconds, seconds on 2 idle cores.
 RATES = ("seconds", "cpu_seconds", "two_core_seconds")

@@ -44,12 +44,13 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import asdict, dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
 from rtcommon.validate import InputError
 
-__all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts",
+__all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts", "ReplayKey",
            "fixed_schedule", "first_cpus", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT",
            "BACKGROUND_FIELDS"]
 
@@ -193,6 +194,18 @@ def _on_cpus(run, cpus):
     return replace(run, processes=run.processes.assign(cpu=np.asarray(cpus, dtype=np.int64)))
 
 
+class ReplayKey(NamedTuple):
+    """What a run replays (:func:`coherence.studies.study` builds it): equal keys, equal runs.
+
+    ``details`` holds the digests of each process's pixels (static) or of
+    the tasks, their order and hand-out costs (dynamic).
+    """
+
+    dynamic: bool
+    n_processes: int
+    details: tuple
+
+
 class RunStore:
     """Runs of one trace kept between studies, to re-cost or reuse instead of simulating.
 
@@ -245,15 +258,13 @@ class RunStore:
     def keys(replay_key, hierarchy, layout, machine, cost, compute) -> tuple:
         """The key of what decides a run's counts, the key of its costs, and its processes' first CPUs.
 
-        ``replay_key`` is :func:`coherence.studies.study`'s: its first two
-        items say whether the distribution is dynamic and how many processes
-        it has. The first CPUs are :func:`first_cpus` for a run with a fixed
+        ``replay_key`` is a :class:`ReplayKey`. The first CPUs are :func:`first_cpus` for a run with a fixed
         schedule, None for any other.
         """
         levels = tuple(replace(level, latency=0.0) for level in hierarchy.levels)
         tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=0.0)
-        dynamic, n = replay_key[0] == "dynamic", int(replay_key[1])
-        fixed = _fixed(dynamic, n, machine)
+        n = int(replay_key.n_processes)
+        fixed = _fixed(bool(replay_key.dynamic), n, machine)
         fields = {k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}
         if fixed:  # the other users run on CPUs of their own
             fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS}

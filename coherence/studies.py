@@ -21,7 +21,7 @@ from coherence.layout import DEFAULT_LAYOUT, MemoryLayout, PlacedLayout, get_lay
 from coherence.mappings import DEFAULT_MAPPINGS, get_mapping
 from coherence.metrics import add_speedups, run_summary
 from coherence.pixel_lines import SHARED_LINES_BUDGET, pixel_lines
-from coherence.recost import RunStore
+from coherence.recost import ReplayKey, RunStore
 from coherence.shared_run import SharedLevels, pixel_pieces, shared_run_row, simulate_shared_run
 from coherence.simulation import Machine, simulate_run
 from rtcommon.validate import InputError, require_int
@@ -305,7 +305,7 @@ def simulate_stored(trace_folder: str, distribution, hierarchy, placed, cost, ma
     return simulate_run(_STORED[key], distribution, hierarchy, placed, cost, machine, compute=compute)
 
 
-def _replay_key(distribution) -> tuple:
+def _replay_key(distribution) -> ReplayKey:
     """What a run replays: equal keys, equal runs (every count and cycle).
 
     A static run depends only on each process's pixels in order (how they
@@ -316,13 +316,15 @@ def _replay_key(distribution) -> tuple:
         return hashlib.blake2b(np.ascontiguousarray(array, dtype=np.int64).tobytes(), digest_size=16).digest()
 
     if distribution.dynamic:
-        return ("dynamic", distribution.n_processes, float(distribution.dispatch_cycles),
-                int(distribution.take_ahead), digest(distribution.task_offsets), digest(distribution.task_pixels))
+        return ReplayKey(True, int(distribution.n_processes),
+                         (float(distribution.dispatch_cycles), int(distribution.take_ahead),
+                          digest(distribution.task_offsets), digest(distribution.task_pixels)))
     owner = np.asarray(distribution.task_process, dtype=np.int64)
     pixel_owner = np.repeat(owner, distribution.task_lengths)
     order = np.argsort(pixel_owner, kind="stable")  # each process's pixels, in its render order
-    return ("static", distribution.n_processes, digest(distribution.task_pixels[order]),
-            digest(np.bincount(pixel_owner, minlength=distribution.n_processes)))
+    return ReplayKey(False, int(distribution.n_processes),
+                     (digest(distribution.task_pixels[order]),
+                      digest(np.bincount(pixel_owner, minlength=distribution.n_processes))))
 
 
 def _progress(total: int, enabled: bool):

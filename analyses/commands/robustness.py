@@ -15,10 +15,11 @@ is sampled over its documented range by Morris trajectories (SALib, six
 levels). Each scene's trace is rendered once per tree variant (study-era
 workload) and every sample replays the trace of its variant: every mapping
 at 1 and 8 processes, all sharing the
-sample's values and seeds. A run that an earlier sample differing only in
-costs already simulated is re-costed from its miss counts when its schedule
-does not depend on cycles (one process per CPU, a static mapping or one
-process); the rest are simulated. With --sobol N,
+sample's values and seeds. A run whose schedule does not depend on cycles
+(one process per CPU, a static mapping or one process) is re-costed from the
+miss counts of an earlier sample that differs from it only in costs or in
+the other users' count and footprint (they run on CPUs of their own); the
+rest are simulated. With --sobol N,
 first-order and total Sobol indices of the top four unknowns follow.
 The 8-process losses and the verdict need --size >= 256. The size check
 simulates the one-process B - S and DB - S of 5 samples at half and twice
