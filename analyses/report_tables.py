@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from analyses.plots import _bytes_text
 from coherence.metrics import DECOMPOSITION_COLUMNS
 from rtcommon.jsonio import plain, round_number
 
@@ -163,14 +164,6 @@ def thread_view_note(inputs) -> str | None:
     sizes = ", ".join(f"{level.name} {_bytes_text(level.size)}" for level in inputs.hierarchy.levels)
     return (f"thread view {inputs.hierarchy.name}: one hardware thread's private copy of each level, cut to its "
             f"share ({sizes}), without coherence or prefetchers; the runs use the platform's shared levels")
-
-
-def _bytes_text(size: int) -> str:
-    """``32768`` -> ``32 KB``; sizes that are not whole kilobytes in bytes."""
-    for unit, factor in (("MB", 1 << 20), ("KB", 1 << 10)):
-        if size % factor == 0:
-            return f"{size // factor} {unit}"
-    return f"{size} B"
 
 
 def miss_map_summary(misses, dtype) -> dict:

@@ -114,8 +114,8 @@ def test_whatif_cli_varies_a_platform(tmp_path, capsys):
 def test_whatif_prefetch_on_and_off_run_on_the_shared_levels(tmp_path, capsys):
     """``coherence whatif --platform apple-m1 --grid prefetch=on,off``: the "on" point's prefetch columns are
     those of simulate_shared_run on the variant's shared levels (issued > 0, issued >= useful + useless), the
-    "off" point's are 0, and its hit rates are the base platform's run. Mutations: ``if prefetching:`` ->
-    ``if False:`` before the access loop's prefetching_access in coherence/shared_schedule.py (no prefetch
+    "off" point's are 0, and its hit rates are the base platform's run. Mutations: ``if prefetchers is not None:``
+    -> ``if False:`` before the access loop's prefetching_access in coherence/shared_schedule.py (no prefetch
     issued); drop ``table[prefetched] = ...fillna(0)`` in run_whatif (the off point's columns are empty); ``timing
     = []`` in evaluate_point (no user_seconds_max)."""
     import numpy as np

@@ -65,7 +65,7 @@ def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processe
     prefetches issued, useful, useless and pending of each instance) equals simulate_threads replaying the order
     the kernel served the accesses in, with the same prefetchers; each process's per-level counts sum to the
     machine's. Mutations: ``shared_access(thread, address, is_write, ...`` -> ``shared_access(0, address,
-    is_write, ...`` in _event_loop; ``if prefetching:`` -> ``if False:`` before the access loop's
+    is_write, ...`` in _event_loop; ``if prefetchers is not None:`` -> ``if False:`` before the access loop's
     prefetching_access (the prefetch cases then fail)."""
     trace = synthetic_trace(7, 5, seed=seed)
     placed = place_layout(get_layout("alpha1997"), trace)
