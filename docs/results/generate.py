@@ -49,6 +49,18 @@ JOBS = {
                       "zen4-7950x"],
     "today-prefetch": ["whatif", "--scene", "balls", "--platform", "zen4-7950x", "--grid", "prefetch=on,off",
                        "--size", "{today_size}"],
+    # the ray-order page (docs/results/ray_orders_page.py): the report's section on both machines, the
+    # whatif --orders grids; sizes fixed so that each runs in minutes on 2 cores
+    "orders-report": ["report", "balls", "--workload", "pathtrace", "--spp", "4", "--size", "256",
+                      "--mappings", "P", "--processes", "8"],
+    "orders-report-today": ["report", "balls", "--workload", "pathtrace", "--spp", "4", "--size", "256",
+                            "--mappings", "P", "--processes", "8", "--platform", "zen4-7950x"],
+    "orders-whatif-balls": ["whatif", "--orders", "--grid", "spp=1,4", "--grid", "max_depth=2,5",
+                            "--grid", "L1.size=8KB,64KB", "--size", "32"],
+    "orders-whatif-tetra": ["whatif", "--orders", "--scene", "tetra", "--grid", "scene_size=6,10",
+                            "--grid", "spp=1,4", "--grid", "L1.size=8KB,64KB", "--size", "32"],
+    "orders-whatif-tetra-l3": ["whatif", "--orders", "--scene", "tetra", "--grid", "scene_size=10",
+                               "--grid", "L3.size=1MB,4MB", "--size", "128"],
 }
 
 
