@@ -30,15 +30,18 @@ from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES,
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
 from coherence.thread_streams import counter_address, record_places, split_records
-from rtcommon.validate import InputError, require_bool, require_number
+from rtcommon.validate import InputError, require_number
 from tracer.trace.records import AUXILIARY_KIND
 
-__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "PREFETCH_RUN_COLUMNS", "SHARED_RUN_COLUMNS", "SharedLevels", "SharedRun",
-           "TASK_COUNTER_COLUMNS", "pixel_pieces", "shared_run_row", "simulate_shared_run"]
+__all__ = ["DEFAULT_INTERLEAVE_CYCLES", "PREFETCH_RUN_COLUMNS", "RECORDS", "SHARED_RUN_COLUMNS", "SharedLevels",
+           "SharedRun", "TASK_COUNTER_COLUMNS", "pixel_pieces", "shared_run_row", "simulate_shared_run"]
 
 #: ``Q`` of a run unless told otherwise: the cycles a hardware thread runs
 #: before the thread whose clock is lowest takes over (see :mod:`coherence.shared_schedule`).
 DEFAULT_INTERLEAVE_CYCLES = 1000
+
+#: What :func:`simulate_shared_run` can also return, named in its ``record``.
+RECORDS = ("log", "pixel_misses")
 
 @dataclass(frozen=True)
 class SharedLevels:
@@ -127,7 +130,7 @@ class SharedRun:
         instances (background reads included, as kind 0), with coherence
         invalidations, coherence misses and false-sharing misses.
     log : (ndarray, ndarray, ndarray) or None
-        With ``log=True``: address, hardware thread and piece index
+        With ``"log"`` in ``record``: address, hardware thread and piece index
         (:data:`coherence.shared_schedule.COUNTER_ACCESS`: a hand-out's access of
         the task counter) of every access in the order the machine served it.
     """
@@ -167,7 +170,7 @@ def pixel_pieces(trace, placed: PlacedLayout, line_size: int) -> PixelPieces:
 def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHierarchy, placed: PlacedLayout,
                         cost: CostModel, machine: Machine, *, interleave_cycles: float = DEFAULT_INTERLEAVE_CYCLES,
                         compute: np.ndarray | None = None, pieces: PixelPieces | None = None,
-                        log: bool = False) -> SharedRun:
+                        record: tuple = ()) -> SharedRun:
     """Simulate one distribution of a trace on the hardware threads of a shared hierarchy.
 
     Parameters
@@ -190,8 +193,11 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
         Compute cycles per pixel (saves time over many runs).
     pieces : PixelPieces, optional
         :func:`pixel_pieces` of this trace, layout and first-level line size (saves time over many runs).
-    log : bool
-        Also return the order the machine served the accesses in (for tests; memory per access).
+    record : tuple of str
+        What else to return (:data:`RECORDS`): ``"log"``, the order the machine served the accesses in
+        (``SharedRun.log``; for tests, memory per access); ``"pixel_misses"``, each pixel's misses per level
+        on the shared levels (``run.pixel_misses``, (H, W, L): the misses of the pixel's own accesses, made by
+        the thread that replayed them; the task counter's accesses belong to no pixel).
 
     Returns
     -------
@@ -212,7 +218,9 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
         raise InputError(f"distribution is for {distribution.width}x{distribution.height} pixels, "
                          f"the trace for {trace.width}x{trace.height}")
     q = require_number("interleave_cycles", interleave_cycles, 1)
-    require_bool("log", log)
+    if isinstance(record, str) or not isinstance(record, (tuple, list)) or not set(record) <= set(RECORDS):
+        raise InputError(f"record must be a tuple of {', '.join(map(repr, RECORDS))}, got {record!r}")
+    log, pixel_misses = "log" in record, "pixel_misses" in record
     n_pixels = trace.width * trace.height
     counters = np.asarray(trace.counters)
     compute = pixel_compute(trace, cost, compute, COUNTER_NAMES)
@@ -237,7 +245,8 @@ def simulate_shared_run(trace, distribution: Distribution, hierarchy: SharedHier
     n_logged = _log_room(pieces, machine, log, distribution)
     out = SharedOutputs(out_cycles, out_placement, task_owner, accesses,
                         np.zeros(n_logged, dtype=np.uint64), np.zeros(n_logged, dtype=np.int64),
-                        np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64))
+                        np.zeros(n_logged, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                        np.zeros((n_pixels if pixel_misses else 0, n_levels), dtype=np.int64))
     state.clock = int(run_shared_schedule(
         pieces, SharedMachine(state.geometry, state.machine_geometry, state.arrays, line_shift,
                               cpu_threads(hierarchy.n_cores, hierarchy.smt), counter_address(placed)),
@@ -275,7 +284,7 @@ def _log_room(pieces: PixelPieces, machine: Machine, log: bool, distribution: Di
     if not log:
         return 0
     if machine.background_load:
-        raise InputError("simulate_shared_run: log=True is for runs without a background load")
+        raise InputError("simulate_shared_run: record=('log',) is for runs without a background load")
     return int(pieces.addresses.shape[0]) + (distribution.n_tasks if distribution.dynamic else 0)
 
 
@@ -317,4 +326,5 @@ def _run(trace, distribution, hierarchy: SharedHierarchy, cost: CostModel, machi
     # Never re-costable: which thread's turn comes next, and so what the shared levels hold, follows the clocks.
     miss_counts = MissCounts(accesses.copy(), np.zeros(n_processes, np.int64), by_process, tuple(COUNTER_NAMES),
                              False)
-    return Run(pd.DataFrame(frame), task_owner, float(cycles[:, FINISH_CYCLES].max()), None, miss_counts)
+    per_pixel = out.pixel_misses.reshape(trace.height, trace.width, -1) if out.pixel_misses.shape[0] else None
+    return Run(pd.DataFrame(frame), task_owner, float(cycles[:, FINISH_CYCLES].max()), per_pixel, miss_counts)

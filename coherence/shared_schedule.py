@@ -163,6 +163,11 @@ class SharedOutputs(NamedTuple):
         :data:`COUNTER_ACCESS`: a task hand-out's access of the counter).
     log_length : ndarray of int64, shape (1,)
         Accesses logged.
+    pixel_misses : ndarray of int64, shape (P, L), or (0, L)
+        With a row per pixel: the misses of each pixel's own accesses at each level (an access served by
+        level ``l`` misses at every level above it), made by whichever thread replayed them; a task
+        hand-out's access of the counter belongs to no pixel. Summed over a process's pixels: its misses in
+        ``accesses`` less those of its counter accesses.
     """
 
     cycles: np.ndarray
@@ -173,6 +178,7 @@ class SharedOutputs(NamedTuple):
     log_threads: np.ndarray
     log_pieces: np.ndarray
     log_length: np.ndarray
+    pixel_misses: np.ndarray
 
 
 def cpu_threads(n_cores: int, smt: int) -> np.ndarray:
@@ -262,6 +268,8 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     accesses = out.accesses
     log_addresses = out.log_addresses
     logging = log_addresses.shape[0] > 0
+    pixel_misses = out.pixel_misses
+    mapping_pixels = pixel_misses.shape[0] > 0
     system = loop.system
     cpu_clock = system.cpu_clock
     slice_used = system.slice_used
@@ -376,6 +384,9 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 if logging:
                     logged = _log(out, logged, address, thread, k)
                 _count_access(accesses, process, level_served, is_write)
+                if mapping_pixels:
+                    for level in range(level_served):
+                        pixel_misses[pixel, level] += 1
                 cycles = latency[0] if is_write else latency[level_served]
                 memory += cycles
                 advance += share + cycles

@@ -65,7 +65,9 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
         write hits, write misses), ``log`` (list of (address, thread, pixel, index in the
         pixel) in the order the machine served them, pixel -1 for a background read and
         COUNTER_ACCESS for a hand-out's write of the task counter: the
-        turn order), ``reference`` (the ReferenceThreads: ``counts``, ``served``).
+        turn order), ``pixel_misses`` (P, L: the misses of each pixel's own accesses per level, an
+        access served by level ``l`` missing at every level above; counter writes belong to no pixel),
+        ``reference`` (the ReferenceThreads: ``counts``, ``served``).
     """
     n = distribution.n_processes
     levels = machine.hierarchy.levels
@@ -83,6 +85,7 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
     result = system.result()
     result["accesses"] = np.zeros((n, n_levels, 4), dtype=np.int64)
     result["log"] = []
+    result["pixel_misses"] = np.zeros((trace.width * trace.height, n_levels), dtype=np.int64)
     finished = [False] * n
 
     def access(thread, address, size, kind, write):
@@ -145,6 +148,7 @@ def reference_shared_schedule(trace, distribution, machine, placed, compute, os_
                 index, (address, size, kind, write) = state["pending"].popleft()
                 served = access(thread, address, size, kind, write)
                 result["log"].append((address, thread, state["pixel"], index))
+                result["pixel_misses"][state["pixel"], :served] += 1
                 cycles = count(p, served, write)
                 result["memory"][p] += cycles
                 state["clock"] += state["share"] + cycles

@@ -74,7 +74,7 @@ def test_q1_equals_the_interleaved_replay_of_its_order(seed, mapping, n_processe
     os_machine = Machine(n_cpus=machine.n_threads, quantum_cycles=400.0, scheduler=scheduler, switch_cycles=3.0)
     compute = np.random.default_rng(seed).uniform(0, 50, trace.width * trace.height)
     run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1,
-                              compute=compute, log=True)
+                              compute=compute, record=("log",))
     pieces = pixel_pieces(trace, placed, 32)
     hand_outs = distribution.n_tasks if distribution.dynamic else 0
     assert np.array_equal(np.sort(run.log[2][run.log[2] >= 0]), np.arange(pieces.addresses.size))  # each once
@@ -104,7 +104,7 @@ def test_larger_q_still_replays_exactly_and_keeps_each_process_in_order():
     machine = tiny_machine(2, ("thread", "machine"), 7)
     distribution = get_mapping("P").build(6, 6, 4)
     run = simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=4, quantum_cycles=0),
-                              interleave_cycles=200, compute=np.full(36, 30.0), log=True)
+                              interleave_cycles=200, compute=np.full(36, 30.0), record=("log",))
     pieces = pixel_pieces(trace, placed, 32)
     np.testing.assert_array_equal(run.shared.counts, replay_log(run, machine, pieces).counts)
     piece = run.log[2]
@@ -172,8 +172,8 @@ def test_hand_checked_false_sharing_needs_fine_interleaving(q, false_sharing):
 
 
 def test_refusals_name_the_field():
-    """A machine with the wrong CPU count, page placement or Q is refused in one line.
-    Mutation: drop the n_cpus check in simulate_shared_run."""
+    """A machine with the wrong CPU count, page placement or Q, or an unknown thing to record, is refused in one
+    line. Mutation: drop the n_cpus check in simulate_shared_run; for ``record``: drop its check there."""
     from coherence.page_placement import PagePlacement
     from rtcommon.validate import InputError
 
@@ -188,6 +188,9 @@ def test_refusals_name_the_field():
     with pytest.raises(InputError, match="virtual addresses"):
         simulate_shared_run(trace, distribution, machine, placed, COST,
                             Machine(n_cpus=2, page_placement=PagePlacement("random")))
+    for record in ("pixel_misses", ("log", "misses")):
+        with pytest.raises(InputError, match="record must be a tuple of 'log', 'pixel_misses'"):
+            simulate_shared_run(trace, distribution, machine, placed, COST, Machine(n_cpus=2), record=record)
 
 
 def test_cpus_go_over_the_cores_before_their_smt_siblings():
@@ -306,7 +309,7 @@ def run_both(seed, q, background=0):
                          background_footprint=96, background_seed=seed)
     compute = whole_cycle_compute(trace, placed, rng)
     run = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=q,
-                              compute=compute, log=not background)
+                              compute=compute, record=("pixel_misses",) if background else ("log", "pixel_misses"))
     reference = reference_shared_schedule(trace, distribution, machine, placed, compute, os_machine, q)
     return run, reference, pixel_pieces(trace, placed, 32), machine
 
@@ -317,9 +320,11 @@ def test_event_loop_equals_the_plain_python_reference(seed, q):
     """On seeded random tiny machines (1-3 cores, SMT on or off, shared or private levels, up to twice as many
     processes as threads, static or dynamic mappings, either scheduler, slices, switches) every process's
     compute, memory, dispatch and finish cycles, first CPU, migrations and tasks, every access in the order the
-    machine served it (so the turn order), each process's hits and misses per level and every instance's counts
-    equal tests/reference_shared_schedule.py. Mutation: ``clock + advance - turn_start < interleave_cycles`` ->
-    ``clock - turn_start < interleave_cycles`` in _event_loop's access loop (a turn runs its pixel to the end)."""
+    machine served it (so the turn order), each process's hits and misses per level, each pixel's misses per
+    level and every instance's counts equal tests/reference_shared_schedule.py. Mutation: ``clock + advance -
+    turn_start < interleave_cycles`` -> ``clock - turn_start < interleave_cycles`` in _event_loop's access loop (a
+    turn runs its pixel to the end); for the pixels' misses alone: ``pixel_misses[pixel, level] += 1`` ->
+    ``pixel_misses[pixel, 0] += 1`` in _event_loop."""
     run, reference, pieces, machine = run_both(seed, q)
     processes = run.run.processes
     for column in ("compute", "memory", "dispatch", "finish"):
@@ -333,20 +338,24 @@ def test_event_loop_equals_the_plain_python_reference(seed, q):
                 for a, t, pixel, index in reference["log"]]
     assert logged == expected
     np.testing.assert_array_equal(run.run.miss_counts.accesses, reference["accesses"])
+    np.testing.assert_array_equal(run.run.pixel_misses.reshape(-1, len(machine.hierarchy.levels)),
+                                  reference["pixel_misses"])
     np.testing.assert_array_equal(run.shared.counts[..., :11], reference["reference"].counts)
     np.testing.assert_array_equal(run.shared.served, reference["reference"].served)
 
 
 @pytest.mark.parametrize("seed", range(4))
 def test_background_slices_equal_the_reference(seed):
-    """With one background process (whole slices of reads through the thread's instances) the cycles and every
-    instance's counts equal the reference. Mutation: ``clock += quantum`` -> ``clock += quantum / 2`` in the
-    background branch of _event_loop."""
-    run, reference, _, _ = run_both(100 + seed, 40, background=1)
+    """With one background process (whole slices of reads through the thread's instances) the cycles, every
+    instance's counts and each pixel's misses (no background read counted in a pixel) equal the reference.
+    Mutation: ``clock += quantum`` -> ``clock += quantum / 2`` in the background branch of _event_loop."""
+    run, reference, _, machine = run_both(100 + seed, 40, background=1)
     processes = run.run.processes
     for column in ("compute", "memory", "dispatch", "finish"):
         np.testing.assert_array_equal(processes[f"{column}_cycles"], reference[column], err_msg=column)
     np.testing.assert_array_equal(run.shared.counts[..., :11], reference["reference"].counts)
+    np.testing.assert_array_equal(run.run.pixel_misses.reshape(-1, len(machine.hierarchy.levels)),
+                                  reference["pixel_misses"])
 
 
 def scene_only_trace(width, height, seed):
@@ -371,9 +380,11 @@ def scene_only_trace(width, height, seed):
 def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(seed, mapping, scheduler):
     """Every level per thread, one process per hardware thread, Q = 1e12, static mappings (a dynamic one also
     writes the shared task counter, which private caches do not model) and no line written by two processes:
-    each process's cycles, hits and misses and the task owners equal coherence.simulation.simulate_run on
-    private caches (private copies lie a multiple of every level's set span apart, so they map to the same sets).
-    Mutation: ``level_served = 0`` -> ``level_served = 1`` in _event_loop's same-line read path."""
+    each process's cycles, hits and misses, each pixel's misses per level and the task owners equal
+    coherence.simulation.simulate_run on private caches (private copies lie a multiple of every level's set span
+    apart, so they map to the same sets). Mutation: ``level_served = 0`` -> ``level_served = 1`` in _event_loop's
+    same-line read path; for the pixels' misses alone: ``for level in range(level_served)`` -> ``for level in
+    range(level_served - 1)`` in _event_loop's pixel-miss count."""
     from coherence.simulation import simulate_run
 
     rng = np.random.default_rng(seed)
@@ -387,13 +398,15 @@ def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(see
     os_machine = Machine(n_cpus=4, quantum_cycles=float(rng.choice([0, 300])), scheduler=scheduler)
     compute = whole_cycle_compute(trace, placed, rng)
     shared = simulate_shared_run(trace, distribution, machine, placed, COST, os_machine, interleave_cycles=1e12,
-                                 compute=compute).run
-    private = simulate_run(trace, distribution, hierarchy, placed, COST, os_machine, compute=compute)
+                                 compute=compute, record=("pixel_misses",)).run
+    private = simulate_run(trace, distribution, hierarchy, placed, COST, os_machine, compute=compute,
+                           pixel_misses=True)
     columns = ["cpu", "migrations", "tasks", "pixels", "compute_cycles", "memory_cycles", "dispatch_cycles",
                "finish_cycles"] + [f"{level}_{what}" for level in ("L1", "L2") for what in ("hits", "misses")]
     for column in columns:
         np.testing.assert_array_equal(shared.processes[column], private.processes[column], err_msg=column)
     np.testing.assert_array_equal(shared.task_owner, private.task_owner)
+    np.testing.assert_array_equal(shared.pixel_misses, private.pixel_misses)
 
 
 @pytest.mark.parametrize("mapping", ["DB", "S"])
