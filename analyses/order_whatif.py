@@ -32,13 +32,14 @@ and its ``.meta.json``.
 from __future__ import annotations
 
 import itertools
+import os
 from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
 
 from analyses.experiment import Experiment
-from rtcommon.validate import InputError
+from rtcommon.validate import InputError, require_int
 
 #: The base unless told otherwise: path-traced balls at 32x32, one sample a pixel, pixel interleaving (P) at
 #: 8 processes on 8 idle CPUs.
@@ -100,8 +101,15 @@ def parse_order_grid(flags) -> dict:
     return grid
 
 
-def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None = None, *, orders=None) -> pd.DataFrame:
+def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None = None, *, orders=None,
+                 n_jobs: int | None = None) -> pd.DataFrame:
     """The ray orders' table at every grid point.
+
+    Each distinct trace of the grid is rendered (or found in the trace cache)
+    once here; then the points run as the other what-ifs' do: on the base's
+    Dask scheduler (``base.dask``; every worker must read the trace cache
+    under the same path), else in a local process pool, else one after
+    another. The table does not depend on which.
 
     Parameters
     ----------
@@ -112,6 +120,8 @@ def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None =
         Values per parameter (module docstring); the study runs every combination.
     orders : sequence of str or RayOrder, optional
         Default every registered order (:func:`analyses.report_orders.report_orders`).
+    n_jobs : int, optional
+        Local worker processes (default: CPUs; 1 runs the points in this process).
 
     Returns
     -------
@@ -128,21 +138,57 @@ def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None =
         raise InputError(f"order what-if: the base's workload must be 'pathtrace', got {base.workload!r}")
     if len(base.n_processes) != 1:
         raise InputError(f"order what-if: the base needs one process count, got {list(base.n_processes)}")
-    tables = [_point_table(base, point, orders) for point in grid_points(grid or {})]
+    points = grid_points(grid or {})
+    local = replace(base, dask=None)
+    workers = min((os.cpu_count() or 1) if n_jobs is None else require_int("order what-if n_jobs", n_jobs, 1),
+                  len(points))
+    if base.dask is None and workers == 1:
+        tables = [_point_table(local, point, orders) for point in points]
+    else:
+        # each distinct trace rendered once, before the tasks that read it from the cache run at once
+        for point in {_trace_key(point): point for point in points}.values():
+            _point_trace(local, point)
+        tasks = [(replace(local, progress=False), point, orders) for point in points]
+        tables = _run_tasks(tasks, base.dask, workers)
     return pd.concat(tables, ignore_index=True)
 
 
-def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
-    """One grid point's rows (:func:`order_whatif`)."""
-    from analyses.report_orders import order_section
-    from analyses.traces import cached_trace
-    from analyses.whatif import _sized_scene_file
-    from coherence.studies import place_layout, study
+def _run_tasks(tasks: list, dask, workers: int) -> list:
+    """``_point_table(*task)`` of every task, in order: on the Dask scheduler ``dask``, else in a pool of
+    ``workers`` local processes."""
+    if dask is not None:
+        from analyses.cluster import dask_executor
 
+        with dask_executor(dask) as executor:
+            futures = [executor.submit(_point_table, *task) for task in tasks]
+            return [future.result() for future in futures]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_point_table, *task) for task in tasks]
+        return [future.result() for future in futures]
+
+
+def _trace_key(point: dict) -> tuple:
+    """What decides a point's trace: its scene, scene size, samples per pixel and bounce limit."""
+    return tuple(point.get(key) for key in ("scene", "scene_size", "spp", "max_depth"))
+
+
+def _point_experiment(base: Experiment, point: dict) -> Experiment:
+    """``base`` with the point's scene, samples per pixel and bounce limit."""
     try:
-        experiment = replace(base, **{key: point[key] for key in ("scene", "spp", "max_depth") if key in point})
+        return replace(base, **{key: point[key] for key in ("scene", "spp", "max_depth") if key in point})
     except ValueError as error:
         raise InputError(f"order what-if point {point}: {error}") from None
+
+
+def _point_trace(base: Experiment, point: dict) -> tuple:
+    """The point's scene and path-traced trace, from the trace cache (rendered there first if missing)."""
+    from analyses.traces import cached_trace
+    from analyses.whatif import _sized_scene_file
+
+    experiment = _point_experiment(base, point)
     scene_name = experiment.scene
     if "scene_size" in point:
         scene_name = _sized_scene_file(str(experiment.scene), point["scene_size"], experiment.cache_dir)
@@ -151,6 +197,16 @@ def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
                                    progress=experiment.progress, workload=experiment.trace_workload(),
                                    tree_variant=experiment.tree_variant,
                                    path_samples=(experiment.spp, experiment.seed))
+    return scene, trace
+
+
+def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
+    """One grid point's rows (:func:`order_whatif`)."""
+    from analyses.report_orders import order_section
+    from coherence.studies import place_layout, study
+
+    experiment = _point_experiment(base, point)
+    scene, trace = _point_trace(base, point)
     hierarchy = _levels_of(experiment, {k: v for k, v in point.items() if "." in k})
     layout, cost, machine = experiment.layout_object(), experiment.cost_model(), experiment.machine()
     mappings = experiment.mapping_objects()

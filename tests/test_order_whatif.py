@@ -26,7 +26,7 @@ def base(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def table(base):
-    return order_whatif(base, {"spp": [1, 2], "L1.size": [4096]}, orders=ORDERS)
+    return order_whatif(base, {"spp": [1, 2], "L1.size": [4096]}, orders=ORDERS, n_jobs=1)
 
 
 def _direct(base, spp, l1_size):
@@ -72,6 +72,26 @@ def test_saved_with_its_meta(base, table, tmp_path):
     np.testing.assert_allclose(back["net_speedup"], table["net_speedup"], rtol=1e-12)
     meta = json.loads(path.with_name(path.name + ".meta.json").read_text())
     assert meta["parameters"]["grid"] == {"spp": ["1", "2"], "L1.size": ["4096"]}
+
+
+def test_pool_and_dask_give_the_serial_table(base, table):
+    """The grid's points run in a local pool of 2 processes, and on a Dask cluster of 2 workers, give the
+    table of the points run one after another, row for row. Fails if the pool's results were gathered in
+    another order than the points' (``futures[::-1]`` in ``_run_tasks``) (checked)."""
+    grid = {"spp": [1, 2], "L1.size": [4096]}
+    pd.testing.assert_frame_equal(order_whatif(base, grid, orders=ORDERS, n_jobs=2), table)
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        on_dask = order_whatif(replace(base, dask=client), grid, orders=ORDERS)
+    pd.testing.assert_frame_equal(on_dask, table)
+
+
+def test_bad_worker_count_is_refused(base):
+    """``n_jobs`` below 1 raises an InputError naming it (fails without the ``require_int`` check: the pool
+    then refuses 0 workers with its own ValueError) (checked)."""
+    with pytest.raises(InputError, match="n_jobs"):
+        order_whatif(base, {"spp": [1, 2]}, orders=ORDERS, n_jobs=0)
 
 
 @pytest.mark.parametrize("grid, words", [({}, "empty"), ({"memory_latency": [80]}, "memory_latency"),

@@ -171,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
 
 def run_orders(args: argparse.Namespace) -> int:
     """``coherence whatif --orders --grid ...``: :func:`analyses.order_whatif.order_whatif` on the options' base."""
+    from analyses.commands import checks
     from analyses.commands.options import experiment_from_args
     from analyses.order_whatif import ORDER_WHATIF_EXPERIMENT, order_whatif, parse_order_grid, save_order_whatif
     from analyses.output import check_output_folder
@@ -180,10 +181,12 @@ def run_orders(args: argparse.Namespace) -> int:
         raise InputError("--orders takes its grid from --grid flags only (no STUDY, no --file)")
     grid = parse_order_grid(args.grid)
     base = experiment_from_args(args, ORDER_WHATIF_EXPERIMENT)
+    if args.dask:
+        checks.require_distributed()
     check_cache_dir(args.cache)
     out = check_output_folder(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    table = order_whatif(base, grid)
+    table = order_whatif(base, grid, n_jobs=args.jobs)
     csv = save_order_whatif(table, base, grid, out)
     shown = [*grid, "mapping", "order", "reordering_gain", "reordering_overhead", "net_speedup"]
     print(table[shown].to_string(index=False, float_format=lambda value: f"{value:.4f}"))
