@@ -110,8 +110,8 @@ class Experiment:
         processes on its hardware threads interleaving every
         ``interleave_cycles`` (:meth:`study_hierarchy`,
         :mod:`coherence.shared_schedule`); ``page_placement`` must stay
-        ``contiguous``. The miss map, miss-ratio curves and texture section
-        of a report still take one hardware thread's view
+        ``contiguous``. A report's miss map is a run on those levels too;
+        its texture section still takes one hardware thread's view
         (:meth:`hierarchy_object`). Its process counts are
         :meth:`~coherence.platforms.Platform.default_processes` when a
         caller takes them from it. Under a platform, the trace logs the

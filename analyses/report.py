@@ -9,7 +9,8 @@
 :class:`~analyses.experiment.Experiment`'s process counts (:func:`coherence.study`),
 computes miss-ratio curves from reuse
 distances, simulates one more run for a per-pixel miss map
-(:func:`coherence.miss_map`), and returns a :class:`Report`;
+(:func:`coherence.miss_map`; under a platform on its shared levels, as the
+study's runs), and returns a :class:`Report`;
 :func:`write_report` writes its files into a folder:
 
 ``index.html``
@@ -245,8 +246,9 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
         chosen_by = f"default: the mapping that loses most to coherence at {verdict_n} processes"
     else:
         chosen_by = "given"
-    misses = miss_map(trace, *miss_map_choice, hierarchy=hierarchy, layout=layout, cost=cost,
-                      machine=setup.machine, scene=scene)
+    # under a platform the run on its shared levels, as the study's
+    misses = miss_map(trace, *miss_map_choice, layout=layout, cost=cost, machine=setup.machine, scene=scene,
+                      hierarchy=hierarchy if experiment.platform is None else experiment.study_hierarchy())
 
     texture = None
     if trace.metadata.get("textures"):
@@ -290,8 +292,10 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     inputs = ReportInputs(
         experiment=experiment, scene=scene, trace=trace, info=info, mappings=setup.mappings, names=names,
         hierarchy=hierarchy, counts=counts, verdict_n=verdict_n, top_n=max(counts), runs=runs,
-        processes=result.processes, verdict=verdict, curves=miss_ratio_curves(trace, placed, setup.mappings,
-                                                                              hierarchy, experiment.progress),
+        processes=result.processes, verdict=verdict,
+        # the curves take no machine; their sizes and line sizes are those of the levels the runs used
+        curves=miss_ratio_curves(trace, placed, setup.mappings, hierarchy if experiment.platform is None else recorded,
+                                 experiment.progress),
         cost_map=cost_map, scene_bytes=scene_bytes, caches=caches, misses=misses, miss_totals=misses.totals(),
         scene_summary=scene.summary(), tree={k: v for k, v in info["tree"].items() if not k.endswith("_seconds")},
         totals=dict(info["totals"]), parameters=parameters, texture=texture, ray_orders=ray_orders)

@@ -171,11 +171,11 @@ def report_html(inputs, miss_png: bytes) -> str:
         from analyses.report_orders import order_table_html
 
         ray_orders = order_table_html(inputs.ray_orders)
-    from analyses.report_tables import thread_view_note
+    from analyses.report_tables import platform_views
 
     return render_page("report.html.j2", ray_orders=ray_orders, texture_share=texture_share, miss_table=miss_table, scene_name=scene.name, p=parameters, names=names,
                        hierarchy_name=parameters["hierarchy"].get("name", hierarchy.name),
-                       thread_view=thread_view_note(inputs), verdict=verdict, verdict_n=verdict_n, top_n=top_n,
+                       views=platform_views(inputs), verdict=verdict, verdict_n=verdict_n, top_n=top_n,
                        scene_summary=scene_summary, image=image, figures=figures, counts_table=counts_table,
                        totals_table=totals_table, tree_table=tree_table, bytes_table=bytes_table,
                        level_table=level_table, curve_points=curve_points, decomposition=decomposition)

@@ -157,13 +157,41 @@ def miss_map_dtype(misses) -> np.dtype:
 
 
 def thread_view_note(inputs) -> str | None:
-    """Under a platform, what the miss map, miss-ratio curves and texture section were computed on: the
-    platform's thread view (``inputs.hierarchy``), named with its levels' sizes; None without a platform."""
+    """Under a platform, what the texture section was computed on: the platform's thread view
+    (``inputs.hierarchy``), named with its levels' sizes; None without a platform."""
     if inputs.experiment.platform is None:
         return None
     sizes = ", ".join(f"{level.name} {_bytes_text(level.size)}" for level in inputs.hierarchy.levels)
     return (f"thread view {inputs.hierarchy.name}: one hardware thread's private copy of each level, cut to its "
             f"share ({sizes}), without coherence or prefetchers; the runs use the platform's shared levels")
+
+
+def platform_views(inputs) -> dict | None:
+    """Under a platform, what each section computed beside the study's runs took, as ``{section: {"view",
+    "what"}}``: the miss map the run on the platform's shared levels, the miss-ratio curves no machine, the
+    texture section (when the report has one) the thread view (:func:`thread_view_note`); None without a
+    platform."""
+    experiment = inputs.experiment
+    if experiment.platform is None:
+        return None
+    platform, misses = experiment.platform_object(), inputs.misses
+    machine = "coherence and the levels' prefetchers on" if platform.hierarchy.hierarchy.prefetches else "coherence on"
+    sizes = ", ".join(f"{level} {_bytes_text(size)}" for level, size in zip(inputs.caches["level"],
+                                                                            inputs.caches["size"]))
+    views = {
+        "miss_map": {"view": "shared run",
+                     "what": f"the run of {misses.mapping} at {misses.n_processes} processes on {platform.name}'s "
+                             f"shared levels, as the study's runs (interleaved {int(experiment.interleave_cycles)} "
+                             f"cycles at a time, {machine}): each pixel's misses are "
+                             "those of its own accesses on the instances its hardware thread reaches; a task "
+                             "counter's accesses belong to no pixel"},
+        "miss_curves": {"view": "no machine",
+                        "what": "fully associative LRU of one process's stream, the same on any machine; the "
+                                f"marked sizes are {platform.name}'s whole levels ({sizes})"},
+    }
+    if inputs.texture is not None:
+        views["texture"] = {"view": "thread view", "what": thread_view_note(inputs)}
+    return views
 
 
 def miss_map_summary(misses, dtype) -> dict:
@@ -270,7 +298,7 @@ def summary(inputs: ReportInputs) -> dict:
         headline[str(n)] = {name: {column: at_n.loc[name, column] for column in DECOMPOSITION_COLUMNS}
                             for name in names}
     shared = shared_levels_summary(runs, inputs.hierarchy.level_names, sorted({verdict_n, inputs.top_n}), names)
-    view = thread_view_note(inputs)
+    views = platform_views(inputs)
     return _clean({
         "report": "coherence report",
         "parameters": inputs.parameters,
@@ -283,9 +311,11 @@ def summary(inputs: ReportInputs) -> dict:
                     "sentences": verdict.sentences, "text": verdict.text,
                     "numbers": verdict.numbers.to_dict(orient="records")},
         "miss_map": {**miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
-                     **({} if view is None else {"caches": view})},
-        **({} if view is None else {"thread_view": {"sections": ["miss_map", "miss_curves", "texture"],
-                                                    "what": view, "hierarchy": inputs.hierarchy.to_dict()}}),
+                     **({} if views is None else {"caches": views["miss_map"]["what"]})},
+        **({} if views is None else {"views": views}),
+        **({} if views is None or "texture" not in views else {
+            "thread_view": {"sections": ["texture"], "what": views["texture"]["what"],
+                            "hierarchy": inputs.hierarchy.to_dict()}}),
         **({} if inputs.ray_orders is None else {"ray_orders": inputs.ray_orders.to_dict(orient="records")}),
         "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
         **shared,

@@ -11,6 +11,13 @@ depend on the mapping, the process count and the machine: what the
 process's previous pixels (and, sharing a CPU, other processes) left in
 the caches. Summed over a process's pixels they give its
 ``<level>_misses`` in :func:`coherence.simulation.simulate_run`'s table.
+
+On levels shared by hardware threads (``hierarchy`` a
+:class:`coherence.shared_run.SharedLevels`) the run is
+:func:`coherence.shared_run.simulate_shared_run`'s: a pixel's misses are
+those of its own accesses on the instances its thread reaches, so they also
+count what the threads running beside it evicted or invalidated; a dynamic
+mapping's task counter accesses belong to no pixel.
 """
 from __future__ import annotations
 
@@ -128,7 +135,9 @@ def miss_map(trace, mapping, n_processes: int, *, hierarchy=DEFAULT_HIERARCHY, l
     n_processes : int
         Processes to distribute the image among.
     hierarchy, layout, cost : object or preset name
-        As for :func:`coherence.study`.
+        As for :func:`coherence.study` (``hierarchy`` a
+        :class:`coherence.shared_run.SharedLevels`: the run on its shared
+        levels; ``machine`` must then have its hardware threads as CPUs).
     machine : coherence.simulation.Machine, optional
         CPUs, scheduler and background load (default ``Machine()``: 8 idle
         CPUs). The same machine as a study's gives that study's run.
@@ -145,20 +154,26 @@ def miss_map(trace, mapping, n_processes: int, *, hierarchy=DEFAULT_HIERARCHY, l
     from coherence.cost import get_cost_model
     from coherence.layout import get_layout
     from coherence.mappings import get_mapping
+    from coherence.shared_run import SharedLevels, simulate_shared_run
     from coherence.simulation import Machine, simulate_run
     from coherence.studies import place_layout
 
     mapping = get_mapping(mapping)
     n_processes = require_int("n_processes", n_processes, 1)
-    hierarchy = get_hierarchy(hierarchy)
+    shared = hierarchy if isinstance(hierarchy, SharedLevels) else None
+    hierarchy = shared.hierarchy if shared is not None else get_hierarchy(hierarchy)
     layout = get_layout(layout)
     cost = get_cost_model(cost)
     machine = Machine() if machine is None else machine
     if not isinstance(machine, Machine):
         raise InputError(f"machine must be a coherence.Machine, got {type(machine).__name__}")
     placed = place_layout(layout, trace, scene)
-    run = simulate_run(trace, mapping.build(trace.width, trace.height, n_processes), hierarchy, placed, cost,
-                       machine, pixel_misses=True)
+    distribution = mapping.build(trace.width, trace.height, n_processes)
+    if shared is not None:
+        run = simulate_shared_run(trace, distribution, shared.machine, placed, cost, machine,
+                                  interleave_cycles=shared.interleave_cycles, record=("pixel_misses",)).run
+    else:
+        run = simulate_run(trace, distribution, hierarchy, placed, cost, machine, pixel_misses=True)
     name = scene.name if scene is not None else str(trace.metadata.get("scene", "trace"))
     return MissMap(run.pixel_misses, tuple(level.name for level in hierarchy.levels), name, mapping.name,
                    n_processes)

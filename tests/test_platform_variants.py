@@ -162,12 +162,13 @@ def test_whatif_prefetch_on_and_off_run_on_the_shared_levels(tmp_path, capsys):
     assert np.isfinite(table.loc["on", "L1_hit_rate"])
 
 
-def test_report_under_a_prefetching_variant_counts_prefetches_and_names_the_thread_view(tmp_path):
+def test_report_under_a_prefetching_variant_counts_prefetches_and_names_each_sections_view(tmp_path):
     """A report on apple-m1 with prefetch on: summary.json's shared_levels carry each level's prefetches issued,
-    useful and useless (those of the run's row, issued > 0 at L1), and the miss map, curves and texture
-    section say they took the thread view (its levels recorded, without prefetchers) in summary.json and on
-    the page; the page's caches are the platform's. Mutations: drop ``+ PREFETCH_RUN_COLUMNS`` in
-    shared_levels_summary; ``view = None`` in report_tables.summary."""
+    useful and useless (those of the run's row, issued > 0 at L1); summary.json's views say the miss map is the
+    shared run with the prefetchers on and the curves take no machine, marked at the platform's whole levels
+    (tetra has no texture section, so nothing takes the thread view); the page's caches are the platform's.
+    Mutations: drop ``+ PREFETCH_RUN_COLUMNS`` in shared_levels_summary; ``views = None`` in
+    report_tables.summary."""
     from analyses.experiment import Experiment
     from analyses.report import build_report
 
@@ -181,9 +182,10 @@ def test_report_under_a_prefetching_variant_counts_prefetches_and_names_the_thre
         for what in ("issued", "useful", "useless"):
             assert shared[name][f"prefetches_{what}"] == row[f"{name}_prefetches_{what}"]
     assert shared["L1"]["prefetches_issued"] > 0
-    view = report.summary["thread_view"]
-    assert view["hierarchy"] == m1.thread_view().to_dict() and not m1.thread_view().prefetches
-    assert report.summary["miss_map"]["caches"] == view["what"]
-    assert view["what"].startswith(f"thread view {m1.name}-thread") and "L2 3 MB" in view["what"]
-    assert f"on its thread view {m1.name}-thread" in report.html
+    views = report.summary["views"]
+    assert set(views) == {"miss_map", "miss_curves"} and "thread_view" not in report.summary
+    assert views["miss_map"]["view"] == "shared run" and "prefetchers on" in views["miss_map"]["what"]
+    assert report.summary["miss_map"]["caches"] == views["miss_map"]["what"]
+    assert views["miss_curves"]["view"] == "no machine" and "L2 12 MB" in views["miss_curves"]["what"]
+    assert "the same on any machine" in report.html
     assert f"{m1.name} caches" in report.html

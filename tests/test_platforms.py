@@ -2,9 +2,11 @@
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from coherence.cost import COST_MODELS, MEASURED_CYCLES, get_cost_model
+from coherence.mappings import get_mapping
 from coherence.platforms import PLATFORMS, Platform, get_platform
 from test_simulate_cli import saved  # noqa: F401  (the saved random trace fixture)
 
@@ -220,3 +222,45 @@ def test_report_under_a_platform_takes_its_process_counts(tmp_path, capsys):
     assert {"machine_misses", "coherence_misses", "false_sharing_misses", "coherence_invalidations"} <= set(shared["L2"])
     assert main([*common, "--platform", "apple-m1", "--max-processes", "3", "--out", str(tmp_path / "b")]) == 0
     assert json.loads(capsys.readouterr().out)["parameters"]["n_processes"] == [1, 2, 3]
+
+
+def test_report_under_a_platform_maps_the_shared_runs_misses(tmp_path):
+    """Under a platform the miss map is the run on the platform's shared levels, as the study's: it equals
+    simulate_shared_run's per-pixel misses on the study's SharedLevels, and for a static mapping (no task
+    counter) its misses summed over the pixels equal the study's run at that count (its processes'
+    ``<level>_misses`` summed); the miss-ratio curves have a point at each of the platform's whole levels;
+    summary.json names each section's view. Mutations: ``hierarchy=hierarchy`` for the miss map in
+    report._assemble (the thread view's map); ``hierarchy`` instead of ``recorded`` for the curves there."""
+    from analyses.experiment import Experiment
+    from analyses.report import build_report
+    from analyses.traces import cached_trace
+    from coherence.shared_run import simulate_shared_run
+    from coherence.studies import place_layout
+
+    m1 = get_platform("apple-m1")
+    experiment = Experiment(scene="tetra", size=8, mappings=("S", "P"), n_processes=(1, 4), platform="apple-m1",
+                            cache_dir=tmp_path / "cache", progress=False)
+    report = build_report(experiment, miss_map="P:4")
+    misses = report.miss_map.misses
+    processes = report.processes[(report.processes["mapping"] == "P") & (report.processes["n_processes"] == 4)]
+    assert misses.sum(axis=(0, 1)).tolist() == [int(processes[f"{level}_misses"].sum()) for level in ("L1", "L2")]
+    assert misses[..., 0].sum() > 0
+    scene, trace, _ = cached_trace("tetra", 8, cache_dir=tmp_path / "cache", kd=experiment.kd_builder(),
+                                   max_depth=experiment.max_depth, progress=False,
+                                   workload=experiment.trace_workload(), tree_variant=experiment.tree_variant,
+                                   path_samples=(experiment.spp, experiment.seed))
+    shared = experiment.study_hierarchy()
+    expected = simulate_shared_run(trace, get_mapping("P").build(8, 8, 4), shared.machine,
+                                   place_layout(experiment.layout_object(), trace, scene), m1.cost,
+                                   experiment.machine(), interleave_cycles=shared.interleave_cycles,
+                                   record=("pixel_misses",)).run.pixel_misses
+    np.testing.assert_array_equal(misses, expected)
+    whole = {level.size for level in m1.hierarchy.hierarchy.levels}
+    for _, curve in report.curves.groupby("order"):
+        assert whole <= set(curve["size"])
+    views = report.summary["views"]
+    assert views["miss_map"]["view"] == "shared run" and views["miss_curves"]["view"] == "no machine"
+    assert report.summary["miss_map"]["caches"] == views["miss_map"]["what"]
+    assert f"4 processes on {m1.name}" in report.html and "the same on any machine" in report.html
+    assert "views" not in build_report(Experiment(scene="tetra", size=8, mappings=("S",), n_processes=(1, 2),
+                                                  cache_dir=tmp_path / "cache", progress=False)).summary
