@@ -314,6 +314,9 @@ def write_pages(work: Path, pages: Path) -> list[str]:
     # (its command and commit head the page); it is listed, not rewritten
     if (pages / "faithfulness.md").exists():
         written.append("faithfulness")
+    from ray_orders_page import write_ray_orders_page  # noqa: PLC0415 (beside this script)
+    # written from ray-orders.json beside it, which the ray-order jobs found in work update first
+    written.append(write_ray_orders_page(work, pages))
     written = [name for name in written if name]
     # anchors.md is written by anchors.py from anchors.json beside it; it is listed, not rewritten
     if (pages / "anchors.md").exists():
