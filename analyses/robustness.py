@@ -17,7 +17,10 @@ its values and seeds. A run whose miss counts an earlier sample of the same
 trace already holds (the samples differ only in costs, and the run's
 schedule does not depend on cycles) is re-costed from them instead of
 simulated (:mod:`coherence.recost`, :data:`RE_COSTED`); the summary counts
-the runs of each path per scene (``runs``, :data:`RUN_PATHS`).
+the runs of each path per scene (``runs``, :data:`RUN_PATHS`). The samples
+of a design go through one :func:`coherence.studies.study_stream`: while a
+sample's last runs are simulated, the next samples' runs take the free
+threads, with the same results as one sample after another.
 
 From each sample (:data:`SAMPLE_COLUMNS`): the one-process time of B and DB
 relative to S's (``(T_B - T_S) / T_S``), every mapping's coherence and
@@ -283,41 +286,60 @@ class _Replays:
 
 
 def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replays) -> tuple[list[dict], dict]:
-    """The rows of ``design``'s samples, and how many runs took each path (:data:`RUN_PATHS`) for them."""
+    """The rows of ``design``'s samples, and how many runs took each path (:data:`RUN_PATHS`) for them.
+
+    The samples' studies go through one :func:`coherence.studies.study_stream`: while a sample's last runs
+    are simulated, the next samples' start on the free threads.
+    """
     before = replays.paths()
     per_trajectory = design.shape[0] // len(seeds)
-    rows = []
-    with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
-        warnings.simplefilter("always")
+    samples = []  # (values, seed, trajectory, scene) per sample, in order, as the stream reads the calls
+
+    def calls():
         for index, unit_row in enumerate(design):
             trajectory = index // per_trajectory
             values = factor_values(unit_row)
-            rows.append(_sample_row(base, replays(values["tree_variant"]), values, index, seeds[trajectory],
-                                    trajectory))
+            replay = replays(values["tree_variant"])
+            samples.append((values, seeds[trajectory], trajectory, replay[0].name))
+            yield _sample_call(base, replay, values, seeds[trajectory])
+
+    rows = []
+    with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
+        warnings.simplefilter("always")
+        for index, result in enumerate(_stream(calls())):
+            values, seed, trajectory, scene = samples[index]
+            rows.append({"scene": scene, "sample": index, "trajectory": trajectory, "seed": seed,
+                         **sample_outputs(result.runs), **values})
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         warnings.warn(message, stacklevel=3)
     after = replays.paths()
     return rows, {path: after[path] - before[path] for path in RUN_PATHS}
 
 
-def _sample_row(base: Experiment, replay, values: dict, index: int, seed: int, trajectory: int) -> dict:
-    """Simulate the sample of ``values`` on ``replay`` = (scene, trace, execution) and return its row."""
-    runs = _sample_runs(base, replay, values, seed)
-    return {"scene": replay[0].name, "sample": index, "trajectory": trajectory, "seed": seed,
-            **sample_outputs(runs), **values}
+def _stream(calls):
+    """:func:`coherence.studies.study_stream` of ``calls`` (a separate name, for benchmarks to time)."""
+    from coherence.studies import study_stream
+
+    return study_stream(calls)
 
 
-def _sample_runs(base: Experiment, replay, values: dict, seed: int) -> pd.DataFrame:
-    """The run table (:attr:`coherence.StudyResult.runs`) of the sample of ``values`` on ``replay``."""
-    from coherence.studies import study
+def _sample_call(base: Experiment, replay, values: dict, seed: int):
+    """The :class:`coherence.studies.StudyCall` of the sample of ``values`` on ``replay`` = (scene, trace,
+    execution)."""
+    from coherence.studies import StudyCall
 
     scene, trace, execution = replay
     setup = sample_setup(base, values, seed)
     experiment = setup.experiment
-    return study(trace, experiment.mapping_objects(), experiment.n_processes,
-                 hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),
-                 cost=experiment.cost_model(), machine=setup.machine, scene=scene, progress=False,
-                 execution=execution).runs
+    return StudyCall(trace, tuple(experiment.mapping_objects()), tuple(experiment.n_processes),
+                     hierarchy=experiment.hierarchy_object(), layout=experiment.layout_object(),
+                     cost=experiment.cost_model(), machine=setup.machine, scene=scene, execution=execution)
+
+
+def _sample_runs(base: Experiment, replay, values: dict, seed: int) -> pd.DataFrame:
+    """The run table (:attr:`coherence.StudyResult.runs`) of the sample of ``values`` on ``replay``."""
+    result, = _stream([_sample_call(base, replay, values, seed)])
+    return result.runs
 
 
 def _size_check(base: Experiment, design: np.ndarray, seeds, replays: _Replays) -> dict:
@@ -327,17 +349,22 @@ def _size_check(base: Experiment, design: np.ndarray, seeds, replays: _Replays) 
     per_trajectory = design.shape[0] // len(seeds)
     # one-process runs of S, B and DB only, on the base's tree (one trace per size)
     checked = replace(base, mappings=SIZE_CHECK_MAPPINGS, n_processes=(1,))
-    values = {size: {name: [] for name in SIZE_CHECK_QUANTITIES} for size in (small_size, reference_size)}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # small images warn of idle processes; the Morris samples said so
-        for size in values:
+    sizes = (small_size, reference_size)
+
+    def calls():
+        for size in sizes:
             for index in rows:
                 point = {**factor_values(design[index]), "tree_variant": base.tree_variant}
-                runs = _sample_runs(replace(checked, size=size), replays(base.tree_variant, size), point,
-                                    seeds[index // per_trajectory])
-                differences = one_process_differences(runs)
-                for name in SIZE_CHECK_QUANTITIES:
-                    values[size][name].append(differences[name])
+                yield _sample_call(replace(checked, size=size), replays(base.tree_variant, size), point,
+                                   seeds[index // per_trajectory])
+
+    values = {size: {name: [] for name in SIZE_CHECK_QUANTITIES} for size in sizes}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # small images warn of idle processes; the Morris samples said so
+        for number, result in enumerate(_stream(calls())):
+            differences = one_process_differences(result.runs)
+            for name in SIZE_CHECK_QUANTITIES:
+                values[sizes[number // len(rows)]][name].append(differences[name])
     return {"small_size": small_size, "reference_size": reference_size, "verdict_size": int(base.size),
             "tolerance": SIZE_CHECK_TOLERANCE, "samples": rows.tolist(), "tree_variant": base.tree_variant,
             "quantities": compare_sizes(values[small_size], values[reference_size], base.size)}

@@ -26,11 +26,15 @@ trace record (the study's base tree at ``--size``; every sample replays
 about that many records), a coarser estimate, marked "by trace size".
 The times for the target's 2 idle cores come from the CPU times, which a
 machine shared with other work does not inflate as it does wall times:
-``study`` simulates a sample's runs on one thread per CPU, so every
-simulated run's CPU time (its thread's) is recorded, and each sample's runs
-are laid on 2 cores as its thread pool takes them (each run to the first
-free core, in order; the sample waits for its last run), plus the CPU time
-spent outside the runs (line addresses, re-costing, tables), on one core.
+the samples of a phase go through one
+:func:`coherence.studies.study_stream`, which simulates their runs on one
+thread per CPU, so every simulated run's CPU time (its thread's) is
+recorded, and the phase's runs are laid on 2 cores as the stream's pool
+takes them (each run to the first free core, in the order they started;
+where the stream waited for the runs under way before working out a new
+placement's line addresses, the runs after wait for all before), plus the
+CPU time spent outside the runs (line addresses, re-costing, tables), on
+one core (though the stream works them out while runs are under way).
 That gives a phase's time on 2 idle cores; its ratio to the phase's CPU time
 projects the budgeted design, and a target counts as met when that time
 meets it. Also printed: the bounds CPU time / 2 (both cores always busy)
@@ -63,41 +67,59 @@ from coherence.unknowns import TREE_VARIANTS  # noqa: E402
 from tracer.scenes.catalog import PAPER_SCENES  # noqa: E402
 
 class RunClock:
-    """Records the CPU time of every simulated run, grouped by sample (one ``study`` call each).
+    """Records the CPU time of every simulated run, grouped by the study's streams of samples.
 
-    Installed around ``coherence.studies.study`` and ``coherence.studies.simulate_run`` for the measured
-    studies only; the results do not depend on it.
+    Installed around ``analyses.robustness._stream`` (one stream a phase of a scene: its Morris samples, the
+    size check, Sobol's samples), ``coherence.studies.simulate_run`` (each run's thread CPU time, in the order
+    the runs start) and ``coherence.studies._wait_for`` (where the stream waits for the runs under way before
+    working out a new placement's line addresses: a new segment), for the measured studies only; the results
+    do not depend on it.
     """
 
     def __init__(self):
         import threading
 
-        self.samples = []  # per study call: CPU seconds of each run it simulated, in submission order
+        self.streams = []  # per stream: segments, each the CPU seconds of its runs in the order they started
         self.lock = threading.Lock()
 
     def install(self):
+        import analyses.robustness as robustness_module
         import coherence.studies as studies
 
-        study, simulate_run = studies.study, studies.simulate_run
+        stream, simulate_run, wait_for = robustness_module._stream, studies.simulate_run, studies._wait_for
 
-        def timed_study(*args, **kwargs):
-            self.samples.append([])
-            return study(*args, **kwargs)
+        def timed_stream(calls):
+            with self.lock:
+                self.streams.append([[]])
+            return stream(calls)
 
         def timed_run(*args, **kwargs):
             start = time.thread_time()
             run = simulate_run(*args, **kwargs)
             with self.lock:
-                self.samples[-1].append(time.thread_time() - start)
+                self.streams[-1][-1].append(time.thread_time() - start)
             return run
 
-        studies.study, studies.simulate_run = timed_study, timed_run
+        def timed_wait(plans):
+            plans = list(plans)
+            if plans:
+                with self.lock:
+                    self.streams[-1].append([])
+            wait_for(plans)
 
-    def two_cores(self, first: int, count: int, cpu_seconds: float) -> float:
-        """Seconds on 2 idle cores of ``count`` samples from ``first`` on, which took ``cpu_seconds`` of CPU."""
-        samples = self.samples[first:first + count]
-        in_runs = sum(sum(runs) for runs in samples)
-        return sum(makespan(runs, CORES) for runs in samples) + max(cpu_seconds - in_runs, 0.0)
+        robustness_module._stream, studies.simulate_run, studies._wait_for = timed_stream, timed_run, timed_wait
+
+    def run_seconds(self, stream: int) -> float:
+        """CPU seconds of the simulated runs of stream number ``stream``."""
+        return sum(sum(runs) for runs in self.streams[stream])
+
+    def two_cores(self, stream: int, cpu_seconds: float) -> float:
+        """Seconds on 2 idle cores of stream number ``stream``, which took ``cpu_seconds`` of CPU: each
+        segment's runs laid on the cores in the order they started (a segment waits for the one before),
+        plus the CPU time outside the runs on one core."""
+        segments = self.streams[stream]
+        in_runs = self.run_seconds(stream)
+        return sum(makespan(runs, CORES) for runs in segments) + max(cpu_seconds - in_runs, 0.0)
 
 
 def makespan(durations, cores: int) -> float:
@@ -143,31 +165,29 @@ def trace_records(base, scene) -> int:
 def scene_phases(result, timings, clock: RunClock, first: int) -> dict:
     """Per phase of one scene's study: seconds, CPU seconds, seconds on 2 idle cores, samples and run paths.
 
-    ``clock`` recorded the study's samples from its sample ``first`` on: the Morris ones, the size check's
-    (one ``study`` call per point and size), then Sobol's.
+    ``clock`` recorded the study's streams from its stream ``first`` on: the Morris samples, the size check,
+    then Sobol's samples, one stream each.
     """
     (scene, summary), = result.summary["scenes"].items()
     design = result.samples["design"]
-    counts = {phase: int((design == phase).sum()) for phase in ("morris", "sobol")}
-    counts["size_check"] = len(clock.samples) - first - counts["morris"] - counts["sobol"]
     phases = {}
-    for phase in ("morris", "size_check", "sobol"):
+    for stream, phase in enumerate(("morris", "size_check", "sobol"), start=first):
         figures = timings[scene][phase]
-        phases[phase] = {**figures, "two_core_seconds": clock.two_cores(first, counts[phase],
-                                                                         figures["cpu_seconds"]),
-                         "samples": counts[phase] if phase != "size_check" else 0,
+        phases[phase] = {**figures, "two_core_seconds": clock.two_cores(stream, figures["cpu_seconds"]),
+                         "run_cpu_seconds": clock.run_seconds(stream),
+                         "samples": int((design == phase).sum()),
                          "runs": summary["sobol"]["runs"] if phase == "sobol" else
                          summary["runs"] if phase == "morris" else dict.fromkeys(("simulated", "re_costed", "reused"), 0)}
-        first += counts[phase]
     return phases
 
 
 def add_phases(totals: dict, phases: dict) -> None:
     """Add one scene's ``phases`` into ``totals`` (same shape)."""
     for phase, figures in phases.items():
-        total = totals.setdefault(phase, {"seconds": 0.0, "cpu_seconds": 0.0, "two_core_seconds": 0.0, "samples": 0,
+        total = totals.setdefault(phase, {"seconds": 0.0, "cpu_seconds": 0.0, "two_core_seconds": 0.0,
+                                          "run_cpu_seconds": 0.0, "samples": 0,
                                           "runs": dict.fromkeys(figures["runs"], 0)})
-        for key in ("seconds", "cpu_seconds", "two_core_seconds", "samples"):
+        for key in ("seconds", "cpu_seconds", "two_core_seconds", "run_cpu_seconds", "samples"):
             total[key] += figures[key]
         for path, count in figures["runs"].items():
             total["runs"][path] += count
@@ -240,7 +260,7 @@ def main():
     with dask_executor(args.dask) as executor:
         for scene in args.scenes:
             timings = {}
-            first = len(clock.samples)
+            first = len(clock.streams)
             result = robustness(base, scenes=[scene], trajectories=args.trajectories, seed=args.seed,
                                 sobol=args.sobol, timings=timings, executor=executor)
             per_scene[scene] = scene_phases(result, timings, clock, first)
@@ -248,7 +268,7 @@ def main():
             projected[scene] = project_scene(per_scene[scene])
             print(f"measured {scene}: " + "; ".join(
                 f"{phase} {f['samples']} samples {f['seconds']:.0f} s wall {f['cpu_seconds']:.0f} s CPU "
-                f"({f['two_core_seconds']:.0f} s on {CORES} cores), "
+                f"({f['run_cpu_seconds']:.0f} s in simulated runs; {f['two_core_seconds']:.0f} s on {CORES} cores), "
                 f"{share(f['runs'])}" for phase, f in per_scene[scene].items()), flush=True)
     records = {scene: trace_records(base, scene) for scene in PAPER_SCENES}
     how = {scene: "from its own rate" for scene in projected}

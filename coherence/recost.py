@@ -43,6 +43,7 @@ run took.
 from __future__ import annotations
 
 import hashlib
+from concurrent.futures import Future
 from dataclasses import asdict, dataclass, replace
 from typing import NamedTuple
 
@@ -52,7 +53,7 @@ from rtcommon.validate import InputError
 
 __all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts", "ReplayKey",
            "fixed_schedule", "first_cpus", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT",
-           "BACKGROUND_FIELDS"]
+           "COMPUTE_KEPT", "BACKGROUND_FIELDS", "compute_digest"]
 
 #: Columns of :attr:`MissCounts.accesses`: read hits and misses, write hits and misses.
 READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES = 0, 1, 2, 3
@@ -63,6 +64,9 @@ CYCLE_COLUMNS = ("tlb_cycles", "compute_cycles", "memory_cycles", "user_cycles",
 
 #: Placed layouts whose pixels' line addresses a :class:`RunStore` keeps (the most recently used ones).
 LINES_KEPT = 2
+
+#: Cost models' compute cycles per pixel a :class:`RunStore` keeps (the most recently used ones).
+COMPUTE_KEPT = 2
 
 #: Fields of :class:`coherence.simulation.Machine` that describe the other users' processes.
 BACKGROUND_FIELDS = ("background_load", "background_footprint", "background_seed")
@@ -231,7 +235,10 @@ class RunStore:
     (:func:`coherence.pixel_lines.pixel_lines`) of the last
     :data:`LINES_KEPT` placed layouts it was asked for: studies that differ
     in costs, latencies or the machine's schedule but place the trace alike
-    read the same addresses (:meth:`pixel_lines`).
+    read the same addresses (:meth:`pixel_lines`). And it keeps what
+    studies of the trace work out alike: compute cycles per pixel of the
+    last :data:`COMPUTE_KEPT` cost models (:meth:`compute_cycles`) and each
+    mapping's replay key per process count (:meth:`replay_of`).
 
     Attributes
     ----------
@@ -242,6 +249,8 @@ class RunStore:
     def __init__(self):
         self._runs = {}
         self._lines = {}  # placed layout's key -> PixelLines or None, least recently used first
+        self._compute = {}  # cost weights -> (compute cycles per pixel, their digest), least recently used first
+        self._replays = {}  # (id of a mapping, process count) -> (the mapping, what replay_of worked out)
         self._trace = None
         self.simulated = 0
         self.re_costed = 0
@@ -258,45 +267,120 @@ class RunStore:
     def keys(replay_key, hierarchy, layout, machine, cost, compute) -> tuple:
         """The key of what decides a run's counts, the key of its costs, and its processes' first CPUs.
 
-        ``replay_key`` is a :class:`ReplayKey`. The first CPUs are :func:`first_cpus` for a run with a fixed
-        schedule, None for any other.
+        ``replay_key`` is a :class:`ReplayKey`; ``compute`` the compute cycles of every pixel, float64 (P,).
+        The first CPUs are :func:`first_cpus` for a run with a fixed schedule, None for any other.
         """
+        return RunStore.keys_of([replay_key], hierarchy, layout, machine, cost, compute_digest(compute))[0]
+
+    @staticmethod
+    def keys_of(replay_keys, hierarchy, layout, machine, cost, compute_key: bytes) -> list:
+        """:meth:`keys` of each of ``replay_keys`` (runs of one study), given ``compute_key``, the
+        :func:`compute_digest` of the study's compute cycles per pixel; the parts the runs share are worked
+        out once."""
         levels = tuple(replace(level, latency=0.0) for level in hierarchy.levels)
         tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=0.0)
-        n = int(replay_key.n_processes)
-        fixed = _fixed(bool(replay_key.dynamic), n, machine)
-        fields = {k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}
-        if fixed:  # the other users run on CPUs of their own
-            fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS}
-            fields["fixed_schedule"] = True
-        elif machine.background_load == 0:  # no other users: their footprint and seed do nothing
-            fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS[1:]}
-        counts_key = (replay_key, repr(replace(hierarchy, levels=levels, memory_latency=0.0, tlb=tlb, name="")),
-                      repr(layout), repr(fields))
-        compute_digest = hashlib.blake2b(np.ascontiguousarray(compute, dtype=np.float64).tobytes(),
-                                         digest_size=16).digest()
-        cost_key = (repr(hierarchy), float(machine.quantum_cycles), float(cost.clock_hz), compute_digest)
-        return counts_key, cost_key, (tuple(first_cpus(n, machine).tolist()) if fixed else None)
+        geometry = repr(replace(hierarchy, levels=levels, memory_latency=0.0, tlb=tlb, name=""))
+        placed = repr(layout)
+        machine_fields = {k: v for k, v in asdict(machine).items() if k != "quantum_cycles"}
+        cost_key = (repr(hierarchy), float(machine.quantum_cycles), float(cost.clock_hz), compute_key)
+        out = []
+        for replay_key in replay_keys:
+            n = int(replay_key.n_processes)
+            fixed = _fixed(bool(replay_key.dynamic), n, machine)
+            fields = machine_fields
+            if fixed:  # the other users run on CPUs of their own
+                fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS}
+                fields["fixed_schedule"] = True
+            elif machine.background_load == 0:  # no other users: their footprint and seed do nothing
+                fields = {k: v for k, v in fields.items() if k not in BACKGROUND_FIELDS[1:]}
+            counts_key = (replay_key, geometry, placed, repr(fields))
+            out.append((counts_key, cost_key, (tuple(first_cpus(n, machine).tolist()) if fixed else None)))
+        return out
+
+    def compute_cycles(self, trace, cost) -> tuple:
+        """``cost``'s compute cycles of every pixel of ``trace`` (float64 (P,)) and their
+        :func:`compute_digest`, worked out once per set of weights (they depend on nothing else; the last
+        :data:`COMPUTE_KEPT` are kept)."""
+        from tracer.trace.access import COUNTER_NAMES
+
+        self.bind(trace)
+        key = cost.weights(COUNTER_NAMES).tobytes()
+        if key in self._compute:
+            self._compute[key] = self._compute.pop(key)  # most recently used last
+            return self._compute[key]
+        while len(self._compute) >= COMPUTE_KEPT:
+            self._compute.pop(next(iter(self._compute)))
+        compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
+        self._compute[key] = (compute, compute_digest(compute))
+        return self._compute[key]
+
+    def replay_of(self, trace, mapping, n_processes: int, work_out):
+        """``work_out()`` (what a study needs of ``mapping``'s distribution of ``trace`` among
+        ``n_processes``: its :class:`ReplayKey`, say), worked out once per mapping object and count: a
+        mapping is a frozen recipe, so its distribution of one image is always the same."""
+        self.bind(trace)
+        key = (id(mapping), int(n_processes))
+        kept = self._replays.get(key)
+        if kept is None or kept[0] is not mapping:
+            kept = (mapping, work_out())  # the mapping is kept alive with it: its id is not reused
+            self._replays[key] = kept
+        return kept[1]
 
     def find(self, keys, hierarchy, cost):
         """The run for ``keys`` (:meth:`keys`) without simulating it, or None; counts the path taken."""
+        served = self.serve(keys, hierarchy, cost)
+        return None if served is None else served()
+
+    def serve(self, keys, hierarchy, cost):
+        """How the run for ``keys`` (:meth:`keys`) is had without simulating it: a callable, or None (simulate).
+
+        The callable returns the run, reused or re-costed, waiting for the
+        stored run if it is still being simulated (:meth:`add` of a
+        future), or None when the stored run turns out not to be
+        re-costable (a process with pixels at zero cycles): the caller then
+        simulates it. Which of the two paths is taken is decided here from
+        the keys alone, so a later run can be planned before an earlier one
+        has finished. The path is counted now (a re-costing that returns
+        None is taken back then).
+        """
         counts_key, cost_key, cpus = keys
         if counts_key not in self._runs:
             return None
-        stored_cost_key, run = self._runs[counts_key]
+        stored_cost_key, stored = self._runs[counts_key]
+        if isinstance(stored, Future) and stored.done() and stored.exception() is not None:
+            return None  # its simulation failed: simulate again
         if stored_cost_key == cost_key:
             self.reused += 1
+            return lambda: _on_cpus(_finished(stored), cpus)
+        if cpus is None:  # a schedule that depends on cycles (:meth:`keys` gives first CPUs to fixed ones only)
+            return None
+
+        self.re_costed += 1
+
+        def recosted():
+            run = recost_run(_finished(stored), hierarchy, cost)
+            if run is None:
+                self.re_costed -= 1
+                return None
             return _on_cpus(run, cpus)
-        recosted = recost_run(run, hierarchy, cost)
-        if recosted is not None:
-            self.re_costed += 1
-            return _on_cpus(recosted, cpus)
-        return None
+
+        return recosted
 
     def add(self, keys, run) -> None:
-        """Keep a simulated run under ``keys``."""
+        """Keep a simulated run under ``keys``: a :class:`~coherence.simulation.Run`, or a
+        :class:`concurrent.futures.Future` of one still being simulated (runs served from it wait for it)."""
         self.simulated += 1
         self._runs[keys[0]] = (keys[1], run)
+
+    def holds_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None) -> bool:
+        """Whether :meth:`pixel_lines` of these arguments is served without working anything out."""
+        return _lines_key(placed, line_size, budget_bytes) in self._lines and self._trace is trace
+
+    def lines_kept_with_new(self) -> list:
+        """The line addresses still kept once :meth:`pixel_lines` works out a new placement's: the
+        ``LINES_KEPT - 1`` served last (a caller that must not hold more than :data:`LINES_KEPT` placements'
+        addresses lets go of any other first)."""
+        return list(self._lines.values())[len(self._lines) - (LINES_KEPT - 1):] if LINES_KEPT > 1 else []
 
     def pixel_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None):
         """:func:`coherence.pixel_lines.pixel_lines` of ``trace`` on ``placed``, worked out once per placement.
@@ -308,12 +392,7 @@ class RunStore:
         from coherence.pixel_lines import pixel_lines
 
         self.bind(trace)
-        digest = hashlib.blake2b(digest_size=16)
-        for array in (placed.record_start, placed.record_size, placed.kind_first, placed.pages.frame):
-            digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
-            digest.update(b"|")
-        key = (digest.digest(), int(placed.end), int(placed.pages.first_page), int(placed.pages.page_shift),
-               int(line_size), budget_bytes)
+        key = _lines_key(placed, line_size, budget_bytes)
         if key in self._lines:
             self._lines[key] = self._lines.pop(key)  # most recently used last
             return self._lines[key]
@@ -322,3 +401,24 @@ class RunStore:
         lines = pixel_lines(trace, placed, line_size, budget_bytes)
         self._lines[key] = lines
         return lines
+
+
+def _lines_key(placed, line_size: int, budget_bytes) -> tuple:
+    """The key of :meth:`RunStore.pixel_lines`: every record's address and size, the page table,
+    ``line_size`` and ``budget_bytes`` (which decides whether there is a result at all)."""
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (placed.record_start, placed.record_size, placed.kind_first, placed.pages.frame):
+        digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
+        digest.update(b"|")
+    return (digest.digest(), int(placed.end), int(placed.pages.first_page), int(placed.pages.page_shift),
+            int(line_size), budget_bytes)
+
+
+def compute_digest(compute) -> bytes:
+    """The digest of compute cycles per pixel (float64 (P,)) that the cost key of :meth:`RunStore.keys` holds."""
+    return hashlib.blake2b(np.ascontiguousarray(compute, dtype=np.float64).tobytes(), digest_size=16).digest()
+
+
+def _finished(run):
+    """``run``, or the result of ``run`` if it is a future (waiting for it)."""
+    return run.result() if isinstance(run, Future) else run

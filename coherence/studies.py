@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import hashlib
 import os
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -159,129 +161,301 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     -------
     StudyResult
     """
-    shared = hierarchy if isinstance(hierarchy, SharedLevels) else None
-    hierarchy = get_hierarchy(hierarchy) if shared is None else shared.hierarchy
-    layout = get_layout(layout)
-    cost = get_cost_model(cost)
-    machine = machine or Machine()
-    mapping_objects = [get_mapping(mapping) for mapping in mappings]
-    names = [mapping.name for mapping in mapping_objects]
-    if len(set(names)) != len(names):
-        raise InputError(f"mappings must have distinct names, got {names}")
-    counts = sorted({1, *(require_int("n_processes", n, 1) for n in n_processes)})
-    execution = execution or Execution()
-    if not isinstance(execution, Execution):
-        raise InputError(f"study: execution must be a coherence.studies.Execution, got {type(execution).__name__}")
-    executor, trace_folder, n_jobs = execution.executor, execution.trace_folder, execution.n_jobs
-    placed = place_layout(layout, trace, scene).with_pages(machine.page_placement, hierarchy)
-    compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
-    jobs = [(mapping, n) for mapping in mapping_objects for n in counts]
-
-    def distribution_of(index):
-        mapping, n = jobs[index]
-        return mapping.build(trace.width, trace.height, n)
-
-    # Runs that replay the same pixels in the same order on every process
-    # (S, P and R at one process, say) are simulated once. A distribution holds
-    # arrays per pixel, so each is built when needed and not kept: a study of
-    # 80 runs at 2048x2048 held 2.5 GB of them.
-    keys = []
-    task_counts = []  # tasks per process of a static run (the one column its key leaves out); None if dynamic
-    process_counts = []
-    for index in range(len(jobs)):
-        distribution = distribution_of(index)
-        keys.append(_replay_key(distribution))
-        process_counts.append(distribution.n_processes)
-        task_counts.append(None if distribution.dynamic else np.bincount(
-            distribution.task_process, minlength=distribution.n_processes).astype(np.int64))
-    first_of = {}
-    for index, key in enumerate(keys):
-        first_of.setdefault(key, index)
-    distinct = sorted(first_of.values())
-
-    store = execution.store if shared is None else None  # a store keeps private-cache runs only
-    simulated = _from_store(store, trace, distinct, keys, (hierarchy, layout, machine, cost, compute))
-    distinct = [index for index in distinct if index not in simulated]  # the runs to simulate
-    bar = _progress(len(distinct), progress)
-    shared_rows = {}
-    if shared is not None:  # on this machine, every run on the shared levels
-        pieces = pixel_pieces(trace, placed, hierarchy.levels[0].line_size)
-
-        def simulate_shared(index):
-            return simulate_shared_run(trace, distribution_of(index), shared.machine, placed, cost, machine,
-                                       interleave_cycles=shared.interleave_cycles, compute=compute, pieces=pieces)
-
-        with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
-            for index, run in zip(distinct, pool.map(simulate_shared, distinct)):
-                simulated[index] = run.run
-                shared_rows[index] = shared_run_row(run.shared)
-                bar.update(1)
-    elif executor is not None:
-        futures = [executor.submit(simulate_stored, str(trace_folder), distribution_of(index), hierarchy, placed,
-                                   cost, machine, compute) for index in distinct]
-        for index, future in zip(distinct, futures):
-            simulated[index] = future.result()
-            bar.update(1)
-    else:
-        # Every run reads the same pixels' line addresses: work them out once, if they fit the budget.
-        smallest_line = min(level.line_size for level in hierarchy.levels)
-        lines = (pixel_lines if store is None else store.pixel_lines)(
-            trace, placed, smallest_line, execution.shared_lines_budget) if len(distinct) > 1 else None
-
-        def simulate(index):
-            return simulate_run(trace, distribution_of(index), hierarchy, placed, cost, machine, compute=compute,
-                                lines=lines)
-
-        # All runs at once, the first included: numba compiles a kernel under
-        # a global lock and looks for the compiled version again once it holds
-        # it, so threads that reach an uncompiled kernel together compile it once.
-        with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
-            for index, run in zip(distinct, pool.map(simulate, distinct)):
-                simulated[index] = run
-                bar.update(1)
-    bar.close()
-    if store is not None:
-        for index in distinct:
-            store.add(store.keys(keys[index], hierarchy, layout, machine, cost, compute),
-                                simulated[index])
-    results = []
-    for (mapping, _), key, tasks, n in zip(jobs, keys, task_counts, process_counts):
-        run = simulated[first_of[key]]
-        processes = run.processes
-        if tasks is not None:  # the one column that depends on how pixels are cut into tasks
-            processes = processes.assign(tasks=tasks)
-        row = {"mapping": mapping.name, **run_summary(processes, hierarchy.level_names, cost.clock_hz,
-                                                        run.real_cycles)}
-        row["n_cpus"] = machine.n_cpus
-        row.update(shared_rows.get(first_of[key], {}))
-        results.append((row, processes.assign(mapping=mapping.name, n_processes=n)))
-    runs = add_speedups(pd.DataFrame([row for row, _ in results]))
-    front = ["mapping", "n_processes", "n_cpus"]
-    runs = runs[front + [c for c in runs.columns if c not in front]]
-    processes = pd.concat([frame for _, frame in results], ignore_index=True)
-    processes = processes[["mapping", "n_processes"] + [c for c in processes.columns
-                                                        if c not in ("mapping", "n_processes")]]
-    parameters = {"hierarchy": hierarchy.to_dict(), "layout": layout.name, "cost": cost.to_dict(),
-                  "machine": asdict(machine), "mappings": names, "n_processes": counts}
-    if shared is not None:
-        parameters["shared_levels"] = shared.to_dict()
-    return StudyResult(runs, processes, parameters)
+    call = StudyCall(trace, mappings, n_processes, hierarchy=hierarchy, layout=layout, cost=cost, machine=machine,
+                     scene=scene, execution=execution)
+    plan = _StudyPlan(call)
+    n_jobs = plan.execution.n_jobs
+    with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
+        plan.submit(pool, plan.work_out_lines())
+        return plan.result(_progress(len(plan.to_simulate), progress))
 
 
-def _from_store(store, trace, distinct, keys, setup) -> dict:
-    """Run index -> run, for the runs of ``distinct`` that ``store`` re-costs or reuses (none without a store).
+@dataclass(frozen=True)
+class StudyCall:
+    """The arguments of one :func:`study` (but ``progress``), for :func:`study_stream`."""
 
-    ``setup`` is (hierarchy, layout, machine, cost, compute cycles per pixel) of the study.
+    trace: object
+    mappings: tuple = DEFAULT_MAPPINGS
+    n_processes: tuple = (1, 2, 4, 8, 16)
+    hierarchy: object = DEFAULT_HIERARCHY
+    layout: object = DEFAULT_LAYOUT
+    cost: object = DEFAULT_COST_MODEL
+    machine: Machine | None = None
+    scene: object = None
+    execution: Execution | None = None
+
+
+#: Studies of :func:`study_stream` whose runs may be under way at once.
+STREAM_WINDOW = 4
+
+
+def study_stream(calls, *, n_jobs: int | None = None, window: int = STREAM_WINDOW):
+    """The results of many studies, in order, their runs simulated on one pool of threads.
+
+    :func:`study` waits for a study's last run before the next study starts,
+    and a core idles while it runs; here the next studies' runs start on
+    the free threads meanwhile. Each result equals :func:`study` of its
+    :class:`StudyCall` made in the same order: a study's runs are looked up
+    in its ``execution.store`` when the study is planned, after every
+    earlier call's runs were put there (as futures while they are
+    simulated), so each run is reused, re-costed or simulated exactly as
+    one study after another would have it (but for a stored run found not
+    re-costable only once it is simulated: that run is then simulated
+    itself, and later studies already planned keep re-costing from the
+    earlier run, equal up to the order of floating-point additions).
+
+    Parameters
+    ----------
+    calls : iterable of StudyCall
+        Read one at a time, as the window lets; ``execution.n_jobs`` of the
+        calls is not used.
+    n_jobs : int, optional
+        Threads simulating the runs (default: the number of CPUs).
+    window : int
+        Studies planned whose results were not yet given, at most; >= 1.
+
+    Yields
+    ------
+    StudyResult
+        One per call, in order.
+
+    Notes
+    -----
+    A study's line addresses (:mod:`coherence.pixel_lines`) are worked out
+    when it is planned; before a new placement's are, the studies under way
+    that use any other than those its store keeps are waited for, so no
+    more placements' addresses are held than one study after another holds
+    (:data:`coherence.recost.LINES_KEPT`).
     """
+    require_int("window", window, 1)
+    if n_jobs is not None:
+        require_int("n_jobs", n_jobs, 1)
+    under_way = deque()
+    with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
+        for call in calls:
+            plan = _StudyPlan(call)
+            if plan.lines_are_new():
+                kept = plan.store.lines_kept_with_new() if plan.store is not None else []
+                _wait_for(study for study in under_way
+                          if study.lines is not None and not any(study.lines is lines for lines in kept))
+            plan.submit(pool, plan.work_out_lines())
+            under_way.append(plan)
+            while len(under_way) >= window + 1 or (under_way and under_way[0].done()):
+                yield under_way.popleft().result()
+        while under_way:
+            yield under_way.popleft().result()
+
+
+def _wait_for(plans) -> None:
+    """Wait until every run of ``plans`` (:class:`_StudyPlan`) is simulated (a point :func:`study_stream`
+    waits at)."""
+    for plan in plans:
+        plan.wait()
+
+
+class _StudyPlan:
+    """One study: its runs, which of them are simulated, and its result once they are.
+
+    Made from a :class:`StudyCall`: validates it, builds the runs' keys and
+    looks them up in the store (:class:`coherence.recost.RunStore`);
+    :meth:`submit` puts the runs to simulate on a pool (or the execution's
+    executor), :meth:`result` waits for them and makes the tables.
+    """
+
+    def __init__(self, call: StudyCall):
+        if not isinstance(call, StudyCall):
+            raise InputError(f"study_stream: every call must be a coherence.studies.StudyCall, "
+                             f"got {type(call).__name__}")
+        trace = call.trace
+        hierarchy = call.hierarchy
+        self.shared = hierarchy if isinstance(hierarchy, SharedLevels) else None
+        self.hierarchy = get_hierarchy(hierarchy) if self.shared is None else self.shared.hierarchy
+        self.layout = get_layout(call.layout)
+        self.cost = get_cost_model(call.cost)
+        self.machine = call.machine or Machine()
+        self.mapping_objects = [get_mapping(mapping) for mapping in call.mappings]
+        self.names = [mapping.name for mapping in self.mapping_objects]
+        if len(set(self.names)) != len(self.names):
+            raise InputError(f"mappings must have distinct names, got {self.names}")
+        self.counts = sorted({1, *(require_int("n_processes", n, 1) for n in call.n_processes)})
+        self.execution = call.execution or Execution()
+        if not isinstance(self.execution, Execution):
+            raise InputError(f"study: execution must be a coherence.studies.Execution, "
+                             f"got {type(self.execution).__name__}")
+        self.trace = trace
+        self.placed = place_layout(self.layout, trace, call.scene).with_pages(self.machine.page_placement,
+                                                                                self.hierarchy)
+        self.store = self.execution.store if self.shared is None else None  # a store keeps private-cache runs only
+        if self.store is None:
+            self.compute = self.cost.compute_cycles(trace.counters, COUNTER_NAMES)
+        else:
+            self.compute, compute_key = self.store.compute_cycles(trace, self.cost)
+        self.jobs = [(mapping, n) for mapping in self.mapping_objects for n in self.counts]
+        # Runs that replay the same pixels in the same order on every process
+        # (S, P and R at one process, say) are simulated once. A distribution holds
+        # arrays per pixel, so each is built when needed and not kept: a study of
+        # 80 runs at 2048x2048 held 2.5 GB of them.
+        replays = []  # per run: its replay key, process count and tasks per process (None if dynamic)
+        for index, (mapping, n) in enumerate(self.jobs):
+            work_out = partial(self._replay, index)
+            replays.append(work_out() if self.store is None else self.store.replay_of(trace, mapping, n, work_out))
+        self.keys = [key for key, _, _ in replays]
+        self.process_counts = [n for _, n, _ in replays]
+        self.task_counts = [tasks for _, _, tasks in replays]  # the one column a static run's key leaves out
+        self.first_of = {}
+        for index, key in enumerate(self.keys):
+            self.first_of.setdefault(key, index)
+        distinct = sorted(self.first_of.values())
+        self.store_keys = {}
+        if self.store is not None:
+            self.store_keys = dict(zip(distinct, self.store.keys_of([self.keys[index] for index in distinct],
+                                                                    self.hierarchy, self.layout, self.machine,
+                                                                    self.cost, compute_key)))
+        self.served = _from_store(self.store, trace, self.store_keys, self.hierarchy, self.cost)
+        self.to_simulate = [index for index in distinct if index not in self.served]
+        self.futures = {}
+        self.lines = None
+        if self.store is not None:
+            for index in self.to_simulate:  # later studies find these runs while they are simulated
+                future = Future()
+                self.futures[index] = future
+                self.store.add(self.store_keys[index], future)
+
+    def _replay(self, index) -> tuple:
+        """The replay key, process count and tasks per process (None if dynamic) of run ``index``."""
+        distribution = self.distribution_of(index)
+        tasks = None if distribution.dynamic else np.bincount(
+            distribution.task_process, minlength=distribution.n_processes).astype(np.int64)
+        return _replay_key(distribution), distribution.n_processes, tasks
+
+    def distribution_of(self, index):
+        mapping, n = self.jobs[index]
+        return mapping.build(self.trace.width, self.trace.height, n)
+
+    def _lines_wanted(self) -> bool:
+        # every run reads the same pixels' line addresses: work them out once, if they fit the budget
+        return self.shared is None and self.execution.executor is None and len(self.to_simulate) > 1
+
+    def _line_size(self) -> int:
+        return min(level.line_size for level in self.hierarchy.levels)
+
+    def lines_are_new(self) -> bool:
+        """Whether :meth:`work_out_lines` works out line addresses no store holds."""
+        if not self._lines_wanted():
+            return False
+        return self.store is None or not self.store.holds_lines(self.trace, self.placed, self._line_size(),
+                                                                self.execution.shared_lines_budget)
+
+    def work_out_lines(self):
+        """The line addresses the runs share (None when not worked out)."""
+        if not self._lines_wanted():
+            return None
+        work = pixel_lines if self.store is None else self.store.pixel_lines
+        return work(self.trace, self.placed, self._line_size(), self.execution.shared_lines_budget)
+
+    def submit(self, pool, lines) -> None:
+        """Simulate the runs to simulate: on the shared levels or privately on ``pool``, or on the
+        execution's executor."""
+        self.lines = lines
+        if self.shared is not None:
+            pieces = pixel_pieces(self.trace, self.placed, self.hierarchy.levels[0].line_size)
+            submitted = {index: pool.submit(self._simulate_shared, index, pieces) for index in self.to_simulate}
+        elif self.execution.executor is not None:
+            submitted = {index: self.execution.executor.submit(
+                simulate_stored, str(self.execution.trace_folder), self.distribution_of(index), self.hierarchy,
+                self.placed, self.cost, self.machine, self.compute) for index in self.to_simulate}
+        else:
+            submitted = {index: pool.submit(self._simulate, index) for index in self.to_simulate}
+        for index, future in submitted.items():
+            if index in self.futures:  # the store's future follows the pool's
+                future.add_done_callback(partial(_pass_on, self.futures[index]))
+            else:
+                self.futures[index] = future
+
+    def _simulate(self, index):
+        return simulate_run(self.trace, self.distribution_of(index), self.hierarchy, self.placed, self.cost,
+                            self.machine, compute=self.compute, lines=self.lines)
+
+    def _simulate_shared(self, index, pieces):
+        return simulate_shared_run(self.trace, self.distribution_of(index), self.shared.machine, self.placed,
+                                   self.cost, self.machine, interleave_cycles=self.shared.interleave_cycles,
+                                   compute=self.compute, pieces=pieces)
+
+    def done(self) -> bool:
+        return all(future.done() for future in self.futures.values())
+
+    def wait(self) -> None:
+        """Wait until every run is simulated, and let go of the line addresses (no run reads them now; a
+        stored run found not re-costable is then simulated without them, with the same counts)."""
+        for future in self.futures.values():
+            future.exception()
+        self.lines = None
+
+    def result(self, bar=None) -> StudyResult:
+        """The study's tables, once its runs are simulated (``bar`` counts them)."""
+        simulated = {}
+        shared_rows = {}
+        for index in self.to_simulate:
+            run = self.futures[index].result()
+            if self.shared is not None:
+                shared_rows[index] = shared_run_row(run.shared)
+                run = run.run
+            simulated[index] = run
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        for index, serve in self.served.items():
+            run = serve()
+            if run is None:  # the stored run was not re-costable after all: simulate it
+                run = self._simulate(index)
+                self.store.add(self.store_keys[index], run)
+            simulated[index] = run
+        hierarchy, cost, machine = self.hierarchy, self.cost, self.machine
+        results = []
+        for (mapping, _), key, tasks, n in zip(self.jobs, self.keys, self.task_counts, self.process_counts):
+            run = simulated[self.first_of[key]]
+            processes = run.processes
+            if tasks is not None:  # the one column that depends on how pixels are cut into tasks
+                processes = processes.assign(tasks=tasks.copy())  # the array is kept for later studies
+            row = {"mapping": mapping.name, **run_summary(processes, hierarchy.level_names, cost.clock_hz,
+                                                            run.real_cycles)}
+            row["n_cpus"] = machine.n_cpus
+            row.update(shared_rows.get(self.first_of[key], {}))
+            results.append((row, processes.assign(mapping=mapping.name, n_processes=n)))
+        runs = add_speedups(pd.DataFrame([row for row, _ in results]))
+        front = ["mapping", "n_processes", "n_cpus"]
+        runs = runs[front + [c for c in runs.columns if c not in front]]
+        processes = pd.concat([frame for _, frame in results], ignore_index=True)
+        processes = processes[["mapping", "n_processes"] + [c for c in processes.columns
+                                                            if c not in ("mapping", "n_processes")]]
+        parameters = {"hierarchy": hierarchy.to_dict(), "layout": self.layout.name, "cost": cost.to_dict(),
+                      "machine": asdict(machine), "mappings": self.names, "n_processes": self.counts}
+        if self.shared is not None:
+            parameters["shared_levels"] = self.shared.to_dict()
+        return StudyResult(runs, processes, parameters)
+
+
+def _pass_on(target: Future, source: Future) -> None:
+    """Give ``target`` the outcome of ``source`` (a done callback)."""
+    if source.exception() is not None:
+        target.set_exception(source.exception())
+    else:
+        target.set_result(source.result())
+
+
+def _from_store(store, trace, store_keys: dict, hierarchy, cost) -> dict:
+    """Run index -> a callable giving the run (:meth:`coherence.recost.RunStore.serve`), for the runs of
+    ``store_keys`` (run index -> :meth:`~coherence.recost.RunStore.keys`) that ``store`` re-costs or reuses
+    (none without a store)."""
     if store is None:
         return {}
     store.bind(trace)
-    hierarchy, _, _, cost, _ = setup
     found = {}
-    for index in distinct:
-        run = store.find(store.keys(keys[index], *setup), hierarchy, cost)
-        if run is not None:
-            found[index] = run
+    for index, keys in store_keys.items():
+        served = store.serve(keys, hierarchy, cost)
+        if served is not None:
+            found[index] = served
     return found
 
 

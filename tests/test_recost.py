@@ -218,3 +218,116 @@ def test_store_keeps_pixel_lines_per_placement():
             np.testing.assert_array_equal(getattr(kept[seed], name), getattr(expected, name))
         assert store.pixel_lines(trace, placed(policy, seed), 32) is kept[seed]
     assert not np.array_equal(kept[1].addresses, kept[2].addresses)
+
+
+def _stream_calls(trace, store):
+    """Six studies of one trace sharing ``store``: costs changed (re-costed), repeated (reused), other users
+    added (fixed runs served, the rest simulated), pages placed elsewhere (all simulated, new line
+    addresses), then back to the first placement."""
+    from coherence.page_placement import PagePlacement
+    from coherence.studies import StudyCall
+
+    machine = Machine(n_cpus=8, quantum_cycles=2000, background_load=0, background_footprint=2048)
+    rng = np.random.default_rng(21)
+    first, second, third = (random_costs(rng, SMALL_TLB) for _ in range(3))
+    elsewhere = replace(machine, page_placement=PagePlacement("random", page_size=512, seed=3))
+    setups = [(first, machine), (second, machine), (second, machine),
+              (first, replace(machine, background_load=3)), (second, elsewhere), (third, machine)]
+    return [StudyCall(trace, ("S", "B", "DB"), (1, 4), hierarchy=hierarchy, cost=cost, machine=machine,
+                      execution=Execution(store=store)) for (hierarchy, cost), machine in setups]
+
+
+def test_stream_serves_runs_as_studies_one_after_another():
+    """Studies through study_stream (several under way at once on two threads) give the tables of the same
+    studies made one after another, exactly, and their store takes the same paths (simulated, re-costed,
+    reused). Fails if _StudyPlan does not put the futures of its runs in the store (drop the
+    ``self.store.add(..., future)`` loop): later studies, planned before earlier ones finish, then simulate
+    what one after another re-costs or reuses (checked)."""
+    from coherence.studies import study_stream
+
+    trace = written_trace(128, 64, seed=3)
+    one_by_one = RunStore()
+    expected = [study(call.trace, call.mappings, call.n_processes, hierarchy=call.hierarchy, cost=call.cost,
+                      machine=call.machine, progress=False, execution=call.execution)
+                for call in _stream_calls(trace, one_by_one)]
+    streamed = RunStore()
+    results = list(study_stream(_stream_calls(trace, streamed), n_jobs=2, window=3))
+    assert len(results) == len(expected)
+    for got, want in zip(results, expected):
+        pd.testing.assert_frame_equal(got.runs, want.runs)
+        pd.testing.assert_frame_equal(got.processes, want.processes)
+        assert got.parameters == want.parameters
+    paths = (one_by_one.simulated, one_by_one.re_costed, one_by_one.reused)
+    assert (streamed.simulated, streamed.re_costed, streamed.reused) == paths
+    assert min(paths) > 0  # every path is taken
+
+
+def test_stream_holds_no_more_placements_than_one_study_after_another(monkeypatch):
+    """While study_stream works out a placement's line addresses, no more than LINES_KEPT - 1 others are
+    held anywhere (runs slowed so that several studies are under way). Fails if study_stream does not
+    wait for the studies under way that use other line addresses (drop its ``_wait_for(...)`` call): the
+    studies under way then hold three placements (checked)."""
+    import gc
+    import time
+    import weakref
+
+    import coherence.pixel_lines as pixel_lines_module
+    import coherence.studies as studies
+    from coherence.page_placement import PagePlacement
+    from coherence.recost import LINES_KEPT
+    from coherence.studies import StudyCall, study_stream
+
+    made, held = [], []
+    real_lines, real_run = pixel_lines_module.pixel_lines, studies.simulate_run
+
+    def tracked_lines(*args, **kwargs):  # each placement's addresses followed by a weak reference to an array
+        gc.collect()
+        held.append(sum(ref() is not None for ref in made))
+        lines = real_lines(*args, **kwargs)
+        made.append(weakref.ref(lines.addresses))
+        return lines
+
+    def slow_run(*args, **kwargs):
+        time.sleep(0.05)
+        return real_run(*args, **kwargs)
+
+    monkeypatch.setattr(pixel_lines_module, "pixel_lines", tracked_lines)
+    monkeypatch.setattr(studies, "simulate_run", slow_run)
+    trace = written_trace(32, 16, seed=4)
+    store = RunStore()
+    calls = [StudyCall(trace, ("S", "B", "DB"), (1, 4), hierarchy=SMALL, execution=Execution(store=store),
+                       machine=Machine(n_cpus=8, page_placement=PagePlacement("random", page_size=512, seed=seed)))
+             for seed in range(6)]
+    results = list(study_stream(calls, n_jobs=2, window=4))
+    assert len(results) == 6 and len(made) == 6
+    assert max(held) <= LINES_KEPT - 1
+
+
+def test_store_works_out_compute_cycles_and_replay_keys_once_per_input():
+    """The store's compute cycles equal the cost model's for each set of weights and are worked out once per
+    set (a clock change alone is served the kept ones); a mapping's replay is worked out once per mapping
+    object and process count. Fails if RunStore.compute_cycles keys on the clock instead of the weights
+    (``key = cost.clock_hz``): the second weights are then served the first's cycles (checked)."""
+    from coherence.recost import compute_digest
+
+    trace = written_trace(16, 12, seed=6)
+    store = RunStore()
+    rng = np.random.default_rng(5)
+    _, first = random_costs(rng, SMALL)
+    _, second = random_costs(rng, SMALL)
+    second = replace(second, clock_hz=first.clock_hz)
+    for cost in (first, second):
+        compute, digest = store.compute_cycles(trace, cost)
+        np.testing.assert_array_equal(compute, cost.compute_cycles(trace.counters, COUNTER_NAMES))
+        assert digest == compute_digest(compute)
+    kept = store.compute_cycles(trace, replace(first, clock_hz=2 * first.clock_hz))[0]
+    assert kept is store.compute_cycles(trace, first)[0]
+    calls = []
+
+    def work_out():
+        calls.append(1)
+        return len(calls)
+
+    strip, block = get_mapping("S"), get_mapping("B")
+    assert [store.replay_of(trace, mapping, n, work_out) for mapping, n in
+            ((strip, 1), (strip, 1), (strip, 4), (block, 4), (strip, 4))] == [1, 1, 2, 3, 2]
