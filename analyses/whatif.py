@@ -3,50 +3,15 @@
 A study (:class:`WhatIf`) is a base :class:`~analyses.experiment.Experiment`
 (scene, image size, workload, mappings, one process count, hierarchy, layout,
 cost model, machine, trace cache, Dask scheduler, memory budget) and a grid of
-parameters to vary.
+parameters to vary (their names and values: :mod:`analyses.whatif_grid`;
+under a platform also its variants: :mod:`analyses.whatif_platform`).
 Every grid point is an independent task: the trace is rendered once (or
-taken from the trace cache) and each task replays it under the point's
-configuration. Tasks run in a local process pool, or on a Dask cluster with
-the same results.
-
-Grid parameters (names as in flags and TOML files):
-
-====================== ========================================================
-``memory_latency``     cycles of a memory access
-``<level>.size``       bytes of a cache level (``L1.size``; ``96KB``, ``4MB``)
-``<level>.line_size``  line size of one level; ``line_size`` sets every level
-``<level>.assoc``      ways (or ``full``); ``<level>.latency`` hit cycles
-``hierarchy``          a preset (``alpha21164``, ``modern``) or a file
-``compute_scale``      factor on every cost model cycle count
-``cost``               a cost preset (``alpha8400``, ``modern``)
-``layout``             a memory layout preset (``compact``, ``alpha1997``)
-``texture_layout``     texel order: ``linear``, ``tiled<k>``, ``morton``,
-                       ``blocked<k>x<s>`` (:mod:`coherence.texture_layout`)
-``scene_size``         SPD size factor of the scene (balls, tetra, shell only)
-``n_processes``        processes; ``n_cpus``, ``background`` the machine
-``frame_buffer_bytes`` bytes of a frame-buffer pixel: 3, 4 or 16
-====================== ========================================================
-
-Under a platform (base ``platform``), its variants
-(:meth:`coherence.platforms.Platform.variant`):
-
-====================== ========================================================
-``cores``              cores of the machine (complexes keep their size)
-``smt``                ``on`` (the platform's SMT), ``off`` (one thread a
-                       core) or threads per core
-``l3_size``            bytes of the whole shared L3 (``16MB``)
-``prefetch``           ``on`` / ``off``: the prefetchers of
-                       :data:`coherence.platforms.PREFETCHERS_ON`
-====================== ========================================================
-
-Under a platform every point's runs are simulated on the variant's shared
-levels (:func:`shared_levels`), the point's level changes applied to whole
-levels, interleaved every ``interleave_cycles`` of the base; each row then
-also gives the run's times (:data:`PLATFORM_TIMES`) and, per level, the
-machine's coherence and false-sharing misses, and the prefetches issued,
-useful and useless (0 at points without prefetchers). The texture columns take the variant's thread view
-(:meth:`coherence.platforms.Platform.thread_view`: each level cut to one
-thread's share, no prefetchers), not the shared levels.
+taken from the trace cache, :mod:`analyses.whatif_traces`) and each task
+replays it under the point's configuration. Tasks run in a local process
+pool, or on a Dask cluster with the same results. For grids over level
+sizes, :func:`exact_lru_curves` (:mod:`analyses.whatif_lru`) adds the exact
+misses of fully associative LRU caches; :func:`save_whatif`
+(:mod:`analyses.whatif_output`) writes a study's files.
 
 Each row of the result says, for one point, mapping and process count, how
 much efficiency was lost to imbalance and to coherence and which was larger
@@ -60,7 +25,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import re
 import sys
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -71,18 +35,14 @@ import pandas as pd
 
 from cachesim import Hierarchy, get_hierarchy
 from analyses.experiment import Experiment
+from analyses.whatif_grid import (LEVEL_FIELDS, PLATFORM_PARAMETERS, PLATFORM_VARIANTS, SIMPLE,  # noqa: F401
+                                  check_parameter, parse_grid_flag, parse_value, point_levels)
+from analyses.whatif_lru import exact_lru_curves  # noqa: F401
+from analyses.whatif_platform import PLATFORM_TIMES, PREFETCH_SUFFIXES, platform_variant, shared_levels
+from analyses.whatif_traces import scene_key, sized_scene_file, traces_for
 from coherence.metrics import DECOMPOSITION_COLUMNS
-from rtcommon.files import read_text_file, remove_stale_temporaries
-from rtcommon.validate import InputError, require_int, require_number
-
-LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
-SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
-          "n_processes", "n_cpus", "background", "line_size", "frame_buffer_bytes")
-#: Grid parameters that vary the base's platform (:meth:`coherence.platforms.Platform.variant`).
-PLATFORM_VARIANTS = ("cores", "smt", "l3_size", "prefetch")
-_SWITCHES = {"on": True, "true": True, "off": False, "false": False}
-_UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB": 1024**3, "G": 1024**3}
-
+from rtcommon.files import read_text_file
+from rtcommon.validate import InputError, require_number
 
 #: The base of a what-if study unless told otherwise: the report's choices at
 #: 128x128 (every grid point is a full replay), 8 processes on 8 idle CPUs.
@@ -93,16 +53,8 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
                "layout", "cost", "n_cpus", "background", "memory_budget", "platform", "frame_buffer_bytes")
 
-#: Ends of the per-level prefetch columns of a row under a platform with prefetchers
-#: (:data:`coherence.shared_run.PREFETCH_RUN_COLUMNS`); 0 at points without them.
-PREFETCH_SUFFIXES = ("_prefetches_issued", "_prefetches_useful", "_prefetches_useless")
-
-#: Columns a row under a platform adds beside the efficiency decomposition: the slowest process's user
-#: seconds, the run's real seconds and its memory cycles summed over processes.
-PLATFORM_TIMES = ("user_seconds_max", "real_seconds", "memory_cycles")
-
-#: Grid parameters a platform sets, so a study under one may not vary them.
-PLATFORM_PARAMETERS = ("hierarchy", "cost", "n_cpus")
+# private names analyses.order_whatif and tests import from this module
+_point_levels, _sized_scene_file, _traces_for = point_levels, sized_scene_file, traces_for
 
 
 @dataclass(frozen=True)
@@ -147,7 +99,7 @@ class WhatIf:
         if not self.grid:
             raise InputError("WhatIf.grid must vary at least one parameter")
         for key, values in self.grid.items():
-            _check_parameter(key)
+            check_parameter(key)
             if not isinstance(values, (list, tuple)) or not values:
                 raise InputError(f"grid[{key!r}] must be a non-empty list of values")
             if key in PLATFORM_PARAMETERS and self.experiment.platform is not None:
@@ -198,37 +150,6 @@ class WhatIf:
         return [dict(zip(keys, values)) for values in itertools.product(*(self.grid[k] for k in keys))]
 
 
-def _check_parameter(key: str) -> None:
-    if key in SIMPLE or key in PLATFORM_VARIANTS:
-        return
-    level, _, attribute = key.partition(".")
-    if attribute in LEVEL_FIELDS and level:
-        return
-    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE + PLATFORM_VARIANTS)} or "
-                     f"<level>.{{{','.join(LEVEL_FIELDS)}}}")
-
-
-def parse_value(text: str):
-    """A grid value from text: ``4MB`` -> 4194304, ``full``, ``0.5``, ``alpha21164``."""
-    text = text.strip()
-    match = re.fullmatch(r"([0-9]+(?:\.[0-9]+)?)\s*([KMG]?B?)", text, re.IGNORECASE)
-    if match:
-        number, unit = match.groups()
-        value = float(number) * _UNITS[unit.upper()]
-        return int(value) if value.is_integer() else value
-    return text
-
-
-def parse_grid_flag(flag: str) -> tuple[str, list]:
-    """``"L3.size=1MB,4MB"`` -> ``("L3.size", [1048576, 4194304])``."""
-    key, sep, values = flag.partition("=")
-    if not sep or not values.strip():
-        raise InputError(f"--grid {flag!r}: expected NAME=VALUE[,VALUE...], e.g. L3.size=1MB,4MB")
-    key = key.strip()
-    _check_parameter(key)
-    return key, [parse_value(value) for value in values.split(",")]
-
-
 def load_study_file(path) -> WhatIf:
     """A study from a TOML file (UTF-8, a byte-order mark skipped): top-level base keys and a ``[grid]`` table."""
     path = Path(path)
@@ -269,7 +190,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
         hierarchy = get_hierarchy(point["hierarchy"])
     else:
         hierarchy = base or study.base_hierarchy()
-    hierarchy = _point_levels(hierarchy, point)
+    hierarchy = point_levels(hierarchy, point)
     cost = get_cost_model(point.get("cost", study.cost))
     scale = require_number("compute_scale", point.get("compute_scale", 1.0), 0)
     if scale == 0:
@@ -291,72 +212,6 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
                       background_load=int(point.get("background", study.background)))
     n_processes = int(point.get("n_processes", study.n_processes))
     return hierarchy, layout, cost, machine, n_processes
-
-
-def _point_levels(hierarchy: Hierarchy, point: dict) -> Hierarchy:
-    """``hierarchy`` with the point's ``line_size``, ``<level>.<field>`` and ``memory_latency``."""
-    levels = {level.name: level for level in hierarchy.levels}
-    updates: dict[str, dict] = {}
-    for key, value in point.items():
-        if key == "line_size":
-            for name in levels:
-                updates.setdefault(name, {})["line_size"] = value
-        elif "." in key:
-            name, attribute = key.split(".", 1)
-            if name not in levels:
-                raise InputError(f"what-if parameter {key!r}: the hierarchy has levels {list(levels)}")
-            updates.setdefault(name, {})[attribute] = value
-    try:
-        if updates:
-            hierarchy = replace(hierarchy, levels=tuple(replace(level, **updates.get(level.name, {}))
-                                                        for level in hierarchy.levels))
-        if "memory_latency" in point:
-            hierarchy = replace(hierarchy, memory_latency=point["memory_latency"])
-    except ValueError as error:
-        raise InputError(f"what-if point {point}: {error}") from None
-    return hierarchy
-
-
-def shared_levels(study: WhatIf, point: dict):
-    """Under a platform, what a point's runs simulate on: the point's platform variant's shared levels, with the
-    point's level changes applied to the whole levels (an ``L3.size`` is the size of one L3), interleaved at the
-    base's ``interleave_cycles`` (:class:`coherence.shared_run.SharedLevels`); None without a platform."""
-    from coherence.shared_run import SharedLevels
-
-    platform = platform_variant(study, point)
-    if platform is None:
-        return None
-    machine = platform.hierarchy
-    try:
-        machine = replace(machine, hierarchy=_point_levels(machine.hierarchy, point))
-    except ValueError as error:
-        raise InputError(f"what-if point {point}: {error}") from None
-    return SharedLevels(machine, study.experiment.interleave_cycles)
-
-
-def platform_variant(study: WhatIf, point: dict):
-    """The base's platform changed by the point's :data:`PLATFORM_VARIANTS` (None without a platform).
-
-    ``smt`` and ``prefetch`` take ``on``/``off`` (or True/False); ``smt`` also a count of threads per core.
-    """
-    platform = study.experiment.platform_object()
-    if platform is None:
-        return None
-    choices = {}
-    for key in PLATFORM_VARIANTS:
-        if key not in point:
-            continue
-        value = point[key]
-        if key in ("smt", "prefetch") and isinstance(value, str):
-            if value.lower() not in _SWITCHES:
-                raise InputError(f"what-if parameter {key} must be on or off"
-                                 f"{' or threads per core' if key == 'smt' else ''}, got {value!r}")
-            value = _SWITCHES[value.lower()]
-        choices[key] = value
-    try:
-        return platform.variant(**choices)
-    except ValueError as error:
-        raise InputError(f"what-if point {point}: {error}") from None
 
 
 def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFrame:
@@ -426,8 +281,8 @@ def run_whatif(study: WhatIf, *, n_jobs: int | None = None, **choices) -> pd.Dat
     cache_dir, dask, progress = experiment.cache_dir, experiment.dask, experiment.progress
     study = replace(study, experiment=replace(experiment, dask=None))  # what travels with each task
     points = study.points()
-    folders = _traces_for(study, points, cache_dir, progress)
-    tasks = [(study, point, folders[_scene_key(point)]) for point in points]
+    folders = traces_for(study, points, cache_dir, progress)
+    tasks = [(study, point, folders[scene_key(point)]) for point in points]
     if dask is not None:
         frames = _run_dask(tasks, dask, progress)
     else:
@@ -450,71 +305,6 @@ def run_whatif(study: WhatIf, *, n_jobs: int | None = None, **choices) -> pd.Dat
     return table
 
 
-def exact_lru_curves(study: WhatIf, *, progress: bool = False, **choices) -> pd.DataFrame | None:
-    """Exact misses of fully associative LRU caches at the grid's level sizes.
-
-    For every ``<level>.size`` in the grid, one reuse-distance pass per
-    process stream (each mapping at ``study.n_processes``, cold caches, that
-    level's line size) gives the misses of a fully associative LRU cache of
-    every size at once: the exact answer for that idealised cache, beside the
-    full simulation of the real (direct-mapped, set-associative) ones.
-    Returns None when the grid varies no level size.
-
-    Returns
-    -------
-    DataFrame
-        mapping, n_processes, level, line_size, size, accesses, misses,
-        miss_ratio (summed over the processes).
-    """
-    from cachesim import reuse_profile
-    from coherence.layout import get_layout
-    from coherence.mappings import get_mapping
-    from coherence.studies import place_layout
-    from tracer.trace.access import AccessTrace
-
-    if choices:  # fields of the base experiment to replace, as in run_whatif
-        study = replace(study, experiment=replace(study.experiment, **choices))
-    sized = {key.split(".")[0]: values for key, values in study.grid.items() if key.endswith(".size")}
-    if not sized or "scene_size" in study.grid:
-        return None
-    folder = _traces_for(study, [{}], study.experiment.cache_dir, progress)[None]
-    trace = AccessTrace.load(Path(folder))
-    from tracer.scenes.catalog import load
-
-    placed = place_layout(get_layout(study.layout), trace, load(study.scene))
-    levels = {level.name: level for level in study.base_hierarchy().levels}
-    rows = []
-    for name in study.mappings:
-        distribution = get_mapping(name).build(trace.width, trace.height, study.n_processes)
-        owner = np.repeat(np.arange(distribution.n_tasks), np.diff(distribution.task_offsets))
-        streams = []
-        for process in range(study.n_processes):
-            if distribution.dynamic:  # DB: take the blocks in hand-out order round robin
-                tasks = np.arange(process, distribution.n_tasks, study.n_processes)
-                pixels = distribution.task_pixels[np.isin(owner, tasks)]
-            else:
-                pixels = distribution.process_pixels(process)
-            starts, stops = trace.pixel_offsets[pixels], trace.pixel_offsets[pixels + 1]
-            index = np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)]) if len(pixels) else \
-                np.zeros(0, dtype=np.int64)
-            streams.append(np.asarray(trace.records)[index])
-        for level_name, sizes in sized.items():
-            if level_name not in levels:
-                raise InputError(f"what-if parameter {level_name}.size: the hierarchy has levels {list(levels)}")
-            line_size = levels[level_name].line_size
-            accesses = 0
-            misses = np.zeros(len(sizes), dtype=np.int64)
-            for records in streams:
-                addresses = placed.addresses(records, line_size)
-                accesses += addresses.size
-                misses += reuse_profile(addresses, line_size).misses(np.asarray(sizes, dtype=np.int64) // line_size)
-            for size, count in zip(sizes, misses):
-                rows.append({"mapping": name, "n_processes": study.n_processes, "level": level_name,
-                             "line_size": line_size, "size": int(size), "accesses": int(accesses),
-                             "misses": int(count), "miss_ratio": count / accesses if accesses else float("nan")})
-    return pd.DataFrame(rows)
-
-
 def long_form(table: pd.DataFrame, study: WhatIf) -> pd.DataFrame:
     """One row per (point, mapping, n_processes, metric): the tidy CSV form."""
     keys = [*study.grid, "mapping", "n_processes"]
@@ -530,59 +320,6 @@ def _run_dask(tasks, address, progress):
     with dask_executor(address) as executor:
         futures = [executor.submit(evaluate_point, *task) for task in tasks]
         return [future.result() for future in futures]
-
-
-def _scene_key(point: dict):
-    return point.get("scene_size")
-
-
-def _traces_for(study: WhatIf, points, cache_dir, progress) -> dict:
-    """Trace folder per distinct scene of the grid (rendered once each)."""
-    from analyses.traces import cached_trace
-
-    from analyses.memory_budget import memory_shares
-
-    base = study.experiment
-    records_budget = memory_shares(base.memory_budget, base.size * base.size)["render_records"]
-    folders = {}
-    for key in dict.fromkeys(_scene_key(point) for point in points):
-        scene = study.scene if key is None else _sized_scene_file(study.scene, key, cache_dir)
-        _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, kd=base.kd, max_depth=base.max_depth,
-                                  progress=progress, workload=base.trace_workload(), memory_budget=records_budget,
-                                  tree_variant=base.tree_variant)
-        folders[key] = str(Path(info["path"]) / "trace")
-    return folders
-
-
-def _sized_scene_file(name: str, size_factor, cache_dir) -> str:
-    """An NFF file of an SPD scene at another size factor (in the cache folder)."""
-    from analyses.traces import cache_root
-    from tracer.scenes import spd
-    from tracer.scenes.nff import format_nff, write_nff
-    from tracer.scenes.study import PAPER_DEPTH, canonical_scene_name
-
-    generators = {"balls": spd.balls, "tetra": spd.tetra, "shell": spd.shells}
-    key = canonical_scene_name(name)
-    if key not in generators:
-        raise InputError(f"scene_size applies to the SPD scenes {sorted(generators)}, not {name!r}")
-    size_factor = require_int("scene_size (an SPD size factor)", size_factor, 1)
-    scene = generators[key](size_factor)
-    scene.max_depth = PAPER_DEPTH[key]
-    folder = cache_root(cache_dir) / "scenes"
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except PermissionError:  # a read-only cache: generate the scene for this process only
-        import tempfile
-
-        folder = Path(tempfile.gettempdir()) / f"coherence-scenes-{os.getuid()}"
-        folder.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(folder)  # a killed run's half-written scene files
-    path = folder / f"{name}-size{size_factor}.nff"
-    # the generator decides every byte: a file that differs (damaged, edited) is written again, or the
-    # traces keyed by its content would be of another scene
-    if not path.is_file() or path.read_bytes() != format_nff(scene).encode("utf-8"):
-        write_nff(scene, path)
-    return str(path)
 
 
 # Built-in studies at a small image size: each answers one question.

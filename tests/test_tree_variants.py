@@ -276,7 +276,7 @@ def _stop_at_the_trace(monkeypatch):
 def test_report_paper_and_whatif_pass_the_variant_to_the_trace(monkeypatch, tmp_path):
     """Fails when a command drops the variant: checked by deleting ``tree_variant=experiment.tree_variant``
     in analyses/report.py, ``tree_variant=one.tree_variant`` in analyses/paper.py and
-    ``tree_variant=base.tree_variant`` in analyses/whatif.py (each alone)."""
+    ``tree_variant=base.tree_variant`` in analyses/whatif_traces.py (each alone)."""
     from dataclasses import replace
 
     from analyses.experiment import Experiment
