@@ -36,7 +36,7 @@ import pandas as pd
 from cachesim import Hierarchy, get_hierarchy
 from analyses.experiment import Experiment
 from analyses.whatif_grid import (LEVEL_FIELDS, PLATFORM_PARAMETERS, PLATFORM_VARIANTS, SIMPLE,  # noqa: F401
-                                  check_parameter, parse_grid_flag, parse_value, point_levels)
+                                  check_parameter, parse_grid_flag, parse_value, point_experiment, point_levels)
 from analyses.whatif_lru import exact_lru_curves  # noqa: F401
 from analyses.whatif_platform import PLATFORM_TIMES, PREFETCH_SUFFIXES, platform_variant, shared_levels
 from analyses.whatif_traces import scene_key, sized_scene_file, traces_for
@@ -51,7 +51,8 @@ WHATIF_EXPERIMENT = Experiment(size=128, n_processes=(8,), background=0)
 #: Fields of the base :class:`~analyses.experiment.Experiment` a study file or
 #: :meth:`WhatIf.of` may set.
 BASE_FIELDS = ("scene", "size", "workload", "tree_variant", "kd", "max_depth", "mappings", "n_processes", "hierarchy",
-               "layout", "cost", "n_cpus", "background", "memory_budget", "platform", "frame_buffer_bytes")
+               "layout", "cost", "n_cpus", "background", "background_footprint", "page_placement", "page_seed",
+               "memory_budget", "platform", "frame_buffer_bytes")
 
 # private names analyses.order_whatif and tests import from this module
 _point_levels, _sized_scene_file, _traces_for = point_levels, sized_scene_file, traces_for
@@ -181,8 +182,10 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
     """The (hierarchy, layout, cost, machine, n_processes) of one grid point."""
     from coherence.cost import get_cost_model
     from coherence.layout import get_layout
+    from coherence.page_placement import PagePlacement
     from coherence.simulation import Machine
 
+    experiment = point_experiment(study.experiment, point)
     platform = platform_variant(study, point)
     if platform is not None:  # a grid may not vary the hierarchy under a platform
         hierarchy = platform.thread_view()
@@ -199,7 +202,7 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
         from coherence.cost import OPERATIONS
 
         cost = replace(cost, **{name: getattr(cost, name) * scale for name in OPERATIONS})
-    layout = get_layout(point.get("layout", study.layout))
+    layout = get_layout(point.get("layout", experiment.layout))
     pixel_bytes = point.get("frame_buffer_bytes", study.experiment.frame_buffer_bytes)
     if pixel_bytes is not None:
         layout = layout.with_frame_buffer(pixel_bytes)
@@ -208,8 +211,9 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
 
         layout = layout.with_texels(TextureLayout.from_label(point["texture_layout"]))
     n_cpus = platform.n_threads if platform is not None else int(point.get("n_cpus", study.n_cpus))
-    machine = Machine(n_cpus=n_cpus,
-                      background_load=int(point.get("background", study.background)))
+    machine = Machine(n_cpus=n_cpus, background_load=int(point.get("background", study.background)),
+                      background_footprint=experiment.background_footprint,
+                      page_placement=PagePlacement(experiment.page_placement, seed=experiment.page_seed))
     n_processes = int(point.get("n_processes", study.n_processes))
     return hierarchy, layout, cost, machine, n_processes
 

@@ -20,6 +20,25 @@ combination. Parameters (names as in flags and TOML files):
 ``frame_buffer_bytes`` bytes of a frame-buffer pixel: 3, 4 or 16
 ====================== ========================================================
 
+The study's unknowns that ``coherence robustness`` samples
+(:data:`coherence.unknowns.UNKNOWNS`), by the same names; each sets one
+field of the point's :class:`~analyses.experiment.Experiment`
+(:data:`UNKNOWN_FIELDS`, :func:`point_experiment`) and takes any value that
+field takes, the documented plausible range (``docs/unknowns.md``) and
+beyond:
+
+======================== ======================================================
+``background_footprint`` bytes one time slice of another user's process
+                         streams through its CPU's caches (``256KB``)
+``page_placement``       ``contiguous``, ``colouring``, ``bin-hopping``,
+                         ``random`` (seeded by the base's ``page_seed``)
+``memory_image``         the memory layout: ``compact``, ``alpha1997``,
+                         ``malloc1997`` (a grid varies it or ``layout``)
+``tree_variant``         the study-era tree rule
+                         (:data:`tracer.rendering.tree_variants.TREE_VARIANTS`;
+                         ``study1997`` workload); one trace per variant
+======================== ======================================================
+
 Under a platform, also its variants (:data:`PLATFORM_VARIANTS`, see
 :mod:`analyses.whatif_platform`).
 """
@@ -29,14 +48,24 @@ import re
 from dataclasses import replace
 
 from cachesim import Hierarchy
+from coherence.layout import LAYOUTS
+from coherence.page_placement import PAGE_PLACEMENTS
 from rtcommon.validate import InputError
+from tracer.rendering.tree_variants import TREE_VARIANTS
 
-__all__ = ["LEVEL_FIELDS", "SIMPLE", "PLATFORM_VARIANTS", "PLATFORM_PARAMETERS", "check_parameter", "parse_value",
-           "parse_grid_flag", "parse_switch", "point_levels"]
+__all__ = ["LEVEL_FIELDS", "SIMPLE", "UNKNOWN_FIELDS", "PLATFORM_VARIANTS", "PLATFORM_PARAMETERS", "check_parameter",
+           "parse_value", "parse_grid_flag", "parse_switch", "point_levels", "point_experiment"]
 
 LEVEL_FIELDS = ("size", "line_size", "assoc", "latency", "policy")
 SIMPLE = ("memory_latency", "hierarchy", "compute_scale", "cost", "layout", "texture_layout", "scene_size",
           "n_processes", "n_cpus", "background", "line_size", "frame_buffer_bytes")
+#: Grid parameters named as the unknowns of :data:`coherence.unknowns.UNKNOWNS`, each to the
+#: :class:`~analyses.experiment.Experiment` field it sets.
+UNKNOWN_FIELDS = {"background_footprint": "background_footprint", "page_placement": "page_placement",
+                  "memory_image": "layout", "tree_variant": "tree_variant"}
+#: The values each categorical one of :data:`UNKNOWN_FIELDS` takes.
+_UNKNOWN_CHOICES = {"page_placement": PAGE_PLACEMENTS, "memory_image": tuple(LAYOUTS),
+                    "tree_variant": tuple(TREE_VARIANTS)}
 #: Grid parameters that vary the base's platform (:meth:`coherence.platforms.Platform.variant`).
 PLATFORM_VARIANTS = ("cores", "smt", "l3_size", "prefetch")
 #: Grid parameters a platform sets, so a study under one may not vary them.
@@ -47,12 +76,13 @@ _UNITS = {"": 1, "B": 1, "KB": 1024, "K": 1024, "MB": 1024**2, "M": 1024**2, "GB
 
 def check_parameter(key: str) -> None:
     """Raise ``ValueError`` naming the allowed parameters unless ``key`` is one."""
-    if key in SIMPLE or key in PLATFORM_VARIANTS:
+    if key in SIMPLE or key in UNKNOWN_FIELDS or key in PLATFORM_VARIANTS:
         return
     level, _, attribute = key.partition(".")
     if attribute in LEVEL_FIELDS and level:
         return
-    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(SIMPLE + PLATFORM_VARIANTS)} or "
+    names = (*SIMPLE, *UNKNOWN_FIELDS, *PLATFORM_VARIANTS)
+    raise InputError(f"unknown what-if parameter {key!r}: use one of {', '.join(names)} or "
                      f"<level>.{{{','.join(LEVEL_FIELDS)}}}")
 
 
@@ -111,3 +141,35 @@ def point_levels(hierarchy: Hierarchy, point: dict) -> Hierarchy:
     except ValueError as error:
         raise InputError(f"what-if point {point}: {error}") from None
     return hierarchy
+
+
+def point_experiment(base, point: dict):
+    """``base`` (an :class:`~analyses.experiment.Experiment`) with the point's :data:`UNKNOWN_FIELDS` set.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter and the values it takes: a value it does not
+        take, ``memory_image`` beside ``layout``, or a value the base does
+        not allow (a tree variant beside a workload other than
+        ``study1997``, a page placement under a platform).
+    """
+    if "memory_image" in point and "layout" in point:
+        raise InputError("what-if parameters memory_image and layout both set the memory layout; vary one of them")
+    experiment = base
+    for key, field in UNKNOWN_FIELDS.items():
+        if key not in point:
+            continue
+        value = point[key]
+        if key == "background_footprint":
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise InputError(f"what-if parameter background_footprint must be bytes, an integer >= 0 "
+                                 f"(262144, 256KB), got {value!r}")
+        elif value not in _UNKNOWN_CHOICES[key]:
+            raise InputError(f"what-if parameter {key} must be one of {', '.join(_UNKNOWN_CHOICES[key])}, "
+                             f"got {value!r}")
+        try:
+            experiment = replace(experiment, **{field: value})
+        except ValueError as error:
+            raise InputError(f"what-if parameter {key}={value}: {error}") from None
+    return experiment

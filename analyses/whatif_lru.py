@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analyses.whatif_traces import traces_for
+from analyses.whatif_traces import TRACE_PARAMETERS, traces_for
 from rtcommon.validate import InputError
 
 __all__ = ["exact_lru_curves"]
@@ -27,7 +27,8 @@ def exact_lru_curves(study, *, progress: bool = False, **choices) -> pd.DataFram
     level's line size) gives the misses of a fully associative LRU cache of
     every size at once: the exact answer for that idealised cache, beside the
     full simulation of the real (direct-mapped, set-associative) ones.
-    Returns None when the grid varies no level size.
+    Returns None when the grid varies no level size, or varies the trace
+    (:data:`analyses.whatif_traces.TRACE_PARAMETERS`).
 
     Parameters
     ----------
@@ -53,9 +54,9 @@ def exact_lru_curves(study, *, progress: bool = False, **choices) -> pd.DataFram
     if choices:  # fields of the base experiment to replace, as in run_whatif
         study = replace(study, experiment=replace(study.experiment, **choices))
     sized = {key.split(".")[0]: values for key, values in study.grid.items() if key.endswith(".size")}
-    if not sized or "scene_size" in study.grid:
+    if not sized or any(key in study.grid for key in TRACE_PARAMETERS):
         return None
-    folder = traces_for(study, [{}], study.experiment.cache_dir, progress)[None]
+    folder = next(iter(traces_for(study, [{}], study.experiment.cache_dir, progress).values()))
     trace = AccessTrace.load(Path(folder))
     placed = place_layout(get_layout(study.layout), trace, load(study.scene))
     levels = {level.name: level for level in study.base_hierarchy().levels}

@@ -2,7 +2,8 @@
 
 A grid that varies ``scene_size`` replays the trace of the SPD scene at each
 size factor, generated as an NFF file in the cache folder
-(:func:`sized_scene_file`); every other parameter replays the base's trace.
+(:func:`sized_scene_file`); one that varies ``tree_variant`` the trace of
+each variant's tree; every other parameter replays the base's trace.
 """
 from __future__ import annotations
 
@@ -12,12 +13,16 @@ from pathlib import Path
 from rtcommon.files import remove_stale_temporaries
 from rtcommon.validate import InputError, require_int
 
-__all__ = ["scene_key", "traces_for", "sized_scene_file"]
+__all__ = ["TRACE_PARAMETERS", "scene_key", "traces_for", "sized_scene_file"]
 
 
-def scene_key(point: dict):
-    """What decides the trace of a grid point: its ``scene_size`` (None: the base's scene)."""
-    return point.get("scene_size")
+#: Grid parameters that decide a point's trace: each value renders a trace of its own.
+TRACE_PARAMETERS = ("scene_size", "tree_variant")
+
+
+def scene_key(point: dict) -> tuple:
+    """What decides the trace of a grid point: its :data:`TRACE_PARAMETERS` (None where the base's holds)."""
+    return tuple(point.get(key) for key in TRACE_PARAMETERS)
 
 
 def traces_for(study, points, cache_dir, progress) -> dict:
@@ -32,10 +37,11 @@ def traces_for(study, points, cache_dir, progress) -> dict:
     records_budget = memory_shares(base.memory_budget, base.size * base.size)["render_records"]
     folders = {}
     for key in dict.fromkeys(scene_key(point) for point in points):
-        scene = study.scene if key is None else sized_scene_file(study.scene, key, cache_dir)
+        size_factor, tree_variant = key
+        scene = study.scene if size_factor is None else sized_scene_file(study.scene, size_factor, cache_dir)
         _, _, info = cached_trace(scene, study.size, cache_dir=cache_dir, kd=base.kd, max_depth=base.max_depth,
                                   progress=progress, workload=base.trace_workload(), memory_budget=records_budget,
-                                  tree_variant=base.tree_variant)
+                                  tree_variant=tree_variant or base.tree_variant)
         folders[key] = str(Path(info["path"]) / "trace")
     return folders
 

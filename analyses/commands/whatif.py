@@ -28,7 +28,8 @@ your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
   mappings = ["S", "R", "DB"]
   n_processes = 8
   workload = "modern"        # also kd, max_depth, hierarchy, layout, cost,
-                             # n_cpus, background, memory_budget (bytes)
+                             # n_cpus, background, background_footprint,
+                             # page_placement, page_seed, memory_budget
   [grid]
   memory_latency = [80, 320]
   "L3.size" = ["1MB", "4MB"]
@@ -36,7 +37,12 @@ your own grid: --grid NAME=V1,V2,... (repeatable), or --file STUDY.toml:
 parameters: memory_latency, <level>.size|line_size|assoc|latency|policy,
 line_size, hierarchy, compute_scale, cost, layout, texture_layout
 (linear, tiled<k>, morton, blocked<k>x<s>), scene_size, n_processes,
-n_cpus, background, frame_buffer_bytes (3, 4, 16). Under --platform
+n_cpus, background, frame_buffer_bytes (3, 4, 16); the study's unknowns
+that robustness samples, by its names (docs/unknowns.md): background_footprint
+(bytes a slice of another user's process streams through its CPU's
+caches), page_placement (contiguous, colouring, bin-hopping, random),
+memory_image (compact, alpha1997, malloc1997: the layout) and tree_variant
+(with --workload study1997; one trace per variant). Under --platform
 also its variants: cores (complexes keep their size), smt (on, off or
 threads per core), l3_size (the whole shared L3), prefetch (on, off:
 next-line at L1, stride at L2; rows add <level>_prefetches_issued,
