@@ -72,6 +72,11 @@ def register(subparsers) -> None:
                         help="map the misses per pixel of MAPPING at N processes, e.g. P:8, in one more run "
                              "(default: the compared mapping that loses most to coherence at 8 processes, or "
                              "at the largest count without 8: the misses the verdict weighs)")
+    parser.add_argument("--prefetch", choices=("on", "off"), metavar="on|off",
+                        help="with --platform: its prefetchers on (next-line at L1, stride at L2: "
+                             "coherence.platforms.PREFETCHERS_ON, docs/prefetch.md) or off; the run table then "
+                             "counts prefetches issued, useful and useless per level (default: the platform's own; "
+                             "the presets have none)")
     parser.add_argument("--json", action="store_true", help="print summary.json to stdout instead of the verdict")
     parser.set_defaults(func=run)
 
@@ -94,13 +99,14 @@ def run(args: argparse.Namespace) -> int:
     miss_map = parse_miss_map(args.miss_map, "--miss-map")
     if args.dask:
         checks.require_distributed()
+    platform = _platform(args)
     out = args.out if args.out is not None else f"report-{Path(args.scene).stem.lower()}"
     counts = args.processes if args.processes else range(1, args.max_processes + 1)
-    if args.platform is not None and not given(args, "processes") and not given(args, "max_processes"):
-        from coherence.platforms import get_platform
-
-        counts = get_platform(args.platform).default_processes()
-    experiment = experiment_from_args(args, n_processes=tuple(counts))
+    if platform is not None and not given(args, "processes") and not given(args, "max_processes"):
+        counts = platform.default_processes()
+    # a variant that changes the platform is passed as the object; otherwise the name stays as given
+    changed = {"platform": platform} if platform is not None and platform.name != args.platform else {}
+    experiment = experiment_from_args(args, n_processes=tuple(counts), **changed)
     report = build_report(experiment, out=out, miss_map=miss_map)
     path = write_report(report, out)
     others = [REPORT_FILES["results"], REPORT_FILES["summary"], *(MISS_MAP_FILES if report.miss_map is not None else ())]
@@ -113,3 +119,16 @@ def run(args: argparse.Namespace) -> int:
         for sentence in report.verdict.sentences:
             print("  " + sentence)
     return 0
+
+
+def _platform(args: argparse.Namespace):
+    """``--platform``'s :class:`coherence.platforms.Platform` with ``--prefetch`` applied, or None."""
+    from coherence.platforms import get_platform
+    from rtcommon.validate import InputError
+
+    if args.platform is None:
+        if args.prefetch is not None:
+            raise InputError(f"--prefetch {args.prefetch} switches a platform's prefetchers; give --platform NAME")
+        return None
+    platform = get_platform(args.platform)
+    return platform if args.prefetch is None else platform.variant(prefetch=args.prefetch == "on")
