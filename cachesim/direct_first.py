@@ -8,9 +8,11 @@ branches. Here every access looks both levels up at once, and a read
 either serves is finished with selects instead of branches: a first-level
 hit changes nothing, a second-level hit stamps its way (LRU) and fills the
 first level's one way. Writes (a few in a thousand on the study-era traces)
-take branches, and only the second level's misses walk on down, as in the
-general walk. The kernel stays a function of its own in its callers
-(:data:`rtcommon.jit.NOT_INLINED`).
+take branches. A second level's miss looks a direct-mapped third level (the
+21164's B-cache) up with one tag compare and fills it without a stamp, in
+scalars too; the levels below it, or a third level that is not
+direct-mapped, are walked as in the general walk. The kernel stays a
+function of its own in its callers (:data:`rtcommon.jit.NOT_INLINED`).
 
 The semantics (inclusion, writes, counters, ``served_by``, the clock and the
 stamps it leaves) are exactly those of :mod:`cachesim.by_access`, which tests
@@ -90,6 +92,21 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     first_invalidations = np.int64(0)
     n_writes = np.int64(0)
     level_hits, level_write_hits, invalidations = _zeroed_counts(work, n_levels)
+    # A direct-mapped third level (the 21164's B-cache) is looked up and
+    # filled here too, with its geometry in scalars.
+    third_direct = n_levels >= 3 and ways[2] == 1 and set_mask[2] >= 0
+    third = 2 if third_direct else 0  # any level: read only when third_direct
+    rel2 = rel_shift[third]
+    mask2 = set_mask[third]
+    offset2 = offset[third]
+    allocate2 = write_allocate[third]
+    stamp2 = geometry.policy[third] == LRU  # a hit is a use
+    spread21 = rel2 - rel1  # second-level lines per third-level line, log2
+    third_hits = np.int64(0)
+    third_write_hits = np.int64(0)
+    third_evictions = np.int64(0)
+    second_invalidations = np.int64(0)
+    unused = np.int64(0)
     n = addresses.shape[0]
     i = 0
     while i < n:
@@ -111,13 +128,20 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
             is_write = False if writes is None else writes[at]
             clock += 1
             i += 1
-            if is_write or not (hit0 | (slot1 >= 0)):
+            # Neither level holds it: slot1 < 0 and resident != line0, in
+            # arithmetic, as a test of hit0 would be compiled to a branch.
+            differs = resident ^ line0
+            if is_write or (slot1 & (differs | -differs)) < 0:
                 break
             # Served: nothing changes on a first-level hit; a second-level
             # hit stamps its way (LRU) and fills the first level, with selects.
             miss0 = not hit0
             touched = np.uint64(slot1 if slot1 >= 0 else base1)
-            stamps[touched] = clock if miss0 else stamps[touched]
+            kept = stamps[touched]
+            # The stamp read is used again (summed into `unused`): a select of
+            # a value read for it alone is compiled to a branch around the read.
+            unused ^= kept
+            stamps[touched] = clock if miss0 else kept
             tags[base0] = line0
             first_evictions += np.int64(miss0 & (resident >= 0))
             first_read_hits += np.int64(hit0)
@@ -146,10 +170,44 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
                 continue
         # Neither level holds it: walk the levels below the second, as the general walk does.
         second_misses += 1
-        served = _serving_level(line0, 2, geometry, state, None, clock, is_write, work)
+        if third_direct:
+            line2 = line0 >> rel2
+            base2 = np.uint64(offset2 + (line2 & mask2))
+            if tags[base2] == line2:
+                served = np.int64(2)
+                third_hits += 1
+                if is_write:
+                    third_write_hits += 1
+                if stamp2:
+                    stamps[base2] = clock
+            else:
+                served = np.int64(3)
+                if n_levels > 3:  # the levels below, as the general walk does
+                    served = _serving_level(line0, 3, geometry, state, None, clock, is_write, work)
+                    _fill_levels(served, 3, geometry, state, None, clock, is_write, work)
+                if allocate2 or not is_write:  # no stamp, as the walk's direct-mapped fill
+                    evicted = tags[base2]
+                    tags[base2] = line2
+                    if evicted >= 0:
+                        third_evictions += 1
+                        if inclusive:  # the lines of the levels above inside the evicted one leave them
+                            first = evicted << spread21
+                            for sub in range(first, first + (np.int64(1) << spread21)):
+                                sub_base = offset1 + (sub & mask1) * ways1
+                                for way in range(sub_base, sub_base + ways1):
+                                    if tags[way] == sub:
+                                        tags[way] = -1
+                                        second_invalidations += 1
+                            first = evicted << rel2
+                            for sub in range(first, first + (np.int64(1) << rel2)):
+                                if tags[sub & mask0] == sub:
+                                    tags[sub & mask0] = -1
+                                    first_invalidations += 1
+        else:
+            served = _serving_level(line0, 2, geometry, state, None, clock, is_write, work)
+            _fill_levels(served, 2, geometry, state, None, clock, is_write, work)
         if served_by is not None:
             served_by[at] = served
-        _fill_levels(served, 2, geometry, state, None, clock, is_write, work)
         if not (is_write and not allocate1):
             if ways1 == 1:  # no stamp, as the walk's direct-mapped fill
                 evicted = tags[base1]
@@ -174,5 +232,11 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     invalidations[0] += first_invalidations
     counts[0, EVICTIONS] += first_evictions
     counts[1, EVICTIONS] += second_evictions
+    if third_direct:
+        level_hits[2] += third_hits
+        level_write_hits[2] += third_write_hits
+        invalidations[1] += second_invalidations
+        counts[2, EVICTIONS] += third_evictions
+    work.level_lines[0] = unused  # scratch: keeps the stamps' second use
     _add_counts(counts, addresses.shape[0], n_writes, level_hits, level_write_hits, invalidations)
     return clock

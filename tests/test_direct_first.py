@@ -9,9 +9,10 @@ from cachesim.by_access import _simulate_by_access
 from cachesim.direct_first import _simulate_direct_first, serves_direct_first
 
 
-def random_hierarchy(rng):
+def random_hierarchy(rng, third_ways=None):
     """A hierarchy the direct path serves: a direct-mapped L1, an LRU L2 of 1-4
-    ways, and 0-2 levels below of any policy, with random write allocation."""
+    ways, and 0-2 levels below of any policy, with random write allocation.
+    With ``third_ways``: 1-2 levels below, the first of ``third_ways`` ways."""
     while True:
         line = 1 << int(rng.integers(4, 7))
         levels = [CacheLevel("L1", line * (1 << int(rng.integers(1, 5))), line, 1, str(rng.choice(["lru", "fifo"])),
@@ -20,9 +21,9 @@ def random_hierarchy(rng):
         ways2 = int(rng.integers(1, 5))
         levels.append(CacheLevel("L2", line2 * ways2 * (1 << int(rng.integers(1, 5))), line2, ways2, "lru",
                                  write_allocate=bool(rng.integers(2))))
-        for depth in range(int(rng.integers(0, 3))):
+        for depth in range(int(rng.integers(0, 3) if third_ways is None else rng.integers(1, 3))):
             line3 = line2 << int(rng.integers(0, 2))
-            ways3 = int(rng.integers(1, 4))
+            ways3 = third_ways if depth == 0 and third_ways is not None else int(rng.integers(1, 4))
             levels.append(CacheLevel(f"L{depth + 3}", line3 * ways3 * (1 << int(rng.integers(2, 6))), line3, ways3,
                                      str(rng.choice(["lru", "fifo", "random"])), seed=int(rng.integers(100)),
                                      write_allocate=bool(rng.integers(2))))
@@ -70,6 +71,26 @@ def test_direct_first_equals_the_general_walk_on_seeded_random_hierarchies(seed)
     writes = rng.random(stream.size) < rng.choice([0.0, 0.05, 0.5]) if seed % 4 else None
     record = bool(seed % 3)
     pieces = int(rng.integers(1, 5))
+    walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
+    direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
+    for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
+        np.testing.assert_array_equal(a, b, err_msg=f"{name} of {hierarchy}")
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_direct_mapped_third_level_equals_the_general_walk(seed):
+    """A direct-mapped third level, which the kernel looks up and fills in its own scalars (one of 1-3
+    ways, walked as the general walk does, for comparison), with a level of 1-3 ways below it or none,
+    against the general walk state for state. Fails when a third-level eviction leaves the second
+    level's lines inside it (``second_invalidations += 1`` and the ``tags[way] = -1`` before it dropped:
+    checked), or when the third level's hit leaves its stamp (``stamps[base2] = clock`` dropped: checked)."""
+    rng = np.random.default_rng(1000 + seed)
+    hierarchy = random_hierarchy(rng, third_ways=1 if seed % 5 else int(rng.integers(2, 4)))
+    assert serves_direct_first(CacheState(hierarchy).geometry)
+    stream = random_stream(rng, int(rng.integers(500, 4000)))
+    writes = rng.random(stream.size) < rng.choice([0.0, 0.05, 0.5]) if seed % 3 else None
+    record = bool(seed % 2)
+    pieces = int(rng.integers(1, 4))
     walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
     direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
     for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
