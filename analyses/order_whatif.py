@@ -143,12 +143,13 @@ def order_whatif(base: Experiment = ORDER_WHATIF_EXPERIMENT, grid: dict | None =
     workers = min((os.cpu_count() or 1) if n_jobs is None else require_int("order what-if n_jobs", n_jobs, 1),
                   len(points))
     if base.dask is None and workers == 1:
-        tables = [_point_table(local, point, orders) for point in points]
+        tables = [_point_table(local, point, orders, None) for point in points]
     else:
         # each distinct trace rendered once, before the tasks that read it from the cache run at once
         for point in {_trace_key(point): point for point in points}.values():
             _point_trace(local, point)
-        tasks = [(replace(local, progress=False), point, orders) for point in points]
+        # one thread per task: the tasks already take every CPU
+        tasks = [(replace(local, progress=False), point, orders, 1) for point in points]
         tables = _run_tasks(tasks, base.dask, workers)
     return pd.concat(tables, ignore_index=True)
 
@@ -200,10 +201,11 @@ def _point_trace(base: Experiment, point: dict) -> tuple:
     return scene, trace
 
 
-def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
-    """One grid point's rows (:func:`order_whatif`)."""
+def _point_table(base: Experiment, point: dict, orders, n_threads: int | None) -> pd.DataFrame:
+    """One grid point's rows (:func:`order_whatif`), its study's runs on ``n_threads`` threads (None: one per
+    CPU)."""
     from analyses.report_orders import order_section
-    from coherence.studies import place_layout, study
+    from coherence.studies import Execution, place_layout, study
 
     experiment = _point_experiment(base, point)
     scene, trace = _point_trace(base, point)
@@ -212,7 +214,8 @@ def _point_table(base: Experiment, point: dict, orders) -> pd.DataFrame:
     mappings = experiment.mapping_objects()
     n_processes = int(experiment.n_processes[0])
     runs = study(trace, mappings, sorted({1, n_processes}), hierarchy=hierarchy, layout=layout, cost=cost,
-                 machine=machine, scene=scene, progress=False).runs
+                 machine=machine, scene=scene, progress=False,
+                 execution=Execution() if n_threads is None else Execution(n_jobs=n_threads)).runs
     setup = {"mappings": mappings, "hierarchy": hierarchy, "placed": place_layout(layout, trace, scene),
              "cost": cost, "machine": machine, "scene": scene}
     table = order_section(trace, runs, setup, n_processes, orders)

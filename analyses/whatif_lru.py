@@ -28,7 +28,8 @@ def exact_lru_curves(study, *, progress: bool = False, **choices) -> pd.DataFram
     every size at once: the exact answer for that idealised cache, beside the
     full simulation of the real (direct-mapped, set-associative) ones.
     Returns None when the grid varies no level size, or varies the trace
-    (:data:`analyses.whatif_traces.TRACE_PARAMETERS`).
+    (:data:`analyses.whatif_traces.TRACE_PARAMETERS`) or the memory image
+    (``layout``, ``memory_image``).
 
     Parameters
     ----------
@@ -54,7 +55,8 @@ def exact_lru_curves(study, *, progress: bool = False, **choices) -> pd.DataFram
     if choices:  # fields of the base experiment to replace, as in run_whatif
         study = replace(study, experiment=replace(study.experiment, **choices))
     sized = {key.split(".")[0]: values for key, values in study.grid.items() if key.endswith(".size")}
-    if not sized or any(key in study.grid for key in TRACE_PARAMETERS):
+    # one curve stands for every point, so none when the points differ in trace or memory image
+    if not sized or any(key in study.grid for key in (*TRACE_PARAMETERS, "layout", "memory_image")):
         return None
     folder = next(iter(traces_for(study, [{}], study.experiment.cache_dir, progress).values()))
     trace = AccessTrace.load(Path(folder))

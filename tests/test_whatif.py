@@ -120,3 +120,16 @@ def test_exact_lru_curves_equal_a_fully_associative_simulation(small):
             misses += int(simulate(placed.addresses(records, 32), full).misses[0])
         row = curves.query("mapping == 'R' and size == @size")
         assert row["misses"].item() == misses
+
+
+def test_exact_lru_curves_none_when_the_memory_image_varies(small):
+    """One curve cannot stand for several memory images: a grid over ``memory_image`` or ``layout`` (with a
+    level size) gets no curves. Fails if whatif_lru stops checking those keys."""
+    from dataclasses import replace
+
+    from analyses.whatif import exact_lru_curves
+
+    study, cache = small
+    for key, values in (("memory_image", ("compact", "malloc1997")), ("layout", ("compact", "alpha1997"))):
+        varied = replace(study, grid={**study.grid, key: values})
+        assert exact_lru_curves(varied, cache_dir=cache) is None
