@@ -71,7 +71,7 @@ from numba import njit
 
 from cachesim.multicore import HITS, shared_access
 from cachesim.multicore_prefetch import prefetching_access
-from coherence.recost import READ_HITS, WRITE_HITS
+from coherence.recost import READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES
 from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, MEMORY_CYCLES, _after_pixel, _background_slice,
                                  _decide, _finish, _lowest_clock_cpu, _next_pixel, _place, os_state)
 from coherence.thread_streams import COUNTER_BYTES
@@ -360,6 +360,8 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
             share = compute_share[cpu]
             memory = 0.0
             advance = 0.0
+            if mapping_pixels:  # the process's misses before, in the pixel's row; the change after
+                _add_misses(pixel_misses, pixel, accesses, process, -1)
             while k < stop and clock + advance - turn_start < interleave_cycles:
                 address = piece_addresses[k]
                 if piece_private[k]:
@@ -384,13 +386,12 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                 if logging:
                     logged = _log(out, logged, address, thread, k)
                 _count_access(accesses, process, level_served, is_write)
-                if mapping_pixels:
-                    for level in range(level_served):
-                        pixel_misses[pixel, level] += 1
                 cycles = latency[0] if is_write else latency[level_served]
                 memory += cycles
                 advance += share + cycles
                 k += 1
+            if mapping_pixels:
+                _add_misses(pixel_misses, pixel, accesses, process, 1)
             out_cycles[process, MEMORY_CYCLES] += memory
             clock += advance
             slice_used[cpu] += advance
@@ -416,6 +417,14 @@ def _log(out, logged, address, thread, piece):
     out.log_threads[logged] = thread
     out.log_pieces[logged] = piece
     return logged + 1
+
+
+@njit(cache=True, inline="always")
+def _add_misses(pixel_misses, pixel, accesses, process, sign):
+    """Add ``sign`` times ``process``'s read and write misses at each level so far to ``pixel``'s row."""
+    for level in range(pixel_misses.shape[1]):
+        pixel_misses[pixel, level] += sign * (accesses[process, level, READ_MISSES]
+                                              + accesses[process, level, WRITE_MISSES])
 
 
 @njit(cache=True, inline="always")

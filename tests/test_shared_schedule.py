@@ -323,8 +323,8 @@ def test_event_loop_equals_the_plain_python_reference(seed, q):
     machine served it (so the turn order), each process's hits and misses per level, each pixel's misses per
     level and every instance's counts equal tests/reference_shared_schedule.py. Mutation: ``clock + advance -
     turn_start < interleave_cycles`` -> ``clock - turn_start < interleave_cycles`` in _event_loop's access loop (a
-    turn runs its pixel to the end); for the pixels' misses alone: ``pixel_misses[pixel, level] += 1`` ->
-    ``pixel_misses[pixel, 0] += 1`` in _event_loop."""
+    turn runs its pixel to the end); for the pixels' misses alone: drop ``+ accesses[process, level,
+    WRITE_MISSES]`` in shared_schedule._add_misses."""
     run, reference, pieces, machine = run_both(seed, q)
     processes = run.run.processes
     for column in ("compute", "memory", "dispatch", "finish"):
@@ -383,8 +383,8 @@ def test_private_levels_one_process_per_thread_and_huge_q_equal_simulate_run(see
     each process's cycles, hits and misses, each pixel's misses per level and the task owners equal
     coherence.simulation.simulate_run on private caches (private copies lie a multiple of every level's set span
     apart, so they map to the same sets). Mutation: ``level_served = 0`` -> ``level_served = 1`` in _event_loop's
-    same-line read path; for the pixels' misses alone: ``for level in range(level_served)`` -> ``for level in
-    range(level_served - 1)`` in _event_loop's pixel-miss count."""
+    same-line read path; for the pixels' misses alone: drop ``+ accesses[process, level, WRITE_MISSES]`` in
+    shared_schedule._add_misses."""
     from coherence.simulation import simulate_run
 
     rng = np.random.default_rng(seed)
