@@ -101,7 +101,7 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
 
 
 @njit(cache=True, inline="always")
-def _probe(tags, base, n_ways, line):
+def _probe_ways(tags, base, n_ways, line):
     """:func:`cachesim.sets._find` without an early exit: every way is compared, so the
     loop has no branch that depends on where the line is (the last match; a line is in a set once)."""
     slot = np.int64(-1)
@@ -111,10 +111,23 @@ def _probe(tags, base, n_ways, line):
 
 
 @njit(cache=True, inline="always")
-def _place(tags, stamps, seed, base, n_ways, policy, line, clock):
-    """:func:`cachesim.sets._insert` (the same victim: the first empty way, else the first
-    of the least stamps, else a random draw) with one comparison per way: an empty way
-    ranks below every stamp (stamps are clocks, >= 0), the earlier of two empty ways first."""
+def _probe(tags, base, n_ways, line):
+    """:func:`_probe_ways`, with a loop of fixed length for the common associativities (8, 12 and 16
+    ways): the compiler then unrolls and vectorises it."""
+    if n_ways == 8:
+        return _probe_ways(tags, base, 8, line)
+    if n_ways == 16:
+        return _probe_ways(tags, base, 16, line)
+    if n_ways == 12:
+        return _probe_ways(tags, base, 12, line)
+    return _probe_ways(tags, base, n_ways, line)
+
+
+@njit(cache=True, inline="always")
+def _victim_ways(tags, stamps, base, n_ways):
+    """The first empty way of the set, else the first of its least stamps, with one comparison per
+    way: an empty way ranks below every stamp (stamps are clocks, >= 0), the earlier of two empty
+    ways first. Returns the way and its rank (< 0: empty)."""
     victim = base
     lowest = np.int64(9223372036854775807)
     for way in range(n_ways):
@@ -123,6 +136,22 @@ def _place(tags, stamps, seed, base, n_ways, policy, line, clock):
         if rank < lowest:
             lowest = rank
             victim = slot
+    return victim, lowest
+
+
+@njit(cache=True, inline="always")
+def _place(tags, stamps, seed, base, n_ways, policy, line, clock):
+    """:func:`cachesim.sets._insert` (the same victim: the first empty way, else the first
+    of the least stamps, else a random draw), the victim found by :func:`_victim_ways` with a
+    loop of fixed length for the common associativities (as :func:`_probe`)."""
+    if n_ways == 8:
+        victim, lowest = _victim_ways(tags, stamps, base, 8)
+    elif n_ways == 16:
+        victim, lowest = _victim_ways(tags, stamps, base, 16)
+    elif n_ways == 12:
+        victim, lowest = _victim_ways(tags, stamps, base, 12)
+    else:
+        victim, lowest = _victim_ways(tags, stamps, base, n_ways)
     if lowest >= 0 and policy == RANDOM:
         victim = base + _random_way(seed, clock, n_ways)
     evicted = tags[victim]
@@ -290,105 +319,139 @@ def shared_access(thread, address, is_write, size, kind, geometry, machine, stat
         The level that served the access: 0 for the first level ... ``L``
         (the number of levels) for memory.
     """
-    tags = state.tags
-    stamps = state.stamps
-    ghosts = state.ghosts
-    ghost_bytes = state.ghost_bytes
-    ghost_filter = state.ghost_filter
-    counts = state.counts
-    instance_of = machine.instance_of
-    level_ways = machine.level_ways
-    instance_base = machine.instance_base
-    rel_shift = geometry.rel_shift
-    n_sets = geometry.n_sets
-    set_mask = geometry.set_mask
-    ways = geometry.ways
-    offset = geometry.offset
-    policy = geometry.policy
-    n_levels = rel_shift.shape[0]
+    n_levels = geometry.rel_shift.shape[0]
     line0 = np.int64(address >> np.uint64(geometry.line_shift))
-    first, end = _byte_range(address, size, line0, geometry.line_shift)
-    served = n_levels
-    instance0 = instance_of[0, thread]
-    base0 = _set_of(line0, 0, instance0, n_sets, set_mask, ways, offset, level_ways)
-    slot = _probe(tags, base0, ways[0], line0)
-    if slot >= 0:
-        if policy[0] == LRU:
-            stamps[slot] = clock
-        counts[0, instance0, kind, HITS] += 1
-        if is_write:
-            counts[0, instance0, kind, WRITE_HITS] += 1
+    touched = _byte_range(address, size, line0, geometry.line_shift)
+    instance0, base0, hit = _look_up(line0, 0, thread, kind, is_write, touched, clock, geometry, machine, state)
+    if hit:
         served = 0
     else:
-        lines = scratch[0]
-        instances = scratch[1]
-        bases = scratch[2]
-        for level in range(n_levels):
-            line = line0 >> rel_shift[level]
-            instance = instance_of[level, thread]
-            base = _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways)
-            lines[level] = line
-            instances[level] = instance
-            bases[level] = base
-            if level > 0:
-                slot = _probe(tags, base, ways[level], line)
-                if slot >= 0:
-                    counts[level, instance, kind, HITS] += 1
-                    if is_write:
-                        counts[level, instance, kind, WRITE_HITS] += 1
-                    if policy[level] == LRU:
-                        stamps[slot] = clock
-                    served = level
-                    break
-            counts[level, instance, kind, MISSES] += 1
-            if is_write:
-                counts[level, instance, kind, WRITE_MISSES] += 1
-            if ghost_filter[_filter_slot(line, instance_base[level] + instance, ghost_filter)] > 0:
-                ghost = _find(ghosts, base, ways[level], line)
-                if ghost >= 0:
-                    counts[level, instance, kind, COHERENCE_MISSES] += 1
-                    if end <= ghost_bytes[ghost, 0] or ghost_bytes[ghost, 1] <= first:
-                        counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
-        _fill(served, is_write, kind, geometry, machine, state, clock, scratch)
+        served = n_levels
+        if n_levels > 1 and _look_up(line0 >> geometry.rel_shift[1], 1, thread, kind, is_write, touched, clock,
+                                     geometry, machine, state)[2]:
+            served = 1
+        if served == 1:
+            # The usual miss, in a path of its own: the second level holds the line (or, with one level,
+            # memory serves it), the first alone is filled.
+            if not is_write or geometry.write_allocate[0]:
+                _fill_level(line0, 0, instance0, base0, kind, clock, geometry, machine, state)
+        else:
+            served = _walk_below(line0, thread, kind, is_write, touched, geometry, machine, state, clock, scratch)
+            scratch[0, 0] = line0
+            scratch[1, 0] = instance0
+            scratch[2, 0] = base0
+            _fill(served, is_write, kind, geometry, machine, state, clock, scratch)
         _note_fill(line0, thread, state.owners)
     state.served[thread, served] += 1
     if is_write:
-        _write_invalidate(line0, thread, kind, first, end, geometry, machine, state)
+        _write_invalidate(line0, thread, kind, touched[0], touched[1], geometry, machine, state)
     return served
 
 
 @njit(cache=True, inline="always")
+def _look_up(line, level, thread, kind, is_write, touched, clock, geometry, machine, state):
+    """Look ``line`` up in the instance of ``level`` that serves ``thread`` and count the hit
+    (:func:`_count_hit`) or the miss (:func:`_count_miss`); return the instance, its set's first way
+    and whether it hit."""
+    instance = machine.instance_of[level, thread]
+    base = _set_of(line, level, instance, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
+                   machine.level_ways)
+    slot = _probe(state.tags, base, geometry.ways[level], line)
+    if slot >= 0:
+        _count_hit(slot, level, instance, kind, is_write, clock, geometry, state)
+    else:
+        _count_miss(line, level, instance, base, kind, is_write, touched, geometry, machine, state)
+    return instance, base, slot >= 0
+
+
+@njit(cache=True, inline="always")
+def _count_hit(slot, level, instance, kind, is_write, clock, geometry, state):
+    """Count a hit in way ``slot`` of ``instance`` of ``level``; an LRU level stamps the way with ``clock``."""
+    state.counts[level, instance, kind, HITS] += 1
+    if is_write:
+        state.counts[level, instance, kind, WRITE_HITS] += 1
+    if geometry.policy[level] == LRU:
+        state.stamps[slot] = clock
+
+
+@njit(cache=True, inline="always")
+def _count_miss(line, level, instance, base, kind, is_write, touched, geometry, machine, state):
+    """Count a miss of ``line`` (its set's first way ``base``) in ``instance`` of ``level``: also a
+    coherence miss when the line has a ghost in the set, and a false-sharing one when the ghost's bytes
+    and the access's ``touched`` (first byte, end) are disjoint."""
+    counts = state.counts
+    counts[level, instance, kind, MISSES] += 1
+    if is_write:
+        counts[level, instance, kind, WRITE_MISSES] += 1
+    if state.ghost_filter[_filter_slot(line, machine.instance_base[level] + instance, state.ghost_filter)] > 0:
+        ghost = _find(state.ghosts, base, geometry.ways[level], line)
+        if ghost >= 0:
+            counts[level, instance, kind, COHERENCE_MISSES] += 1
+            first, end = touched
+            if end <= state.ghost_bytes[ghost, 0] or state.ghost_bytes[ghost, 1] <= first:
+                counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+
+
+@njit(cache=True, inline="always")
+def _walk_below(line0, thread, kind, is_write, touched, geometry, machine, state, clock, scratch):
+    """The lookup below first and second levels that missed (their misses counted): from the third
+    level down until one holds the line; return that level (the number of levels: memory). Leaves the
+    line, instance and set of the levels from the second down in ``scratch``."""
+    n_levels = geometry.rel_shift.shape[0]
+    for level in range(1, n_levels):
+        line = line0 >> geometry.rel_shift[level]
+        if level == 1:
+            instance = machine.instance_of[1, thread]
+            base = _set_of(line, 1, instance, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
+                           machine.level_ways)
+            hit = False
+        else:
+            instance, base, hit = _look_up(line, level, thread, kind, is_write, touched, clock, geometry, machine,
+                                           state)
+        scratch[0, level] = line
+        scratch[1, level] = instance
+        scratch[2, level] = base
+        if hit:
+            return level
+    return n_levels
+
+
+@njit(cache=True, inline="always")
 def _fill(served, is_write, kind, geometry, machine, state, clock, scratch):
-    """Fill the line into the levels above ``served`` that missed, lowest first (``scratch`` as
-    :func:`shared_access` left it)."""
-    tags = state.tags
-    ghosts = state.ghosts
-    ghost_filter = state.ghost_filter
-    ways = geometry.ways
-    inclusive = geometry.inclusion == INCLUSIVE
+    """Fill the line into the levels above ``served`` that missed, lowest first (``scratch`` holds each
+    level's line, instance and set)."""
     for level in range(served - 1, -1, -1):
         if is_write and not geometry.write_allocate[level]:
             continue
-        line = scratch[0, level]
-        instance = scratch[1, level]
-        base = scratch[2, level]
-        number = machine.instance_base[level] + instance
-        entry = _filter_slot(line, number, ghost_filter)
-        if ghost_filter[entry] > 0:
-            ghost = _find(ghosts, base, ways[level], line)
-            if ghost >= 0:  # the line is back: its ghost goes
-                _drop_ghost(ghost, entry, ghosts, ghost_filter)
-        evicted = _place(tags, state.stamps, geometry.seeds[level], base, ways[level], geometry.policy[level], line,
-                          clock)
-        if evicted >= 0:
-            state.counts[level, instance, kind, EVICTIONS] += 1
-            if inclusive and level > 0:
-                _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
-        else:
-            # The fill took an empty way, which may hold another line's ghost: evicted now.
-            taken = _find(tags, base, ways[level], line)
-            if ghosts[taken] >= 0:
-                _drop_ghost(taken, _filter_slot(ghosts[taken], number, ghost_filter), ghosts, ghost_filter)
+        _fill_level(scratch[0, level], level, scratch[1, level], scratch[2, level], kind, clock, geometry, machine,
+                    state)
+
+
+@njit(cache=True, inline="always")
+def _fill_level(line, level, instance, base, kind, clock, geometry, machine, state):
+    """Fill ``line`` into its set (first way ``base``) of ``instance`` of ``level``: the line's own
+    ghost in the set goes, the victim is counted and, in an inclusive hierarchy, removed from the
+    instances above, and a ghost in an empty way the fill takes goes too."""
+    tags = state.tags
+    ghosts = state.ghosts
+    ghost_filter = state.ghost_filter
+    n_ways = geometry.ways[level]
+    number = machine.instance_base[level] + instance
+    entry = _filter_slot(line, number, ghost_filter)
+    if ghost_filter[entry] > 0:
+        ghost = _find(ghosts, base, n_ways, line)
+        if ghost >= 0:  # the line is back: its ghost goes
+            _drop_ghost(ghost, entry, ghosts, ghost_filter)
+    evicted = _place(tags, state.stamps, geometry.seeds[level], base, n_ways, geometry.policy[level], line, clock)
+    if evicted >= 0:
+        state.counts[level, instance, kind, EVICTIONS] += 1
+        if geometry.inclusion == INCLUSIVE and level > 0:
+            _back_invalidate(evicted, level, instance, kind, geometry, machine, state)
+    else:
+        # The fill took an empty way, which may hold another line's ghost: evicted now.
+        taken = _find(tags, base, n_ways, line)
+        if ghosts[taken] >= 0:
+            _drop_ghost(taken, _filter_slot(ghosts[taken], number, ghost_filter), ghosts, ghost_filter)
 
 
 @njit(cache=True, **NO_REFCOUNTS)

@@ -31,8 +31,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import _back_invalidate, _byte_range, _drop_ghost, _filter_slot, _invalidate_others, _set_of
-from cachesim.multicore_state import COHERENCE_MISSES, FALSE_SHARING_MISSES
+from cachesim.multicore import (_back_invalidate, _byte_range, _count_hit, _count_miss, _drop_ghost, _filter_slot,
+                                _invalidate_others, _set_of)
 from cachesim.prefetch import ISSUED, NO_PREFETCH, USEFUL, _candidates
 from cachesim.prefetch_config import MAX_DEGREE
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
@@ -223,22 +223,12 @@ def _walk_down(line0, first_level, access, demand, geometry, machine, state, clo
         slot = _find(state.tags, base, geometry.ways[level], line)
         if slot >= 0:
             if demand:
-                state.counts[level, instance, kind, HITS] += 1
-                if is_write:
-                    state.counts[level, instance, kind, WRITE_HITS] += 1
-            if geometry.policy[level] == LRU:
+                _count_hit(slot, level, instance, kind, is_write, clock, geometry, state)
+            elif geometry.policy[level] == LRU:
                 state.stamps[slot] = clock
             return level
         if demand:
-            state.counts[level, instance, kind, MISSES] += 1
-            if is_write:
-                state.counts[level, instance, kind, WRITE_MISSES] += 1
-            if state.ghost_filter[_filter_slot(line, machine.instance_base[level] + instance, state.ghost_filter)] > 0:
-                ghost = _find(state.ghosts, base, geometry.ways[level], line)
-                if ghost >= 0:
-                    state.counts[level, instance, kind, COHERENCE_MISSES] += 1
-                    if end <= state.ghost_bytes[ghost, 0] or state.ghost_bytes[ghost, 1] <= first:
-                        state.counts[level, instance, kind, FALSE_SHARING_MISSES] += 1
+            _count_miss(line, level, instance, base, kind, is_write, (first, end), geometry, machine, state)
     return geometry.rel_shift.shape[0]
 
 

@@ -7,7 +7,7 @@ from cachesim.interleave import interleave, interleave_order
 from cachesim.multicore import simulate_threads
 from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
                                       FALSE_SHARING_MISSES, SharedState)
-from cachesim.sets import HITS, MISSES
+from cachesim.sets import EVICTIONS, HITS, MISSES
 from cachesim.sharing import SHARING, SharedHierarchy, private
 from reference_multicore import reference_threads
 
@@ -49,8 +49,8 @@ def random_stream(rng, machine, n):
 def test_random_machines_match_the_reference(seed):
     """Every counter of every instance and kind, and each thread's served counts, equal the
     reference's, for one call and for the stream run in two calls on one state.
-    Mutations: drop the ``_drop_ghost`` of the line's own ghost in a fill in _replay; drop
-    ``and thread == previous_thread`` there."""
+    Mutations: drop the ``_drop_ghost`` of the line's own ghost in _fill_level; drop
+    ``and thread == previous_thread`` in _replay."""
     rng = np.random.default_rng(seed)
     machine = random_machine(rng)
     addresses, threads, writes, sizes, kinds = random_stream(rng, machine, 1500)
@@ -66,6 +66,49 @@ def test_random_machines_match_the_reference(seed):
     second = simulate_threads(addresses[cut:], threads[cut:], state, writes=writes[cut:], sizes=sizes[cut:],
                               kinds=kinds[cut:])
     np.testing.assert_array_equal(first.counts + second.counts, expected)
+
+
+def wide_machine(rng):
+    """:func:`random_machine`'s kind of machine with 1-3 levels of 1-16 ways, the associativities that have
+    a loop of their own (8, 12, 16) among them, one or two sets; the first level private to a thread or a core."""
+    n_levels = int(rng.integers(1, 4))
+    line = int(rng.choice([8, 16]))
+    levels = []
+    for index in range(n_levels):
+        ways = int(rng.choice([8, 12, 16, 5, 1]))
+        levels.append(CacheLevel(f"L{index + 1}", line * ways * int(rng.choice([1, 2])) * (index + 1), line, ways,
+                                 str(rng.choice(["lru", "lru", "fifo", "random"])), seed=int(rng.integers(0, 9)),
+                                 write_allocate=bool(index or rng.random() < 0.5)))
+    scopes = sorted([int(rng.integers(0, 2))] + list(rng.choice(len(SHARING), n_levels - 1)))  # first: thread or core
+    return SharedHierarchy(Hierarchy(tuple(levels), inclusion=str(rng.choice(["non-inclusive", "inclusive"]))),
+                           n_cores=int(rng.integers(2, 4)), smt=int(rng.integers(1, 3)),
+                           shared_by=tuple(SHARING[s] for s in scopes))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_wide_sets_and_single_levels_match_the_reference(seed):
+    """Sets of up to 16 ways (each way compared and the victim found by fixed-length loops) and machines
+    of one level (no second level to serve a first-level miss): every counter and the served counts equal
+    the reference's, on a stream of 3-8 times as many lines as the first level holds, so that the wide sets fill,
+    evict and lose lines to invalidations.
+    Mutations: ``_probe_ways(tags, base, 8, line)`` in _probe's 12-way branch; ``if True:`` for
+    ``if not is_write or geometry.write_allocate[0]:`` in shared_access (a write fills a first level that
+    does not allocate on writes)."""
+    rng = np.random.default_rng(300 + seed)
+    machine = wide_machine(rng)
+    level = machine.hierarchy.levels[0]
+    n = 2500
+    line = level.line_size
+    held = level.size // line
+    fresh = np.maximum.accumulate(np.where(rng.random(n) < 0.3, 0, np.arange(n)))
+    addresses = rng.integers(0, held * int(rng.integers(3, 9)), n)[fresh] * line + rng.integers(0, line, n)
+    sizes = np.minimum(rng.integers(1, 9, n), line - addresses % line)
+    threads, writes, kinds = rng.integers(0, machine.n_threads, n)[fresh], rng.random(n) < 0.25, rng.integers(0, 16, n)
+    expected, served = reference_threads(addresses, threads, machine, writes, sizes, kinds)
+    result = simulate_threads(addresses, threads, machine, writes=writes, sizes=sizes, kinds=kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    np.testing.assert_array_equal(result.served, served)
+    assert expected[..., COHERENCE_INVALIDATIONS].sum() > 0 and expected[..., EVICTIONS].sum() > 0
 
 
 def uniform_machine(rng):
@@ -154,7 +197,7 @@ def test_a_copied_state_continues_independently():
     (CacheLevel("L1", 512, 16, 2, "random", seed=3), CacheLevel("L2", 2048, 32, 4, "fifo")),
     inclusion="inclusive")])
 def test_one_thread_of_private_levels_equals_simulate(make):
-    """Mutation: fill the levels top-down (``range(served)``) in simulate_threads_stream."""
+    """Mutation: fill the levels top-down (``range(served)``) in _fill."""
     rng = np.random.default_rng(7)
     addresses = rng.integers(0, 1 << 23, 20000) & ~np.int64(3)
     writes = rng.random(addresses.size) < 0.2
@@ -197,7 +240,7 @@ def test_ping_pong_writes_invalidate_each_other():
 def test_disjoint_bytes_of_one_line_are_false_sharing():
     """Thread 0 writes bytes 0-3 and thread 1 bytes 4-7 of one line (adjacent, disjoint): the same
     misses as ping-pong, and every coherence miss is a false-sharing miss.
-    Mutation: ``end < written_first or written_end < first`` in _note_miss (touching counts as shared)."""
+    Mutation: ``end < written_first or written_end < first`` in _count_miss (touching counts as shared)."""
     addresses, threads, writes, sizes = ping_pong(10, [0, 4])
     frame = simulate_threads(addresses, threads, two_cores(), writes=writes, sizes=sizes).to_frame()
     l1 = frame[frame.level == "L1"]
@@ -215,7 +258,7 @@ def test_a_ghost_lasts_until_its_way_is_filled():
     of the other L1 set and A: a coherence miss; or C of A's set, which fills the ghost's way, and
     A: an ordinary miss. In an L1 that does not allocate writes, a write miss on the ghost leaves it,
     so the read after it is a coherence miss too. Direct-mapped L1s of 2 sets, counted by hand.
-    Mutation: leave out the ``_drop_ghost`` of the way an empty-way fill takes, in _replay."""
+    Mutation: leave out the ``_drop_ghost`` of the way an empty-way fill takes, in _fill_level."""
     def l1_coherence_misses(addresses, threads, writes, allocate=True):
         hierarchy = Hierarchy((CacheLevel("L1", 128, 64, 1, write_allocate=allocate), CacheLevel("L2", 4096, 64, 4)))
         machine = SharedHierarchy(hierarchy, n_cores=2, shared_by=("core", "machine"))
