@@ -264,19 +264,11 @@ class RunStore:
             raise InputError("RunStore: this store holds runs of another trace; use one store per trace")
 
     @staticmethod
-    def keys(replay_key, hierarchy, layout, machine, cost, compute) -> tuple:
-        """The key of what decides a run's counts, the key of its costs, and its processes' first CPUs.
-
-        ``replay_key`` is a :class:`ReplayKey`; ``compute`` the compute cycles of every pixel, float64 (P,).
-        The first CPUs are :func:`first_cpus` for a run with a fixed schedule, None for any other.
-        """
-        return RunStore.keys_of([replay_key], hierarchy, layout, machine, cost, compute_digest(compute))[0]
-
-    @staticmethod
     def keys_of(replay_keys, hierarchy, layout, machine, cost, compute_key: bytes) -> list:
-        """:meth:`keys` of each of ``replay_keys`` (runs of one study), given ``compute_key``, the
-        :func:`compute_digest` of the study's compute cycles per pixel; the parts the runs share are worked
-        out once."""
+        """Per run of one study (each of ``replay_keys``, a :class:`ReplayKey`): the key of what decides its
+        counts, the key of its costs, and its processes' first CPUs (:func:`first_cpus` for a run with a
+        fixed schedule, None for any other). ``compute_key`` is the :func:`compute_digest` of the study's
+        compute cycles per pixel; the parts the runs share are worked out once."""
         levels = tuple(replace(level, latency=0.0) for level in hierarchy.levels)
         tlb = None if hierarchy.tlb is None else replace(hierarchy.tlb, miss_cycles=0.0)
         geometry = repr(replace(hierarchy, levels=levels, memory_latency=0.0, tlb=tlb, name=""))
@@ -326,13 +318,8 @@ class RunStore:
             self._replays[key] = kept
         return kept[1]
 
-    def find(self, keys, hierarchy, cost):
-        """The run for ``keys`` (:meth:`keys`) without simulating it, or None; counts the path taken."""
-        served = self.serve(keys, hierarchy, cost)
-        return None if served is None else served()
-
     def serve(self, keys, hierarchy, cost):
-        """How the run for ``keys`` (:meth:`keys`) is had without simulating it: a callable, or None (simulate).
+        """How the run for ``keys`` (:meth:`keys_of`) is had without simulating it: a callable, or None (simulate).
 
         The callable returns the run, reused or re-costed, waiting for the
         stored run if it is still being simulated (:meth:`add` of a
@@ -352,7 +339,7 @@ class RunStore:
         if stored_cost_key == cost_key:
             self.reused += 1
             return lambda: _on_cpus(_finished(stored), cpus)
-        if cpus is None:  # a schedule that depends on cycles (:meth:`keys` gives first CPUs to fixed ones only)
+        if cpus is None:  # a schedule that depends on cycles (:meth:`keys_of` gives first CPUs to fixed ones only)
             return None
 
         self.re_costed += 1
@@ -415,7 +402,7 @@ def _lines_key(placed, line_size: int, budget_bytes) -> tuple:
 
 
 def compute_digest(compute) -> bytes:
-    """The digest of compute cycles per pixel (float64 (P,)) that the cost key of :meth:`RunStore.keys` holds."""
+    """The digest of compute cycles per pixel (float64 (P,)) that the cost key of :meth:`RunStore.keys_of` holds."""
     return hashlib.blake2b(np.ascontiguousarray(compute, dtype=np.float64).tobytes(), digest_size=16).digest()
 
 

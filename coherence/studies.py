@@ -166,7 +166,7 @@ def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
     plan = _StudyPlan(call)
     n_jobs = plan.execution.n_jobs
     with ThreadPoolExecutor(max_workers=n_jobs or os.cpu_count() or 1) as pool:
-        plan.submit(pool, plan.work_out_lines())
+        plan.start(pool)
         return plan.result(_progress(len(plan.to_simulate), progress))
 
 
@@ -238,7 +238,7 @@ def study_stream(calls, *, n_jobs: int | None = None, window: int = STREAM_WINDO
                 kept = plan.store.lines_kept_with_new() if plan.store is not None else []
                 _wait_for(study for study in under_way
                           if study.lines is not None and not any(study.lines is lines for lines in kept))
-            plan.submit(pool, plan.work_out_lines())
+            plan.start(pool)
             under_way.append(plan)
             while len(under_way) >= window + 1 or (under_way and under_way[0].done()):
                 yield under_way.popleft().result()
@@ -314,6 +314,7 @@ class _StudyPlan:
         self.served = _from_store(self.store, trace, self.store_keys, self.hierarchy, self.cost)
         self.to_simulate = [index for index in distinct if index not in self.served]
         self.futures = {}
+        self.passed_on = set()  # runs whose store future follows a submitted simulation
         self.lines = None
         if self.store is not None:
             for index in self.to_simulate:  # later studies find these runs while they are simulated
@@ -353,6 +354,19 @@ class _StudyPlan:
         work = pixel_lines if self.store is None else self.store.pixel_lines
         return work(self.trace, self.placed, self._line_size(), self.execution.shared_lines_budget)
 
+    def start(self, pool) -> None:
+        """Work out the line addresses and :meth:`submit` the runs. If that fails, the store's futures of
+        the runs not submitted fail with the same error, so a later study simulates them again instead of
+        waiting for them for ever."""
+        try:
+            self.submit(pool, self.work_out_lines())
+        except BaseException as error:
+            for index in self.to_simulate:
+                future = self.futures.get(index)
+                if index not in self.passed_on and future is not None and not future.done():
+                    future.set_exception(error)
+            raise
+
     def submit(self, pool, lines) -> None:
         """Simulate the runs to simulate: on the shared levels or privately on ``pool``, or on the
         execution's executor."""
@@ -369,6 +383,7 @@ class _StudyPlan:
         for index, future in submitted.items():
             if index in self.futures:  # the store's future follows the pool's
                 future.add_done_callback(partial(_pass_on, self.futures[index]))
+                self.passed_on.add(index)
             else:
                 self.futures[index] = future
 
@@ -446,7 +461,7 @@ def _pass_on(target: Future, source: Future) -> None:
 
 def _from_store(store, trace, store_keys: dict, hierarchy, cost) -> dict:
     """Run index -> a callable giving the run (:meth:`coherence.recost.RunStore.serve`), for the runs of
-    ``store_keys`` (run index -> :meth:`~coherence.recost.RunStore.keys`) that ``store`` re-costs or reuses
+    ``store_keys`` (run index -> :meth:`~coherence.recost.RunStore.keys_of`) that ``store`` re-costs or reuses
     (none without a store)."""
     if store is None:
         return {}

@@ -166,7 +166,7 @@ def test_store_serves_fixed_runs_whatever_the_other_users():
     of two background processes reuses the one-process runs (and simulates the 8-process ones), and two
     studies without any that differ only in the footprint share every run; each equals a study without a
     store, cpu column included. Fails if the store serves a run with its stored cpu column (``return run``
-    in RunStore.find; the one-process runs then start on CPU 2, not 5) (checked)."""
+    in RunStore.serve; the one-process runs then start on CPU 2, not 5) (checked)."""
     trace = written_trace(128, 64, seed=3)
     machine = Machine(n_cpus=8, quantum_cycles=2000, background_load=2, background_footprint=2048)
     store = RunStore()
@@ -331,3 +331,35 @@ def test_store_works_out_compute_cycles_and_replay_keys_once_per_input():
     strip, block = get_mapping("S"), get_mapping("B")
     assert [store.replay_of(trace, mapping, n, work_out) for mapping, n in
             ((strip, 1), (strip, 1), (strip, 4), (block, 4), (strip, 4))] == [1, 1, 2, 3, 2]
+
+
+def test_a_failed_study_leaves_no_run_for_others_to_wait_on(monkeypatch):
+    """A study that fails while working out its line addresses has put its runs in the store as futures;
+    they fail with its error, so the next study on the store simulates them and finishes (with the runs
+    of a fresh store). Fails (the second study waits for ever; here: times out) if _StudyPlan.start stops
+    failing the futures of runs it did not submit."""
+    import threading
+
+    import coherence.pixel_lines as pixel_lines_module
+
+    trace = written_trace(32, 16, seed=4)
+    store = RunStore()
+    real = pixel_lines_module.pixel_lines
+
+    def fail(*args, **kwargs):
+        raise MemoryError("no room for line addresses")
+
+    monkeypatch.setattr(pixel_lines_module, "pixel_lines", fail)
+    with pytest.raises(MemoryError):
+        study(trace, ("S", "B"), (1, 4), hierarchy=SMALL, execution=Execution(store=store), progress=False)
+    monkeypatch.setattr(pixel_lines_module, "pixel_lines", real)
+    result = {}
+    thread = threading.Thread(target=lambda: result.setdefault("runs", study(
+        trace, ("S", "B"), (1, 4), hierarchy=SMALL, execution=Execution(store=store), progress=False).runs),
+        daemon=True)
+    thread.start()
+    thread.join(120)
+    assert "runs" in result, "the second study is still waiting for the first one's runs"
+    fresh = study(trace, ("S", "B"), (1, 4), hierarchy=SMALL, execution=Execution(store=RunStore()),
+                  progress=False).runs
+    pd.testing.assert_frame_equal(result["runs"], fresh)
