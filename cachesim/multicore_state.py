@@ -140,8 +140,10 @@ class SharedArrays(NamedTuple):
 
 #: Entries of SharedArrays.ghost_filter (a power of two).
 GHOST_FILTER_SIZE = 1 << 13
-#: Entries of SharedArrays.owners (a power of two; 16 bytes each).
-OWNERS_SIZE = 1 << 14
+#: Entries of SharedArrays.owners (a power of two; 16 bytes each): 32 KB, as every fill of a first-level
+#: line reads an entry and a small table stays in the host's nearer caches; a collision only makes a
+#: write search the other instances, so the counts do not depend on the size.
+OWNERS_SIZE = 1 << 11
 #: The thread of an owners entry whose line other threads filled since its last write.
 SEVERAL_THREADS = -2
 
