@@ -62,19 +62,25 @@ def run_kernel(kernel, stream, writes, hierarchy, pieces, record):
     return clock, state.tags.copy(), state.stamps.copy(), state.counts.copy(), served
 
 
-@pytest.mark.parametrize("seed", range(40))
-def test_direct_first_equals_the_general_walk_on_seeded_random_hierarchies(seed):
-    rng = np.random.default_rng(seed)
-    hierarchy = random_hierarchy(rng)
+def assert_direct_first_equals_the_walk(rng, hierarchy, lengths, with_writes, record, max_pieces):
+    """The direct-first kernel and the general walk leave the same clock, tags, stamps, counts and served
+    levels on a random stream of ``lengths`` (low, high) accesses, written at a random rate if
+    ``with_writes``, replayed in 1 to ``max_pieces - 1`` calls."""
     assert serves_direct_first(CacheState(hierarchy).geometry)
-    stream = random_stream(rng, int(rng.integers(1, 3000)))
-    writes = rng.random(stream.size) < rng.choice([0.0, 0.05, 0.5]) if seed % 4 else None
-    record = bool(seed % 3)
-    pieces = int(rng.integers(1, 5))
+    stream = random_stream(rng, int(rng.integers(*lengths)))
+    writes = rng.random(stream.size) < rng.choice([0.0, 0.05, 0.5]) if with_writes else None
+    pieces = int(rng.integers(1, max_pieces))
     walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
     direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
     for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
         np.testing.assert_array_equal(a, b, err_msg=f"{name} of {hierarchy}")
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_direct_first_equals_the_general_walk_on_seeded_random_hierarchies(seed):
+    rng = np.random.default_rng(seed)
+    hierarchy = random_hierarchy(rng)
+    assert_direct_first_equals_the_walk(rng, hierarchy, (1, 3000), bool(seed % 4), bool(seed % 3), 5)
 
 
 @pytest.mark.parametrize("seed", range(30))
@@ -86,15 +92,7 @@ def test_direct_mapped_third_level_equals_the_general_walk(seed):
     checked), or when the third level's hit leaves its stamp (``stamps[base2] = clock`` dropped: checked)."""
     rng = np.random.default_rng(1000 + seed)
     hierarchy = random_hierarchy(rng, third_ways=1 if seed % 5 else int(rng.integers(2, 4)))
-    assert serves_direct_first(CacheState(hierarchy).geometry)
-    stream = random_stream(rng, int(rng.integers(500, 4000)))
-    writes = rng.random(stream.size) < rng.choice([0.0, 0.05, 0.5]) if seed % 3 else None
-    record = bool(seed % 2)
-    pieces = int(rng.integers(1, 4))
-    walked = run_kernel(_simulate_by_access, stream, writes, hierarchy, pieces, record)
-    direct = run_kernel(_simulate_direct_first, stream, writes, hierarchy, pieces, record)
-    for name, a, b in zip(("clock", "tags", "stamps", "counts", "served_by"), walked, direct):
-        np.testing.assert_array_equal(a, b, err_msg=f"{name} of {hierarchy}")
+    assert_direct_first_equals_the_walk(rng, hierarchy, (500, 4000), bool(seed % 3), bool(seed % 2), 4)
 
 
 def test_simulate_uses_the_direct_path_with_the_same_results_on_the_alpha_presets():
