@@ -25,8 +25,8 @@ from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout
 from coherence.recost import N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts
-from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
-                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
+from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES, MIGRATIONS,
+                                N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
 from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
 from coherence.thread_streams import counter_address, record_places, split_records

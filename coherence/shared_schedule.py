@@ -1,8 +1,9 @@
 """The schedule on a machine whose hardware threads share cache levels: processes that run at the same time interleave.
 
 :func:`run_shared_schedule` is the event loop of :mod:`coherence.scheduler`
-(run queues, time slices, dynamic hand-outs, take-ahead, context switches,
-background slices: the same rules, in the same order) on the hardware
+with the operating system's rules of :mod:`coherence.os_rules` (run queues,
+time slices, dynamic hand-outs, take-ahead, context switches, background
+slices: the same rules, in the same order) on the hardware
 threads of a :class:`cachesim.sharing.SharedHierarchy`. A CPU of the
 scheduler is a hardware thread (:func:`cpu_threads`: free CPUs are taken
 in CPU order, and the CPUs go over the cores before their SMT siblings, so
@@ -35,7 +36,7 @@ core are hardware threads like any other: each has its own clock and they
 interleave at the same ``Q`` (at ``Q = 1`` access by access).
 
 Other users' background processes take whole slices as in
-:mod:`coherence.scheduler`; a background slice is one turn, its reads
+:mod:`coherence.os_rules`; a background slice is one turn, its reads
 (one per line of its stream, kind 0) going through the thread's instances
 at once.
 
@@ -72,8 +73,8 @@ from numba import njit
 from cachesim.multicore import HITS, shared_access
 from cachesim.multicore_prefetch import prefetching_access
 from coherence.recost import READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES
-from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, MEMORY_CYCLES, _after_pixel, _background_slice,
-                                 _decide, _finish, _lowest_clock_cpu, _next_pixel, _place, os_state)
+from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, MEMORY_CYCLES, after_pixel, background_slice, decide,
+                                finish, lowest_clock_cpu, next_pixel, os_state, place)
 from coherence.thread_streams import COUNTER_BYTES
 from rtcommon.jit import NO_REFCOUNTS
 from tracer.trace.records import AUXILIARY_KIND
@@ -193,7 +194,7 @@ class _LoopState(NamedTuple):
 
     Attributes
     ----------
-    system : coherence.scheduler.OsState
+    system : coherence.os_rules.OsState
         Run queues, clocks, slices, what each CPU runs and where each process is in its tasks.
     compute_share : ndarray of float64, shape (C,)
         Compute cycles each access of the CPU's pixel carries.
@@ -222,9 +223,9 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
     cost : coherence.simulation.PixelCost
         ``latency`` (L + 1,): cycles of an access served by each level, memory last.
     schedule : coherence.simulation.Schedule
-    queues : coherence.scheduler.RunQueues
+    queues : coherence.os_rules.RunQueues
         ``n_queues`` 1 (shared queue) or one per CPU (static).
-    background : coherence.scheduler.BackgroundLoad
+    background : coherence.os_rules.BackgroundLoad
         ``skip`` and page placement are not used: every background read is made.
     out : SharedOutputs
     interleave_cycles : float
@@ -288,7 +289,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     access_clock = 0
     logged = 0
     while ours_left > 0:
-        cpu = _lowest_clock_cpu(cpu_clock, system.active)
+        cpu = lowest_clock_cpu(cpu_clock, system.active)
         if cpu < 0:
             break
         clock = cpu_clock[cpu]
@@ -296,11 +297,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
         thread = thread_of[cpu]
         process = system.running[cpu]
         if next_piece[cpu] < 0:  # between pixels: the operating system decides
-            process, clock = _decide(system, queues, cpu, clock, n_ours)
+            process, clock = decide(system, queues, cpu, clock, n_ours)
             if process < 0:
                 continue
             if process >= n_ours:
-                start = _background_slice(system, queues, background, process, n_ours, cpu, clock)
+                start = background_slice(system, queues, background, process, n_ours, cpu, clock)
                 for i in range(footprint_lines):  # one turn: the slice's reads at once
                     address = np.uint64((start + i) << line_shift)
                     access_clock += 1
@@ -312,7 +313,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
                     if logging:
                         logged = _log(out, logged, address, thread, BACKGROUND_READ)
                 continue
-            _place(system, out.placement, process, cpu)
+            place(system, out.placement, process, cpu)
 
         finished = False
         offset = np.uint64(process + 1) * span
@@ -323,7 +324,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
         while True:
             if next_piece[cpu] < 0:  # the next pixel
                 handed_before = system.next_task[0]
-                pixel, clock = _next_pixel(system, schedule, out, process, cpu, clock)
+                pixel, clock = next_pixel(system, schedule, out, process, cpu, clock)
                 for _ in range(system.next_task[0] - handed_before):  # each hand-out: the counter's atomic update
                     access_clock += 1
                     if prefetchers is not None:
@@ -399,11 +400,11 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
             if k < stop:
                 break  # the turn is over inside the pixel
             next_piece[cpu] = -1
-            back, finished = _after_pixel(system, schedule, queues, process, cpu)
+            back, finished = after_pixel(system, schedule, queues, process, cpu)
             if back or clock - turn_start >= interleave_cycles:
                 break
         if finished:
-            _finish(system, out, process, cpu, clock)
+            finish(system, out, process, cpu, clock)
             ours_left -= 1
         cpu_clock[cpu] = clock
     out.log_length[0] = logged

@@ -46,9 +46,9 @@ from coherence.page_placement import PagePlacement
 from coherence.pixel_lines import PixelLines, no_pixel_lines
 from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
                               fixed_schedule)
-from coherence.scheduler import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES,
-                                 MIGRATIONS, N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, CpuTlbs,
-                                 RunOutputs, RunQueues, run_schedule)
+from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES, MIGRATIONS,
+                                N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS, BackgroundLoad, RunQueues)
+from coherence.scheduler import CpuTlbs, RunOutputs, run_schedule
 from rtcommon.validate import InputError, require_bool, require_int, require_number
 
 SCHEDULERS = ("shared-queue", "static")

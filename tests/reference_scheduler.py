@@ -1,6 +1,6 @@
 """A slow, obvious model of the simulated operating system, to check coherence.scheduler.
 
-Written from the rules in coherence.scheduler's docstring with Python lists,
+Written from the rules in the docstrings of coherence.os_rules and coherence.scheduler with Python lists,
 deques and the dict-based reference caches of tests/reference_cache.py: one
 cache per CPU, FIFO run queues, a loop that always moves the CPU whose clock
 is lowest (lowest index on ties). It returns the same per-process numbers as

@@ -1,6 +1,6 @@
 """A slow, obvious model of the schedule on shared cache levels, to check coherence.shared_schedule.
 
-Written from the rules in coherence.shared_schedule's and coherence.scheduler's
+Written from the rules in coherence.shared_schedule's and coherence.os_rules'
 docstrings with Python lists and deques; every access goes through
 reference_multicore_prefetch.ReferenceThreads (explicit ways with ghosts, one
 instance per group of hardware threads sharing a level; no prefetcher here).
