@@ -254,7 +254,10 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     if trace.metadata.get("textures"):
         from analyses.report_texture import texture_section
 
-        texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost)
+        # under a platform its share and layouts come from runs on the shared levels, as the study's
+        texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost,
+                                  shared=None if experiment.platform is None else experiment.study_hierarchy(),
+                                  machine=setup.machine)
     ray_orders = None
     if trace.segments is not None and not setup.machine.page_placement.translates:
         from analyses.report_orders import order_section

@@ -156,21 +156,35 @@ def miss_map_dtype(misses) -> np.dtype:
         else np.dtype(np.int64)
 
 
-def thread_view_note(inputs) -> str | None:
-    """Under a platform, what the texture section was computed on: the platform's thread view
-    (``inputs.hierarchy``), named with its levels' sizes; None without a platform."""
-    if inputs.experiment.platform is None:
+def texture_note(inputs) -> str | None:
+    """Under a platform, what the texture section was computed on: runs on the platform's shared levels,
+    one per texel order and mapping; None without a platform."""
+    experiment = inputs.experiment
+    if experiment.platform is None:
         return None
-    sizes = ", ".join(f"{level.name} {_bytes_text(level.size)}" for level in inputs.hierarchy.levels)
-    return (f"thread view {inputs.hierarchy.name}: one hardware thread's private copy of each level, cut to its "
-            f"share ({sizes}), without coherence or prefetchers; the runs use the platform's shared levels")
+    name = experiment.platform_object().name
+    return (f"texel reads and misses come from one run per texel order and mapping at {inputs.verdict_n} "
+            f"processes on {name}'s shared levels, as the study's runs (interleaved "
+            f"{int(experiment.interleave_cycles)} cycles at a time, coherence on), each level's counts summed over "
+            "its instances; a level's misses are the processes' own there (background reads left out); the "
+            "texel miss-ratio curves take no machine")
+
+
+#: Under a platform, what ``results.csv``'s texture sections hold instead of :data:`SECTIONS`' (their runs).
+PLATFORM_SECTIONS = {
+    "texture": SECTIONS["texture"].replace(
+        "each process on a cold hierarchy of its own (coherence.kind_misses)",
+        "from a run of each mapping on the platform's shared levels, each level summed over its instances "
+        "(analyses.report_texture.shared_texel_table)"),
+    "texture_layouts": SECTIONS["texture_layouts"] + ", from a run of each texel order and mapping on the "
+                                                     "platform's shared levels, each level summed over its instances",
+}
 
 
 def platform_views(inputs) -> dict | None:
     """Under a platform, what each section computed beside the study's runs took, as ``{section: {"view",
-    "what"}}``: the miss map the run on the platform's shared levels, the miss-ratio curves no machine, the
-    texture section (when the report has one) the thread view (:func:`thread_view_note`); None without a
-    platform."""
+    "what"}}``: the miss map and the texture section (when the report has one, :func:`texture_note`) runs
+    on the platform's shared levels, the miss-ratio curves no machine; None without a platform."""
     experiment = inputs.experiment
     if experiment.platform is None:
         return None
@@ -190,7 +204,7 @@ def platform_views(inputs) -> dict | None:
                                 f"marked sizes are {platform.name}'s whole levels ({sizes})"},
     }
     if inputs.texture is not None:
-        views["texture"] = {"view": "thread view", "what": thread_view_note(inputs)}
+        views["texture"] = {"view": "shared run", "what": texture_note(inputs)}
     return views
 
 
@@ -313,11 +327,9 @@ def summary(inputs: ReportInputs) -> dict:
         "miss_map": {**miss_map_summary(inputs.misses, miss_map_dtype(inputs.misses)),
                      **({} if views is None else {"caches": views["miss_map"]["what"]})},
         **({} if views is None else {"views": views}),
-        **({} if views is None or "texture" not in views else {
-            "thread_view": {"sections": ["texture"], "what": views["texture"]["what"],
-                            "hierarchy": inputs.hierarchy.to_dict()}}),
         **({} if inputs.ray_orders is None else {"ray_orders": inputs.ray_orders.to_dict(orient="records")}),
-        "results_csv": {"columns": list(RESULT_COLUMNS), "sections": SECTIONS},
+        "results_csv": {"columns": list(RESULT_COLUMNS),
+                        "sections": SECTIONS if views is None else {**SECTIONS, **PLATFORM_SECTIONS}},
         **shared,
     })
 

@@ -1,7 +1,9 @@
 """The report's texture section: how texels behave in the caches, for textured scenes.
 
-Three tables, each from every process's pixels replayed on a cold hierarchy of
-its own (:mod:`coherence.kind_misses`) or from one texel stream:
+Three tables: ``share`` and ``layouts`` from every process's pixels replayed
+on a cold hierarchy of its own (:mod:`coherence.kind_misses`), or under a
+platform from runs on its shared levels (:func:`shared_texel_table`, each
+level summed over its instances); ``curves`` from one texel stream:
 
 * ``share``: per mapping at the section's process count and per cache level,
   texel reads, texel misses, misses per texel read and the texels' share of
@@ -26,7 +28,8 @@ from rtcommon.validate import InputError
 LAYOUTS = ("linear", "tiled4", "morton", "blocked4x8")
 
 
-def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int, cost) -> dict:
+def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int, cost, shared=None,
+                    machine=None) -> dict:
     """The section's tables (see the module docstring) as DataFrames.
 
     Parameters
@@ -37,35 +40,39 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
         Gives polygons their vertex counts in the layout.
     layout : MemoryLayout
     hierarchy : Hierarchy
+        The levels each process replays its pixels on when ``shared`` is None; the curves take its first
+        level's line size and reach four times its largest level.
     mappings : sequence of Mapping
     n_processes : int
     cost : CostModel
         Decides who renders which block of a dynamic mapping.
+    shared : coherence.shared_run.SharedLevels, optional
+        A platform's shared levels: ``share`` and ``layouts`` then come from one
+        :func:`coherence.shared_run.simulate_shared_run` per texel order and mapping on them, each level's
+        counts summed over its instances (:func:`coherence.kind_misses.shared_misses_by_kind`).
+    machine : coherence.simulation.Machine, optional
+        The operating system's machine of those runs (``n_cpus`` the platform's hardware threads);
+        required with ``shared``.
 
     Returns
     -------
     dict with ``share``, ``layouts`` and ``curves`` DataFrames
     """
-    from coherence.kind_misses import dedicated_task_owners, misses_by_kind_per_layout
     from coherence.studies import place_layout
     from coherence.texture_layout import TextureLayout
 
     if not trace.metadata.get("textures"):
         raise InputError("texture_section: the trace has no textures")
+    if shared is not None and machine is None:
+        raise InputError("texture_section: runs on shared levels need the machine (machine)")
     base = layout.texels.label
     labels = [base, *[label for label in LAYOUTS if label != base]]
     placements = {label: place_layout(layout.with_texels(TextureLayout.from_label(label)), trace, scene)
                   for label in labels}
-    frames = []
-    for mapping in mappings:
-        distribution = mapping.build(trace.width, trace.height, n_processes)
-        owners = dedicated_task_owners(trace, distribution, hierarchy, placements[base], cost)
-        frames.append(misses_by_kind_per_layout(trace, placements, hierarchy, distribution, owners)
-                      .assign(mapping=mapping.name))
-    by_kind = pd.concat(frames, ignore_index=True)
-    texel = by_kind[by_kind["kind"] == "texel"].set_index(["layout", "mapping", "level"])
-    every = by_kind.groupby(["layout", "mapping", "level"], sort=False)[["misses"]].sum()
-    table = texel[["accesses", "misses"]].join(every.rename(columns={"misses": "misses_all"})).reset_index()
+    if shared is None:
+        table = _private_texel_table(trace, placements, hierarchy, mappings, n_processes, cost)
+    else:
+        table = shared_texel_table(trace, placements, (shared, machine), mappings, n_processes, cost)
     layouts = table.assign(texel_hit_rate=1.0 - table["misses"] / table["accesses"])
     layouts = layouts[layouts["layout"].isin(LAYOUTS)][["layout", "mapping", "level", "texel_hit_rate"]]
     share = table[table["layout"] == base].rename(columns={"accesses": "texel_reads", "misses": "texel_misses"})
@@ -78,6 +85,73 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     layouts = layouts.sort_values("layout", key=lambda column: column.map(order), kind="stable")
     return {"share": share.reset_index(drop=True), "layouts": layouts.reset_index(drop=True),
             "curves": curves[["layout", "line_size", "size", "capacity_lines", "misses", "miss_ratio"]]}
+
+
+def _private_texel_table(trace, placements: dict, hierarchy, mappings, n_processes: int, cost) -> pd.DataFrame:
+    """Texel accesses and misses and every kind's misses per (layout, mapping, level), each process's pixels
+    on a cold ``hierarchy`` of its own (:func:`coherence.kind_misses.misses_by_kind_per_layout`)."""
+    from coherence.kind_misses import dedicated_task_owners, misses_by_kind_per_layout
+
+    base = next(iter(placements))
+    frames = []
+    for mapping in mappings:
+        distribution = mapping.build(trace.width, trace.height, n_processes)
+        owners = dedicated_task_owners(trace, distribution, hierarchy, placements[base], cost)
+        frames.append(misses_by_kind_per_layout(trace, placements, hierarchy, distribution, owners)
+                      .assign(mapping=mapping.name))
+    by_kind = pd.concat(frames, ignore_index=True)
+    texel = by_kind[by_kind["kind"] == "texel"].set_index(["layout", "mapping", "level"])
+    every = by_kind.groupby(["layout", "mapping", "level"], sort=False)[["misses"]].sum()
+    return texel[["accesses", "misses"]].join(every.rename(columns={"misses": "misses_all"})).reset_index()
+
+
+def shared_texel_table(trace, placements: dict, on, mappings, n_processes: int, cost) -> pd.DataFrame:
+    """Texel accesses and misses and the level's misses per (layout, mapping, level), from one run on shared
+    levels per placement and mapping.
+
+    Parameters
+    ----------
+    trace : tracer.trace.access.AccessTrace
+    placements : dict of str to PlacedLayout
+        Labelled placements (one per texel order).
+    on : (coherence.shared_run.SharedLevels, coherence.simulation.Machine)
+        The shared levels and the operating system's machine of every run.
+    mappings : sequence of Mapping
+    n_processes : int
+    cost : CostModel
+
+    Returns
+    -------
+    DataFrame
+        ``layout``, ``mapping``, ``level``, ``accesses`` and ``misses`` (the texel reads that reached the
+        level and those it missed, summed over the level's instances), ``misses_all`` (the misses of the
+        processes' own accesses at the level, the study's ``<level>_misses`` summed: background reads left
+        out); rows mapping by mapping, then placement, then level, a level no texel read reached left out.
+    """
+    from coherence.kind_misses import shared_misses_by_kind
+    from coherence.shared_run import pixel_pieces, simulate_shared_run
+    from tracer.trace.access import COUNTER_NAMES
+
+    levels, machine = on
+    names = levels.hierarchy.level_names
+    compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
+    rows = []
+    for label, placed in placements.items():
+        pieces = pixel_pieces(trace, placed, levels.hierarchy.levels[0].line_size)
+        for k, mapping in enumerate(mappings):
+            run = simulate_shared_run(trace, mapping.build(trace.width, trace.height, n_processes), levels.machine,
+                                      placed, cost, machine, interleave_cycles=levels.interleave_cycles,
+                                      compute=compute, pieces=pieces)
+            by_kind = shared_misses_by_kind(run.shared)
+            texel = by_kind[by_kind["kind"] == "texel"].set_index("level")
+            processes = run.run.processes
+            for level in names:
+                if level in texel.index:  # as misses_by_kind: no row for a level no texel read reached
+                    rows.append((k, label, mapping.name, level, int(texel.loc[level, "accesses"]),
+                                 int(texel.loc[level, "misses"]), int(processes[f"{level}_misses"].sum())))
+        del pieces
+    table = pd.DataFrame(rows, columns=["order", "layout", "mapping", "level", "accesses", "misses", "misses_all"])
+    return table.sort_values("order", kind="stable").drop(columns="order").reset_index(drop=True)
 
 
 def _texel_curve(trace, placed, hierarchy) -> pd.DataFrame:

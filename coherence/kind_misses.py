@@ -195,6 +195,36 @@ def _only_texels_move(first: PlacedLayout, other: PlacedLayout, line_size: int) 
     return True
 
 
+def shared_misses_by_kind(shared) -> pd.DataFrame:
+    """Accesses and misses per cache level and record kind of a run on shared levels, each level summed
+    over its instances.
+
+    Parameters
+    ----------
+    shared : cachesim.multicore_state.SharedResult
+        A run's machine counts (:attr:`coherence.shared_run.SharedRun.shared`), given record kinds.
+
+    Returns
+    -------
+    DataFrame
+        :func:`misses_by_kind`'s columns: one row per (level, kind) with any accesses at that level (an
+        access reaches a level when the levels above it missed). The auxiliary kind (a dynamic mapping's
+        task counter) is ``auxiliary``; kind 0 (``kd_node``) also holds background reads, if the run had
+        any.
+    """
+    from cachesim.sets import ACCESSES, MISSES
+
+    if not shared.by_kind:
+        raise InputError("shared_misses_by_kind: the run's counts were not kept per record kind")
+    counts = shared.counts.sum(axis=1)  # (L, kinds, counters)
+    names = [kind.name.lower() for kind in RecordKind] + ["auxiliary"] * (counts.shape[1] - N_KINDS)
+    rows = [{"level": level_name, "kind": names[kind], "accesses": int(counts[level, kind, ACCESSES]),
+             "misses": int(counts[level, kind, MISSES])}
+            for level, level_name in enumerate(shared.machine.hierarchy.level_names)
+            for kind in range(counts.shape[1]) if counts[level, kind, ACCESSES]]
+    return pd.DataFrame(rows, columns=["level", "kind", "accesses", "misses"])
+
+
 def texture_summary(by_kind: pd.DataFrame) -> dict:
     """Per level, from :func:`misses_by_kind`: ``texel_<level>_misses_per_access``
     (misses of texel reads over the texel reads that reached the level) and

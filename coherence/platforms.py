@@ -17,8 +17,8 @@ A run under a platform simulates its processes on the hardware threads of
 (:mod:`coherence.shared_schedule`). :meth:`Platform.thread_view` is one
 hardware thread with its own copy of every level, a shared level cut to the
 thread's share of its capacity (its size divided by the threads sharing
-it): what the analyses that take one private hierarchy (a report's texture
-section, a what-if's texture columns) see of the platform.
+it): what the analyses that take one private hierarchy (a what-if's texture
+columns) see of the platform.
 """
 from __future__ import annotations
 
@@ -39,8 +39,8 @@ MAX_DEFAULT_PROCESSES = 32
 SHARED_LEVELS_NOTE = ("shared levels interleaved: processes run on the hardware threads and every access goes "
                       "through the one state of the machine's caches (write-invalidate coherence on), the thread "
                       "whose clock is lowest running interleave_cycles at a time, the levels' prefetchers, if any, "
-                      "trained by every access; the report's miss map is such a run too, its miss-ratio curves take "
-                      "no machine (fully associative LRU of one process's stream), and its texture section and a "
+                      "trained by every access; the report's miss map and texture section are such runs too, its "
+                      "miss-ratio curves take no machine (fully associative LRU of one process's stream), and a "
                       "what-if's texture columns take the thread view instead: one thread's share of every "
                       "level, private, no coherence, no prefetchers; see docs/platforms.md")
 
@@ -109,8 +109,8 @@ class Platform:
         A level shared by ``k`` threads keeps its line size, ways and
         latency and gets ``size // k`` bytes, rounded down to whole sets
         (at least one). The levels' prefetchers are left out: the analyses
-        that take this view (miss maps, miss-ratio curves, texture misses)
-        simulate private caches without them. Named ``<platform>-thread``.
+        that take this view (a what-if's texture misses) simulate private
+        caches without them. Named ``<platform>-thread``.
         """
         machine = self.hierarchy
         levels = []
