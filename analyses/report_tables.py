@@ -156,16 +156,22 @@ def miss_map_dtype(misses) -> np.dtype:
         else np.dtype(np.int64)
 
 
+def _machine_words(platform) -> str:
+    """What a run on ``platform``'s shared levels has on, for the views' sentences."""
+    return "coherence and the levels' prefetchers on" if platform.hierarchy.hierarchy.prefetches else "coherence on"
+
+
 def texture_note(inputs) -> str | None:
     """Under a platform, what the texture section was computed on: runs on the platform's shared levels,
     one per texel order and mapping; None without a platform."""
     experiment = inputs.experiment
     if experiment.platform is None:
         return None
-    name = experiment.platform_object().name
+    platform = experiment.platform_object()
+    machine = _machine_words(platform)
     return (f"texel reads and misses come from one run per texel order and mapping at {inputs.verdict_n} "
-            f"processes on {name}'s shared levels, as the study's runs (interleaved "
-            f"{int(experiment.interleave_cycles)} cycles at a time, coherence on), each level's counts summed over "
+            f"processes on {platform.name}'s shared levels, as the study's runs (interleaved "
+            f"{int(experiment.interleave_cycles)} cycles at a time, {machine}), each level's counts summed over "
             "its instances; a level's misses are the processes' own there (background reads left out); the "
             "texel miss-ratio curves take no machine")
 
@@ -189,7 +195,7 @@ def platform_views(inputs) -> dict | None:
     if experiment.platform is None:
         return None
     platform, misses = experiment.platform_object(), inputs.misses
-    machine = "coherence and the levels' prefetchers on" if platform.hierarchy.hierarchy.prefetches else "coherence on"
+    machine = _machine_words(platform)
     sizes = ", ".join(f"{level} {_bytes_text(size)}" for level, size in zip(inputs.caches["level"],
                                                                             inputs.caches["size"]))
     views = {
