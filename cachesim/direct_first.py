@@ -42,19 +42,37 @@ def _simulate_direct_first(addresses, writes, geometry, state, clock, served_by,
     :func:`serves_direct_first`: same parameters, same results."""
     if record:
         if writes.shape[0] > 0:
-            return _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work)
-        return _direct_first_kernel(addresses, None, geometry, state, clock, served_by, work)
+            return _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work, 0)
+        return _direct_first_kernel(addresses, None, geometry, state, clock, served_by, work, 0)
     if writes.shape[0] > 0:
-        return _direct_first_kernel(addresses, writes, geometry, state, clock, None, work)
-    return _direct_first_kernel(addresses, None, geometry, state, clock, None, work)
+        return _direct_first_kernel(addresses, writes, geometry, state, clock, None, work, 0)
+    return _direct_first_kernel(addresses, None, geometry, state, clock, None, work, 0)
+
+
+@njit(cache=True, inline="always")
+def _simulate_direct_first_skips(addresses, writes, skip_mask, geometry, state, clock, work):
+    """:func:`_simulate_direct_first` of a stream whose certain first-level read hits were taken out,
+    each access's low ``skip_mask`` bits counting those that followed it (:func:`_direct_first_kernel`)."""
+    if writes.shape[0] > 0:
+        return _direct_first_kernel(addresses, writes, geometry, state, clock, None, work, skip_mask)
+    return _direct_first_kernel(addresses, None, geometry, state, clock, None, work, skip_mask)
 
 
 @njit(cache=True, **NOT_INLINED, **NO_REFCOUNTS)
-def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work):
+def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, work, skip_mask):
     """The kernel of :func:`_simulate_direct_first`, compiled apart for a
     stream of reads (``writes`` None) and for one that does not record
     ``served_by`` (None): numba drops the checks of a None argument, at the
     price of compiling more specialisations.
+
+    ``skip_mask`` (0, or ``2**b - 1`` with ``b`` at most the line shift):
+    the low bits of each address count the reads that followed it in the
+    original stream and that the first level was certain to serve (a line
+    a read put there with no access to any of the line's sets in any level
+    since: :func:`coherence.pixel_lines.pixel_lines` takes them out). Such
+    a read changes no state in a direct-mapped first level, so each counts
+    as an access and a read hit there and advances the clock, as walked it
+    would; ``served_by`` must then be None.
 
     Every index is cast to unsigned: numba fixes up a negative signed index
     (a shift, a mask and an add at every array access), which took a quarter
@@ -108,6 +126,9 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
     second_invalidations = np.int64(0)
     unused = np.int64(0)
     n = addresses.shape[0]
+    low = np.uint64(skip_mask)
+    pending = np.int64(0)  # certain hits after the last access, counted as the next one comes
+    skipped = np.int64(0)
     i = 0
     while i < n:
         # Reads that the first level or the second serves run in a loop of
@@ -116,7 +137,8 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
         # and the loop keeps its own in registers.
         while True:
             at = np.uint64(i)
-            line0 = np.int64(addresses[at] >> shift)
+            address = addresses[at]
+            line0 = np.int64(address >> shift)
             base0 = np.uint64(line0 & mask0)
             resident = tags[base0]
             hit0 = resident == line0
@@ -126,7 +148,9 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
             for way in range(base1, base1 + ways1):
                 slot1 = way if tags[np.uint64(way)] == line1 else slot1
             is_write = False if writes is None else writes[at]
-            clock += 1
+            clock += 1 + pending
+            pending = np.int64(address & low)
+            skipped += pending
             i += 1
             # Neither level holds it: slot1 < 0 and resident != line0, in
             # arithmetic, as a test of hit0 would be compiled to a branch.
@@ -225,9 +249,11 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
         if allocate0 or not is_write:
             first_evictions += np.int64(tags[base0] >= 0)
             tags[base0] = line0
-    level_hits[0] = first_read_hits + first_write_hits
+    clock += pending
+    n_accesses = addresses.shape[0] + skipped
+    level_hits[0] = first_read_hits + skipped + first_write_hits
     level_write_hits[0] = first_write_hits
-    level_hits[1] = addresses.shape[0] - second_misses - level_hits[0]
+    level_hits[1] = n_accesses - second_misses - level_hits[0]
     level_write_hits[1] = second_write_hits
     invalidations[0] += first_invalidations
     counts[0, EVICTIONS] += first_evictions
@@ -238,5 +264,5 @@ def _direct_first_kernel(addresses, writes, geometry, state, clock, served_by, w
         invalidations[1] += second_invalidations
         counts[2, EVICTIONS] += third_evictions
     work.level_lines[0] = unused  # scratch: keeps the stamps' second use
-    _add_counts(counts, addresses.shape[0], n_writes, level_hits, level_write_hits, invalidations)
+    _add_counts(counts, n_accesses, n_writes, level_hits, level_write_hits, invalidations)
     return clock

@@ -59,7 +59,7 @@ from numba import njit, prange
 
 from cachesim.by_access import _simulate_by_access, _simulate_indexed
 from cachesim.by_level import _simulate_by_level
-from cachesim.direct_first import _simulate_direct_first, serves_direct_first
+from cachesim.direct_first import _simulate_direct_first, _simulate_direct_first_skips, serves_direct_first
 from cachesim.full import uses_index
 from cachesim.sets import (ACCESSES, CHUNK, EVICTIONS, EXCLUSIVE, FIFO, HITS, INCLUSIVE, INVALIDATIONS, LRU,
                            MISSES, N_COUNTERS, NON_INCLUSIVE, RANDOM, WRITE_HITS, WRITE_MISSES, WRITES,
@@ -69,7 +69,7 @@ __all__ = [
     "ACCESSES", "CHUNK", "EVICTIONS", "EXCLUSIVE", "FIFO", "HITS", "INCLUSIVE", "INVALIDATIONS", "LRU",
     "MISSES", "N_COUNTERS", "NON_INCLUSIVE", "RANDOM", "WRITES", "WRITE_HITS", "WRITE_MISSES",
     "CacheArrays", "CacheGeometry", "ChunkBuffers", "chunk_buffers", "simulate_into", "simulate_stream",
-    "simulate_streams", "simulate_writes", "simulate_writes_into",
+    "simulate_streams", "simulate_writes", "simulate_writes_into", "simulate_skips_into",
 ]
 
 @njit(cache=True)
@@ -157,6 +157,34 @@ def simulate_writes_into(addresses, writes, geometry, state, clock, served_by, r
     if serves_direct_first(geometry):
         return _simulate_direct_first(addresses, writes, geometry, state, clock, served_by, record, work)
     return _simulate_by_access(addresses, writes, geometry, state, clock, served_by, record, work)
+
+
+@njit(cache=True, inline="always")
+def simulate_skips_into(addresses, writes, skip_mask, geometry, state, clock, work):
+    """:func:`simulate_writes_into` of a stream whose certain first-level read hits were taken out.
+
+    Parameters
+    ----------
+    addresses : ndarray of uint64, shape (N,)
+        Byte addresses, their low bits (``skip_mask``, at most the line
+        offset's) each counting the reads after it that the first level was
+        certain to serve, taken out of the stream
+        (:func:`coherence.pixel_lines.pixel_lines`).
+    writes : ndarray of bool, shape (N,) or (0,)
+    skip_mask : int
+        0 (no access was taken out) or ``2**b - 1``.
+    geometry : CacheGeometry
+        One that :func:`cachesim.direct_first.serves_direct_first`.
+    state, clock, work
+        As for :func:`simulate_into`.
+
+    Returns
+    -------
+    int
+        The clock after the last access, the ones taken out included: the
+        state and the counters are those the whole stream leaves.
+    """
+    return _simulate_direct_first_skips(addresses, writes, skip_mask, geometry, state, clock, work)
 
 
 @njit(cache=True)

@@ -107,7 +107,7 @@ def empty_tlbs(n_tlbs: int, entries: int) -> TlbArrays:
 
 
 @njit(cache=True, **NO_REFCOUNTS)
-def tlb_lookup(addresses, geometry, tlb):
+def tlb_lookup(addresses, geometry, tlb, skip_mask=0):
     """Look up the page of every address in one TLB, in order.
 
     Parameters
@@ -117,12 +117,20 @@ def tlb_lookup(addresses, geometry, tlb):
     geometry : TlbGeometry
     tlb : TlbArrays
         Updated in place, counters included.
+    skip_mask : int
+        0, or ``2**b - 1``: the low ``b`` bits of each address count further
+        accesses that followed it on the same page and were taken out of
+        the stream (:func:`coherence.pixel_lines.pixel_lines`). Each is a
+        lookup of the page the last one found: a hit that stamps that entry,
+        as it would in the full stream.
 
     Returns
     -------
     int
         The misses of this call (each costs the TLB's fixed miss penalty).
     """
+    low = np.uint64(skip_mask)
+    skipped = np.int64(0)
     pages = tlb.pages
     stamps = tlb.stamps
     cursor = tlb.cursor
@@ -140,8 +148,11 @@ def tlb_lookup(addresses, geometry, tlb):
     before_page = np.int64(-1)
     misses = np.int64(0)
     for i in range(addresses.shape[0]):
-        page = np.int64(addresses[i] >> shift)
-        clock += 1
+        address = addresses[i]
+        page = np.int64(address >> shift)
+        repeats = np.int64(address & low)  # same-page lookups after this one: hits on its entry
+        skipped += repeats
+        clock += 1 + repeats  # an entry's stamp is its last lookup's, the repeats' included
         if page == last_page:
             stamps[last] = clock
             continue
@@ -175,7 +186,7 @@ def tlb_lookup(addresses, geometry, tlb):
         before_page = last_page
         last = found
         last_page = page
-    n = addresses.shape[0]
+    n = addresses.shape[0] + skipped
     cursor[CLOCK] = clock
     cursor[NEXT_FILL] = next_fill
     cursor[LAST_USED] = last

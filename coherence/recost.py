@@ -359,9 +359,9 @@ class RunStore:
         self.simulated += 1
         self._runs[keys[0]] = (keys[1], run)
 
-    def holds_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None) -> bool:
+    def holds_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None, hierarchy=None) -> bool:
         """Whether :meth:`pixel_lines` of these arguments is served without working anything out."""
-        return _lines_key(placed, line_size, budget_bytes) in self._lines and self._trace is trace
+        return _lines_key(placed, line_size, budget_bytes, hierarchy) in self._lines and self._trace is trace
 
     def lines_kept_with_new(self) -> list:
         """The line addresses still kept once :meth:`pixel_lines` works out a new placement's: the
@@ -369,36 +369,41 @@ class RunStore:
         addresses lets go of any other first)."""
         return list(self._lines.values())[len(self._lines) - (LINES_KEPT - 1):] if LINES_KEPT > 1 else []
 
-    def pixel_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None):
+    def pixel_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None, hierarchy=None):
         """:func:`coherence.pixel_lines.pixel_lines` of ``trace`` on ``placed``, worked out once per placement.
 
         The key is everything the addresses depend on: every record's address
-        and size, the page table, ``line_size`` and ``budget_bytes`` (which
-        decides whether there is a result at all).
+        and size, the page table, ``line_size``, ``budget_bytes`` (which
+        decides whether there is a result at all) and, with ``hierarchy``,
+        which of its certain first-level hits are taken out.
         """
         from coherence.pixel_lines import pixel_lines
 
         self.bind(trace)
-        key = _lines_key(placed, line_size, budget_bytes)
+        key = _lines_key(placed, line_size, budget_bytes, hierarchy)
         if key in self._lines:
             self._lines[key] = self._lines.pop(key)  # most recently used last
             return self._lines[key]
         while len(self._lines) >= LINES_KEPT:  # let go first: at most LINES_KEPT are ever held
             self._lines.pop(next(iter(self._lines)))
-        lines = pixel_lines(trace, placed, line_size, budget_bytes)
+        lines = pixel_lines(trace, placed, line_size, budget_bytes, hierarchy=hierarchy)
         self._lines[key] = lines
         return lines
 
 
-def _lines_key(placed, line_size: int, budget_bytes) -> tuple:
+def _lines_key(placed, line_size: int, budget_bytes, hierarchy=None) -> tuple:
     """The key of :meth:`RunStore.pixel_lines`: every record's address and size, the page table,
-    ``line_size`` and ``budget_bytes`` (which decides whether there is a result at all)."""
+    ``line_size``, ``budget_bytes`` (which decides whether there is a result at all) and which accesses
+    ``hierarchy`` takes out (:func:`coherence.pixel_lines.skip_key`; "" for none)."""
+    from coherence.pixel_lines import skip_key, skips_certain_hits
+
+    skips = skip_key(hierarchy) if hierarchy is not None and skips_certain_hits(hierarchy, line_size) else ""
     digest = hashlib.blake2b(digest_size=16)
     for array in (placed.record_start, placed.record_size, placed.kind_first, placed.pages.frame):
         digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
         digest.update(b"|")
     return (digest.digest(), int(placed.end), int(placed.pages.first_page), int(placed.pages.page_shift),
-            int(line_size), budget_bytes)
+            int(line_size), budget_bytes, skips)
 
 
 def compute_digest(compute) -> bytes:

@@ -90,12 +90,13 @@ class RunOutputs(NamedTuple):
 
 
 @njit(cache=True, inline="always")
-def _tlb_misses(tlbs, cpu, process, addresses):
+def _tlb_misses(tlbs, cpu, process, addresses, skip_mask):
     # look the addresses up in the CPU's TLB, counting for the process
     if not tlbs.enabled:
         return 0
     return T.tlb_lookup(addresses, tlbs.geometry,
-                        T.TlbArrays(tlbs.pages[cpu], tlbs.stamps[cpu], tlbs.cursor[cpu], tlbs.counts[process]))
+                        T.TlbArrays(tlbs.pages[cpu], tlbs.stamps[cpu], tlbs.cursor[cpu], tlbs.counts[process]),
+                        skip_mask)
 
 
 @njit(cache=True, nogil=True)
@@ -135,6 +136,12 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
     shared_writes = reads.lines.writes
     pixel_writes = reads.lines.pixel_writes
     shared = line_offsets.shape[0] > 0
+    # certain first-level read hits taken out of the shared lines, counted in their low bits; the TLB then
+    # looks up every access in the pixel's page runs
+    skip_mask = reads.lines.skip_mask if shared else 0
+    page_offsets = reads.lines.page_offsets
+    page_runs = reads.lines.page_runs
+    run_mask = (1 << reads.lines.page_shift) - 1
     compute = cost.compute
     latency = cost.latency
     first_line = background.first_line
@@ -191,7 +198,7 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
                     translate_stream(buffer, footprint_lines, b, first_line[b] << line_shift, background_pages)
                 cache_clock[cpu] = K.simulate_into(buffer[:footprint_lines], geometry, cache, cache_clock[cpu],
                                                    served, record_served, work)
-                _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines])
+                _tlb_misses(tlbs, cpu, process, buffer[:footprint_lines], 0)
             continue
 
         place(system, out_placement, process, cpu)
@@ -222,13 +229,21 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
                 for level in range(n_levels):
                     pixel_misses[pixel, level] = process_counts[level, K.MISSES]
             # a pixel without writes keeps the read-only (fast) path
-            cache_clock[cpu] = K.simulate_writes_into(addresses, flags if n_writes else no_writes,
-                                                      geometry, cache, cache_clock[cpu], served, record_served, work)
+            if skip_mask:
+                cache_clock[cpu] = K.simulate_skips_into(addresses, flags if n_writes else no_writes, skip_mask,
+                                                         geometry, cache, cache_clock[cpu], work)
+            else:
+                cache_clock[cpu] = K.simulate_writes_into(addresses, flags if n_writes else no_writes, geometry,
+                                                          cache, cache_clock[cpu], served, record_served, work)
             if record_pixel_misses:
                 for level in range(n_levels):
                     pixel_misses[pixel, level] = process_counts[level, K.MISSES] - pixel_misses[pixel, level]
             memory = _memory_cycles(process_counts, hits_before, misses_before, latency) + n_writes * latency[0]
-            memory += _tlb_misses(tlbs, cpu, process, addresses) * tlb_miss_cycles
+            if skip_mask:
+                memory += _tlb_misses(tlbs, cpu, process, page_runs[page_offsets[pixel]:page_offsets[pixel + 1]],
+                                      run_mask) * tlb_miss_cycles
+            else:
+                memory += _tlb_misses(tlbs, cpu, process, addresses, 0) * tlb_miss_cycles
             cycles = compute[pixel] + memory
             out_cycles[process, COMPUTE_CYCLES] += compute[pixel]
             out_cycles[process, MEMORY_CYCLES] += memory

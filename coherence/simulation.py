@@ -43,7 +43,7 @@ from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
 from coherence.page_placement import PagePlacement
-from coherence.pixel_lines import PixelLines, no_pixel_lines
+from coherence.pixel_lines import PixelLines, no_pixel_lines, skip_key
 from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
                               fixed_schedule)
 from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES, MIGRATIONS,
@@ -330,7 +330,8 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     lines : coherence.pixel_lines.PixelLines, optional
         Every pixel's line accesses from :func:`~coherence.pixel_lines.pixel_lines`
         for this trace, ``placed`` (with its pages placed, when the machine
-        places pages) and the hierarchy's smallest line size (saves time over
+        places pages) and the hierarchy's smallest line size, with or without
+        this hierarchy's certain first-level hits taken out (saves time over
         many runs; the results are the same).
     pixel_misses : bool
         Also return each pixel's misses per cache level (``Run.pixel_misses``,
@@ -385,6 +386,9 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     elif lines.line_shift != line_shift or lines.line_offsets.shape != (n_pixels + 1,):
         raise InputError(f"lines are for {lines.line_offsets.shape[0] - 1} pixels of {1 << lines.line_shift}-byte "
                          f"lines; this run needs {n_pixels} pixels of {1 << line_shift}-byte lines")
+    elif lines.skip_mask and lines.skips_for != skip_key(hierarchy):
+        raise InputError(f"lines had their certain first-level hits taken out for the hierarchy {lines.skips_for!r}; "
+                         f"this run's is {skip_key(hierarchy)!r}: make them with pixel_lines(..., hierarchy=) of it")
 
     out_cycles = np.zeros((n_processes, N_CYCLE_COLUMNS), dtype=np.float64)
     out_placement = np.zeros((n_processes, N_PLACEMENT_COLUMNS), dtype=np.int64)

@@ -345,14 +345,15 @@ class _StudyPlan:
         if not self._lines_wanted():
             return False
         return self.store is None or not self.store.holds_lines(self.trace, self.placed, self._line_size(),
-                                                                self.execution.shared_lines_budget)
+                                                                self.execution.shared_lines_budget, self.hierarchy)
 
     def work_out_lines(self):
         """The line addresses the runs share (None when not worked out)."""
         if not self._lines_wanted():
             return None
         work = pixel_lines if self.store is None else self.store.pixel_lines
-        return work(self.trace, self.placed, self._line_size(), self.execution.shared_lines_budget)
+        return work(self.trace, self.placed, self._line_size(), self.execution.shared_lines_budget,
+                    hierarchy=self.hierarchy)
 
     def start(self, pool) -> None:
         """Work out the line addresses and :meth:`submit` the runs. If that fails, the store's futures of

@@ -9,7 +9,7 @@ from coherence.cost import CostModel
 from coherence.layout import RecordLayout, get_layout
 from coherence.mappings import Block, DynamicBlock, Pixel, Row, Strip
 from coherence.metrics import run_summary
-from coherence.pixel_lines import pixel_lines
+from coherence.pixel_lines import pixel_lines, skips_certain_hits
 from coherence.simulation import Machine, simulate_run
 from tracer.trace.access import COUNTER_NAMES, AccessTrace, RecordKind, pack, unpack
 
@@ -43,6 +43,13 @@ def compare(trace, mapping, n, hierarchy, machine):
     lines = pixel_lines(trace, placed, min(level.line_size for level in hierarchy.levels))
     shared = simulate_run(trace, distribution, hierarchy, placed, COST, machine, compute=compute, lines=lines)
     assert shared.processes.equals(run.processes) and shared.real_cycles == run.real_cycles
+    # nor must taking the hierarchy's certain first-level hits out of them
+    line_size = min(level.line_size for level in hierarchy.levels)
+    if skips_certain_hits(hierarchy, line_size):
+        lines = pixel_lines(trace, placed, line_size, hierarchy=hierarchy)
+        assert lines.skip_mask > 0
+        taken = simulate_run(trace, distribution, hierarchy, placed, COST, machine, compute=compute, lines=lines)
+        assert taken.processes.equals(run.processes) and taken.real_cycles == run.real_cycles
     expected = reference_schedule(trace, distribution, hierarchy, placed, compute, machine)
     frame = run.processes
     for column in ("compute", "memory", "dispatch", "user", "finish"):
