@@ -26,6 +26,7 @@ traces about a quarter of the line accesses go, and six in ten TLB lookups.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import numpy as np
@@ -33,8 +34,9 @@ from numba import njit
 
 from cachesim.direct_first import serves_direct_first
 from coherence.layout import PlacedLayout
-from coherence.record_lines import FILL_AHEAD, _count_lines, _fill_lines
 from coherence.page_placement import translate_addresses
+from coherence.record_lines import FILL_AHEAD, _count_lines, _fill_lines
+from rtcommon.jit import NO_REFCOUNTS
 from rtcommon.validate import InputError, require_power_of_two
 
 #: Bytes a study may spend on shared line addresses (1 GiB); beyond it, each run converts per pixel.
@@ -150,8 +152,9 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     if budget_bytes is not None and n_lines * BYTES_PER_LINE > budget_bytes:
         return None
     # FILL_AHEAD spare entries: the fill writes that many past each pixel's lines.
-    addresses = np.empty(n_lines + FILL_AHEAD, dtype=np.uint64)
-    writes = np.empty(n_lines + FILL_AHEAD, dtype=np.bool_)
+    with _small_pages():
+        addresses = np.empty(n_lines + FILL_AHEAD, dtype=np.uint64)
+        writes = np.empty(n_lines + FILL_AHEAD, dtype=np.bool_)
     pixel_writes = np.zeros(pixel_offsets.shape[0] - 1, dtype=np.int64)
     _fill_pixel_lines(records, pixel_offsets, placed.placement, line_offsets, line_shift, addresses, writes,
                       pixel_writes)
@@ -161,6 +164,30 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     if hierarchy is None or not skips_certain_hits(hierarchy, line_size):
         return lines
     return take_out_certain_hits(lines, hierarchy)
+
+
+@contextmanager
+def _small_pages():
+    """Allocate without numpy's advice to back large arrays by transparent huge pages.
+
+    The line addresses are gigabytes written once and then read in order: huge pages save them nothing,
+    and where the system must compact memory to hand them out, the first write took 2-6 s of system time a
+    placement (balls at 256 x 256), against 0.7-0.9 s in ordinary pages. Only the advice changes, for every
+    thread while it is off; a numpy without the switch allocates as it does.
+    """
+    try:
+        from numpy._core import multiarray
+    except ImportError:  # numpy < 2
+        from numpy.core import multiarray
+    switch = getattr(multiarray, "_set_madvise_hugepage", None)
+    if switch is None:
+        yield
+        return
+    before = switch(False)
+    try:
+        yield
+    finally:
+        switch(before)
 
 
 def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
@@ -185,89 +212,122 @@ def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
     page_shift = (hierarchy.tlb.page_size if hierarchy.tlb is not None else DEFAULT_PAGE_SIZE).bit_length() - 1
     skip_mask = (1 << line_shift) - 1
     n_sets = np.asarray(geometry.n_sets, dtype=np.int64)
-    owners = np.full((n_sets.shape[0], int(n_sets.max())), -1, dtype=np.int64)
+    set_base = np.concatenate([[0], np.cumsum(n_sets)[:-1]]).astype(np.int64)  # level l's sets in the flat arrays
+    owners = np.full(int(n_sets.sum()), -1, dtype=np.int64)
     page_offsets = np.zeros(line_offsets.shape[0], dtype=np.int64)
-    page_runs = np.empty(lines.addresses.shape[0], dtype=np.uint64)  # only the pages written are ever taken
-    n_runs = _page_runs(line_offsets, addresses, page_shift, page_offsets, page_runs)
+    with _small_pages():
+        page_runs = np.empty(lines.addresses.shape[0], dtype=np.uint64)  # shrunk to the runs written below
+    sets = SetRuns(np.asarray(geometry.rel_shift, dtype=np.int64), np.asarray(geometry.set_mask, dtype=np.int64),
+                   set_base, owners, np.zeros_like(owners), np.full(n_sets[0], -1, np.int64))
+    n_kept, n_runs = _take_out_certain_hits(line_offsets, addresses, writes, line_shift, skip_mask, sets, page_shift,
+                                            page_offsets, page_runs)
     page_runs.resize(n_runs, refcheck=False)
-    n_kept = _take_out_certain_hits(line_offsets, addresses, writes, line_shift,
-                                    np.asarray(geometry.rel_shift, dtype=np.int64),
-                                    np.asarray(geometry.set_mask, dtype=np.int64), skip_mask, owners,
-                                    np.zeros_like(owners), np.full(n_sets[0], -1, np.int64))
     addresses.resize(n_kept + FILL_AHEAD, refcheck=False)  # gives the rest back without a copy
     writes.resize(n_kept + FILL_AHEAD, refcheck=False)
     return PixelLines(line_offsets, addresses[:n_kept], writes[:n_kept], lines.pixel_writes, line_shift, skip_mask,
                       page_offsets, page_runs, page_shift, skip_key(hierarchy))
 
 
-@njit(cache=True, nogil=True)
-def _page_runs(line_offsets, addresses, page_shift, page_offsets, page_runs):
-    """Every pixel's accesses as runs on one page (:attr:`PixelLines.page_runs`); returns the runs."""
-    shift = np.uint64(page_shift)
-    most = np.uint64((1 << page_shift) - 1)  # a longer run continues in a new entry
-    n_runs = 0
-    for pixel in range(line_offsets.shape[0] - 1):
-        for i in range(line_offsets[pixel], line_offsets[pixel + 1]):
-            page = (addresses[i] >> shift) << shift
-            last = n_runs - 1
-            if n_runs > page_offsets[pixel] and (page_runs[last] >> shift) << shift == page \
-                    and page_runs[last] - page < most:
-                page_runs[last] += np.uint64(1)
-            else:
-                page_runs[n_runs] = page
-                n_runs += 1
-        page_offsets[pixel + 1] = n_runs
-    return n_runs
+class SetRuns(NamedTuple):
+    """The hierarchy's sets and what :func:`_take_out_certain_hits` knows of each, levels one after another
+    (flat; every array int64).
 
-
-@njit(cache=True, nogil=True)
-def _take_out_certain_hits(line_offsets, addresses, writes, line_shift, rel_shift, set_mask, skip_mask, owner, since,
-                           last_read):
-    """Take the certain first-level read hits out of every pixel's accesses, in place (see the module's
-    docstring); returns the accesses kept.
-
-    ``owner[l, s]`` is the level-``l`` line of the last access to set ``s`` of level ``l``, ``since[l, s]``
-    the index of the first access of its run there (the accesses to that set since were all to that line);
-    ``last_read[s]`` the index of the last read of first-level set ``s``. A read is certain to hit if the
-    last read of its first-level set, made in this pixel, was of its line and, at every level, the set's
-    run of the line began no later than that read. ``line_offsets`` becomes the kept accesses' offsets.
+    Attributes
+    ----------
+    rel_shift, set_mask : ndarray, shape (L,)
+        Each level's line shift relative to the first's and set mask (:class:`cachesim.kernels.CacheGeometry`).
+    set_base : ndarray, shape (L,)
+        Where each level's sets start in ``owner`` and ``since``.
+    owner : ndarray, shape (S,)
+        The level's line of the last access to the set, -1 before any.
+    since : ndarray, shape (S,)
+        Index of the first access of the run of that line in the set: every access to the set since was to it.
+    last_read : ndarray, shape (S0,)
+        Index of the last read of each first-level set, -1 before any.
     """
+
+    rel_shift: np.ndarray
+    set_mask: np.ndarray
+    set_base: np.ndarray
+    owner: np.ndarray
+    since: np.ndarray
+    last_read: np.ndarray
+
+
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
+def _take_out_certain_hits(line_offsets, addresses, writes, line_shift, skip_mask, sets, page_shift, page_offsets,
+                           page_runs):
+    """Take the certain first-level read hits out of every pixel's accesses, in place, and write its page runs
+    (see the module's docstring), in one pass.
+
+    A read is certain to hit if the last read of its first-level set (``sets.last_read``), made in this
+    pixel, was of its line and, at every level, the run of the line in its set began no later than that read
+    (:class:`SetRuns`). ``line_offsets`` becomes the kept accesses' offsets, ``page_offsets`` (P + 1,) the
+    runs'; ``page_runs`` receives the runs, each at most ``2**page_shift`` accesses long.
+
+    Returns
+    -------
+    kept, runs : int
+        Accesses kept and page runs written.
+    """
+    rel_shift = sets.rel_shift
+    set_mask = sets.set_mask
+    set_base = sets.set_base
     n_levels = rel_shift.shape[0]
     shift = np.uint64(line_shift)
-    mask0 = set_mask[0]
+    pages = np.uint64(page_shift)
+    longest = np.uint64((1 << page_shift) - 1)  # repeats a run's low bits hold
+    count_full = np.uint64(skip_mask)
+    owner = sets.owner
+    since = sets.since
+    last_read = sets.last_read
+    mask0 = np.uint64(set_mask[0])
     kept = 0
+    runs = 0
     start = line_offsets[0]
     for pixel in range(line_offsets.shape[0] - 1):
         stop = line_offsets[pixel + 1]
-        carrier = -1  # the kept access the taken-out ones after it count on
+        carrier = np.uint64(0)  # the kept access the taken-out ones after it count on
+        run_page = np.uint64(1)  # never a page's address: the pixel's first access starts a run
+        run_at = np.uint64(0)
         for i in range(start, stop):
-            address = addresses[i]
+            at = np.uint64(i)
+            address = addresses[at]
+            write = writes[at]
+            page = (address >> pages) << pages
+            if page == run_page and page_runs[run_at] - page < longest:
+                page_runs[run_at] += np.uint64(1)
+            else:
+                run_at = np.uint64(runs)
+                page_runs[run_at] = page
+                run_page = page
+                runs += 1
             line = np.int64(address >> shift)
-            write = writes[i]
-            read_at = last_read[line & mask0]
-            certain = (not write and carrier >= 0 and read_at >= start
-                       and (addresses[carrier] & np.uint64(skip_mask)) < np.uint64(skip_mask))
+            first_set = np.uint64(line) & mask0
+            read_at = last_read[first_set]
+            certain = not write and i > start and read_at >= start and (addresses[carrier] & count_full) < count_full
             for level in range(n_levels):
                 level_line = line >> rel_shift[level]
-                s = level_line & set_mask[level]
-                if owner[level, s] != level_line:
+                s = np.uint64(set_base[level] + (level_line & set_mask[level]))
+                if owner[s] != level_line:
                     certain = False
-                    owner[level, s] = level_line
-                    since[level, s] = i
-                elif since[level, s] > read_at:
+                    owner[s] = level_line
+                    since[s] = i
+                elif since[s] > read_at:
                     certain = False
             if not write:
-                last_read[line & mask0] = i
+                last_read[first_set] = i
             if certain:
                 addresses[carrier] += np.uint64(1)
             else:
-                addresses[kept] = address
-                writes[kept] = write
-                carrier = kept
+                carrier = np.uint64(kept)
+                addresses[carrier] = address
+                writes[carrier] = write
                 kept += 1
         line_offsets[pixel + 1] = kept
+        page_offsets[pixel + 1] = runs
         start = stop
-    return kept
+    return kept, runs
 
 
 @njit(cache=True, nogil=True)

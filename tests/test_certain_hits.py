@@ -99,7 +99,7 @@ def replay_both(rng, hierarchy, addresses, writes, offsets, taken):
 def test_taken_out_hits_leave_the_state_of_the_whole_stream(seed):
     """On seeded random hierarchies and pixels, pixels replayed from the taken-out lines (and the TLB from the
     page runs) leave every tag, stamp, counter and clock as the general walk of every access does. Fails when
-    the take-out forgets a lower level's conflict (``elif since[level, s] > read_at: certain = False`` dropped,
+    the take-out forgets a lower level's conflict (``elif since[s] > read_at: certain = False`` dropped,
     checked: an inclusive eviction then leaves a line out of the first level that it counts as a hit), or when
     the walk forgets the clock of the hits (``clock += 1 + pending`` made ``clock += 1``: checked)."""
     rng = np.random.default_rng(seed)
