@@ -38,10 +38,10 @@ counts, per record kind:
   nothing.
 
 A write looks for copies to remove in every other instance unless a table
-of lately written lines (``SharedArrays.owners``) knows that only its own
-thread's instances may hold the line: none has been filled by another
-thread since this thread's last write removed the others. The counts are
-the same either way.
+of lately written lines (``SharedArrays.owners``) knows which threads have
+filled the line since the last write removed the other copies: it then
+searches only the instances serving those threads, and none when they all
+share the writer's first-level instance. The counts are the same either way.
 
 Supported: every replacement policy (random draws use the global access
 clock and the level's seed, the same for every instance), non-inclusive and
@@ -57,7 +57,7 @@ from numba import njit
 from cachesim import prefetch as P
 from cachesim.inputs import as_addresses, as_writes, small_integers
 from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS, COHERENCE_MISSES,
-                                      FALSE_SHARING_MISSES, N_KINDS, SEVERAL_THREADS, SharedResult, SharedState,
+                                      FALSE_SHARING_MISSES, N_KINDS, SharedResult, SharedState,
                                       ThreadStream)
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, RANDOM, WRITE_HITS, WRITE_MISSES,
                            WRITES, _find, _random_way)
@@ -102,12 +102,15 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
 
 @njit(cache=True, inline="always")
 def _probe_ways(tags, base, n_ways, line):
-    """:func:`cachesim.sets._find` without an early exit: every way is compared, so the
-    loop has no branch that depends on where the line is (the last match; a line is in a set once)."""
-    slot = np.int64(-1)
+    """:func:`cachesim.sets._find` without an early exit or a select per way: the matches (a line is in a
+    set once) and their way numbers are summed, which the compiler turns into vector compares and adds."""
+    found = np.int64(0)
+    where = np.int64(0)
     for way in range(n_ways):
-        slot = base + way if tags[base + way] == line else slot
-    return slot
+        match = np.int64(tags[base + way] == line)
+        found += match
+        where += match * way
+    return base + where if found else np.int64(-1)
 
 
 @njit(cache=True, inline="always")
@@ -185,14 +188,34 @@ def _back_invalidate(evicted, level, instance, kind, geometry, machine, state):
 
 
 @njit(cache=True, inline="always")
-def _invalidate_others(line0, thread, kind, first, end, geometry, machine, state):
+def _thread_bit(thread):
+    """The bit of hardware thread ``thread`` in a sharers mask: bit ``thread mod 64`` (threads 64 apart share one)."""
+    return np.int64(1) << np.int64(thread & 63)
+
+
+@njit(cache=True, inline="always")
+def _instance_bits(instance, width):
+    """The sharers-mask bits of the threads that instance ``instance`` of a level ``width`` threads wide
+    serves (threads ``instance * width`` ... ``(instance + 1) * width - 1``): ``width`` bits from bit
+    ``instance * width mod 64``, wrapping around; all 64 when ``width >= 64``."""
+    if width >= 64:
+        return np.int64(-1)
+    ones = (np.uint64(1) << np.uint64(width)) - np.uint64(1)
+    start = np.uint64((instance * width) & 63)
+    return np.int64((ones << start) | (ones >> ((np.uint64(64) - start) & np.uint64(63))))
+
+
+@njit(cache=True, inline="always")
+def _invalidate_others(line0, thread, kind, first, end, sharers, geometry, machine, state):
     """A write by ``thread``: remove its line from every instance that does not serve the thread,
-    leaving a ghost with the write's bytes."""
+    leaving a ghost with the write's bytes. Only instances serving a thread whose bit is in the mask
+    ``sharers`` (:func:`_thread_bit`; -1: every thread) are searched: no other holds the line."""
     for level in range(geometry.rel_shift.shape[0]):
         line = line0 >> geometry.rel_shift[level]
         own = machine.instance_of[level, thread]
+        width = machine.threads_per_instance[level]
         for other in range(machine.n_instances[level]):
-            if other == own:
+            if other == own or (sharers != -1 and _instance_bits(other, width) & sharers == 0):
                 continue
             base = _set_of(line, level, other, geometry.n_sets, geometry.set_mask, geometry.ways, geometry.offset,
                            machine.level_ways)
@@ -217,29 +240,35 @@ def _owner_slot(line, owners):
 
 @njit(cache=True, inline="always")
 def _note_fill(line0, thread, owners):
-    """A fill of first-level line ``line0`` by ``thread``: the line's owners entry, if it names
-    another thread, names several."""
+    """A fill of first-level line ``line0`` by ``thread``: the line's owners entry, if it has one,
+    gains the thread's bit."""
     if owners.shape[0] > 0:
         entry = _owner_slot(line0, owners)
-        if owners[entry, 0] == line0 and owners[entry, 1] != thread:
-            owners[entry, 1] = SEVERAL_THREADS
+        if owners[entry, 0] == line0:
+            owners[entry, 1] |= _thread_bit(thread)
 
 
 @njit(cache=True, inline="always")
 def _write_invalidate(line0, thread, kind, first, end, geometry, machine, state):
-    """:func:`_invalidate_others` for a write by ``thread``, skipped when the owners table says only
-    the thread's own instances may hold the line (there is then no copy to remove); after it, the
-    table says so."""
+    """:func:`_invalidate_others` for a write by ``thread``, searching only the instances of the threads
+    the owners table names for the line (all without an entry), and skipped when those threads share
+    the thread's first-level instance, hence every instance that serves it (no copy to remove); after a
+    search, the entry names the thread alone."""
     owners = state.owners
     if owners.shape[0] == 0:
-        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+        _invalidate_others(line0, thread, kind, first, end, np.int64(-1), geometry, machine, state)
         return
     entry = _owner_slot(line0, owners)
-    if owners[entry, 0] == line0 and owners[entry, 1] == thread:
-        return
-    _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+    sharers = np.int64(-1)
+    if owners[entry, 0] == line0:
+        sharers = owners[entry, 1]
+        width = machine.threads_per_instance[0]
+        own_bits = _instance_bits(machine.instance_of[0, thread], width)
+        if machine.instance_of.shape[1] <= 64 and sharers & ~own_bits == 0:
+            return
+    _invalidate_others(line0, thread, kind, first, end, sharers, geometry, machine, state)
     owners[entry, 0] = line0
-    owners[entry, 1] = thread
+    owners[entry, 1] = _thread_bit(thread)
 
 
 @njit(cache=True)

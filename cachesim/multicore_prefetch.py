@@ -200,7 +200,7 @@ def prefetching_access(thread, address, is_write, size, kind, geometry, machine,
             clock = _issue(prefetchers.candidates[k], level, access, geometry, machine, state, clock, prefetch,
                            prefetchers.fetch_lines, kind_of)
     if is_write:
-        _invalidate_others(line0, thread, kind, first, end, geometry, machine, state)
+        _invalidate_others(line0, thread, kind, first, end, np.int64(-1), geometry, machine, state)
     return served, clock
 
 

@@ -23,7 +23,7 @@ from cachesim.simulate import cache_geometry
 from rtcommon.validate import InputError
 
 __all__ = ["BACK_INVALIDATIONS", "COHERENCE_INVALIDATIONS", "COHERENCE_MISSES", "FALSE_SHARING_MISSES",
-           "GHOST_FILTER_SIZE", "N_KINDS", "N_SHARED_COUNTERS", "OWNERS_SIZE", "SEVERAL_THREADS",
+           "GHOST_FILTER_SIZE", "N_KINDS", "N_SHARED_COUNTERS", "OWNERS_SIZE",
            "MachineGeometry", "SharedArrays", "SharedResult", "SharedState", "ThreadStream"]
 
 # Counter columns of SharedArrays.counts: the first eight are those of
@@ -115,17 +115,20 @@ class SharedArrays(NamedTuple):
     served : ndarray of int64, shape (T, L + 1)
         Accesses of each hardware thread served by each level (``L``: memory).
     owners : ndarray of int64, shape (D, 2) or (0, 2)
-        Lines whose copies only one hardware thread's instances may hold,
-        so that its writes need not look for copies elsewhere: entry ``e``
-        (a hash of the first-level line, :func:`cachesim.multicore._owner_slot`)
-        is ``(line, t)`` after a write by ``t`` removed the line from every
-        instance that does not serve ``t``, until a fill of the line by
-        another thread makes ``t`` :data:`SEVERAL_THREADS`; ``(-1, -1)``:
-        unused. Only a write's look-up and fills read or change it. ``D``
-        is a power of two, :data:`OWNERS_SIZE` in a :class:`SharedState`;
-        (0, 2), every write looks: levels with lines of different sizes
-        (a fill there covers several first-level lines) or prefetchers
-        (whose fills are not noted).
+        The sharers of lately written lines, so that a write searches for
+        copies only where they may be: entry ``e`` (a hash of the
+        first-level line, :func:`cachesim.multicore._owner_slot`) is
+        ``(line, mask)`` after a write by ``t`` removed the line from every
+        instance that does not serve ``t`` (``mask`` then holds ``t``'s
+        bit alone), and every fill of the line by a thread ``u`` since
+        adds ``u``'s bit (bit ``u mod 64``): every instance holding the
+        line serves a thread whose bit is in ``mask``. ``(-1, -1)``:
+        unused; a line without an entry may be anywhere. Only a write's
+        look-up and fills read or change it. ``D`` is a power of two,
+        :data:`OWNERS_SIZE` in a :class:`SharedState`; (0, 2), every write
+        searches every instance: levels with lines of different sizes (a
+        fill there covers several first-level lines) or prefetchers (whose
+        fills are not noted).
     """
 
     tags: np.ndarray
@@ -144,8 +147,6 @@ GHOST_FILTER_SIZE = 1 << 13
 #: line reads an entry and a small table stays in the host's nearer caches; a collision only makes a
 #: write search the other instances, so the counts do not depend on the size.
 OWNERS_SIZE = 1 << 11
-#: The thread of an owners entry whose line other threads filled since its last write.
-SEVERAL_THREADS = -2
 
 
 def _machine_geometry(machine: SharedHierarchy, geometry: CacheGeometry) -> tuple[CacheGeometry, MachineGeometry]:

@@ -149,7 +149,9 @@ def test_owned_writes_match_the_reference(seed, owners_size):
     """Writes that skip the search for other copies (the owners table), on machines whose levels all have
     one line size: counts and served equal the reference's, with the table off (0 entries), crowded
     (2 entries) and as made. Mutations: drop ``_note_fill`` in shared_access (a line another thread
-    filled is still owned); ``owners[entry, 1] = thread`` -> ``= 0`` in _write_invalidate (checked)."""
+    filled is still owned); ``owners[entry, 1] |= _thread_bit(thread)`` -> ``= _thread_bit(thread)`` in
+    _note_fill (only the last filler's copies are searched); ``_thread_bit(thread)`` -> ``_thread_bit(0)``
+    at the end of _write_invalidate (checked)."""
     rng = np.random.default_rng(100 + seed)
     machine = uniform_machine(rng)
     addresses, threads, writes, sizes, kinds = owned_stream(rng, machine, 2000)
@@ -157,6 +159,29 @@ def test_owned_writes_match_the_reference(seed, owners_size):
     assert state.owners.shape[0] > 0
     if owners_size is not None:
         state.owners = np.full((owners_size, 2), -1, dtype=np.int64)
+    result = simulate_threads(addresses, threads, state, writes=writes, sizes=sizes, kinds=kinds)
+    expected, served = reference_threads(addresses, threads, machine, writes, sizes, kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    np.testing.assert_array_equal(result.served, served)
+    assert expected[..., COHERENCE_INVALIDATIONS].sum() > 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_sharer_masks_of_threads_64_apart_match_the_reference(seed):
+    """On a machine of 72 hardware threads (36 cores, SMT 2), threads 64 apart share a bit of the owners
+    table's sharers masks; a stream of runs by a few such threads, to lines they all read and write (many
+    sharers), gives the reference's counts and served counts.
+    Mutation: drop ``machine.instance_of.shape[1] <= 64 and`` in _write_invalidate (a write by thread 0
+    after thread 64 filled the line then searches no other instance)."""
+    rng = np.random.default_rng(400 + seed)
+    levels = (CacheLevel("L1", 16 * 2 * 2, 16, 2), CacheLevel("L2", 16 * 4 * 2, 16, 4),
+              CacheLevel("L3", 16 * 4 * 8, 16, 4))
+    scopes = (str(rng.choice(["thread", "core"])), "core", "machine")
+    machine = SharedHierarchy(Hierarchy(levels), n_cores=36, smt=2, shared_by=scopes)
+    addresses, threads, writes, sizes, kinds = owned_stream(rng, machine, 1500)
+    threads = np.array([0, 1, 64, 65, 2, 66])[threads % 6]
+    state = SharedState(machine)
+    assert state.owners.shape[0] > 0
     result = simulate_threads(addresses, threads, state, writes=writes, sizes=sizes, kinds=kinds)
     expected, served = reference_threads(addresses, threads, machine, writes, sizes, kinds)
     np.testing.assert_array_equal(result.counts, expected)
