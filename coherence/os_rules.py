@@ -90,9 +90,10 @@ class BackgroundLoad(NamedTuple):
         Distinct lines one background slice reads.
     skip : bool
         Apply each slice with :func:`cachesim.fresh.skip_fresh_lines`
-        instead of walking it access by access: the caller has checked
-        that it is exact (:func:`cachesim.fresh.skips_exactly`), that no TLB
-        is looked up, and that lines are the first level's.
+        instead of walking it access by access (a data TLB looking the
+        slice's pages up as runs): the caller has checked that it is exact
+        (:func:`cachesim.fresh.skips_exactly`), that lines are the first
+        level's and that a TLB's pages hold whole lines.
     pages : BackgroundPages
         Where the streams' pages lie in physical memory (``colour_bits``
         -1: as they are; see :func:`coherence.page_placement.translate_stream`).

@@ -190,6 +190,9 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             cache = K.CacheArrays(tags[cpu], stamps[cpu], counts[process])
             if skip_background:  # fresh lines: the state after them is known without walking them
                 cache_clock[cpu] = skip_fresh_lines(start, footprint_lines, geometry, cache, cache_clock[cpu])
+                if tlbs.enabled:  # and the TLB looks up each page once, counting its other lines as repeats
+                    n_runs = _fresh_page_runs(start, footprint_lines, line_shift, tlbs.geometry.page_shift, buffer)
+                    _tlb_misses(tlbs, cpu, process, buffer[:n_runs], (1 << tlbs.geometry.page_shift) - 1)
             else:
                 for i in range(footprint_lines):
                     buffer[i] = np.uint64((start + i) << line_shift)
@@ -257,6 +260,22 @@ def run_schedule(reads, geometry, caches, tlbs, cost, schedule, queues, backgrou
             ours_left -= 1
         cpu_clock[cpu] = clock
 
+
+
+@njit(cache=True, inline="always")
+def _fresh_page_runs(first_line, n_lines, line_shift, page_shift, runs):
+    """Write the page runs (:attr:`coherence.pixel_lines.PixelLines.page_runs`) of the consecutive lines
+    ``first_line .. first_line + n_lines - 1`` of ``2**line_shift`` bytes to ``runs``; returns how many.
+    The runs are one per page: a page's lines are fewer than its bytes, which its run's count field holds."""
+    lines_per_page = np.int64(1) << (page_shift - line_shift)
+    last_line = first_line + n_lines - 1
+    n_runs = 0
+    for page in range(first_line >> (page_shift - line_shift), (last_line >> (page_shift - line_shift)) + 1):
+        first = max(first_line, page * lines_per_page)
+        last = min(last_line, (page + 1) * lines_per_page - 1)
+        runs[n_runs] = np.uint64((page << page_shift) + (last - first))
+        n_runs += 1
+    return n_runs
 
 
 @njit(cache=True, inline="always")

@@ -488,10 +488,13 @@ def _counters_by_process(counters, pixel_owner, n_processes):
 
 def _background(machine: Machine, line_shift: int, state: CacheState, tlbs: CpuTlbs) -> BackgroundLoad:
     """The machine's background load, its slices skipped rather than walked where that is exact
-    (:mod:`cachesim.fresh`: the caches' state and our processes' counts are the same either way)."""
+    (:mod:`cachesim.fresh`: the caches' state and our processes' counts are the same either way; a data
+    TLB then looks each slice up as page runs, as exact)."""
     load = machine.background(line_shift)
     pages = machine.page_placement.background(machine.page_placement.colours(state.hierarchy))
-    skip = (machine.background_load > 0 and not tlbs.enabled and line_shift == state.geometry.line_shift
+    # a TLB looks the skipped lines up by pages (their page runs): its page size must hold a line
+    tlb_fits = not tlbs.enabled or tlbs.geometry.page_shift >= line_shift
+    skip = (machine.background_load > 0 and tlb_fits and line_shift == state.geometry.line_shift
             and pages.colour_bits < 0 and skips_exactly(state.geometry, load.footprint_lines))
     return BackgroundLoad(load.first_line, load.footprint_lines, bool(skip), pages)
 

@@ -250,6 +250,26 @@ def test_tlb_in_the_schedule_equals_the_reference(mapping, policy):
     assert frame["tlb_cycles"].tolist() == (frame["tlb_misses"] * 21.0).tolist()
 
 
+@pytest.mark.parametrize("footprint", [768, 4096, 5000])
+@pytest.mark.parametrize("mapping", ["P", "DB"])
+def test_skipped_background_slices_look_their_pages_up(mapping, footprint):
+    """Other users' slices of fresh lines are skipped with a data TLB too (cachesim.fresh for the caches, one
+    lookup per page with its other lines as repeats for the TLB; footprints of 2 to 10 pages of 512 bytes,
+    starting anywhere in a page), and every count equals the reference's, which walks them access by access.
+    Fails when the skipped slice is not looked up (the ``_tlb_misses(..., buffer[:n_runs], ...)`` line after
+    ``skip_fresh_lines`` dropped: checked)."""
+    from cachesim import CacheState
+    from coherence.simulation import _background, _cpu_tlbs
+
+    trace = random_trace(width=8, height=6, seed=15)
+    hierarchy = replace(INCLUSIVE, tlb=SMALL_TLB)
+    machine = Machine(n_cpus=2, quantum_cycles=3000.0, background_load=2, background_footprint=footprint)
+    state = CacheState(hierarchy)
+    assert _background(machine, 5, state, _cpu_tlbs(state, 2, 5)).skip
+    run = compare(trace, mapping, 3, hierarchy, machine)
+    assert run.processes["tlb_misses"].sum() > 0
+
+
 def test_tlb_misses_add_to_memory_cycles_only():
     trace = random_trace(width=6, height=4, seed=14)
     placed = placed_for()
