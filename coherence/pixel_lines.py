@@ -7,7 +7,10 @@ smallest line size, so :func:`pixel_lines` does that work once, and
 :func:`coherence.simulation.simulate_run` reads slices of the result instead.
 It costs 9 bytes per line access (address and write flag) and 16 per pixel
 (offset and write count), so a study asks for it only within
-:data:`SHARED_LINES_BUDGET`; the replay's counts are the same either way.
+:data:`SHARED_LINES_BUDGET`; the replay's counts are the same either way. The
+budget counts those bytes only: while certain hits are taken out (below) the
+page runs take up to 8 more bytes per access and 8 per pixel, of which the
+runs actually written stay (one per run of accesses to one page).
 
 Given the hierarchy the runs replay, :func:`pixel_lines` also takes out the
 reads its direct-mapped first level is certain to serve whatever state a
@@ -21,11 +24,11 @@ address bits instead (``PixelLines.skip_mask``), and the cache walk
 stream would. The data TLB sees every access, so it gets every pixel's
 pages apart, a run of accesses to one page as one entry that counts the
 rest in its low bits (``PixelLines.page_runs``; a repeat of the last page
-is a hit on its entry, :func:`cachesim.tlb.tlb_lookup`). On the study-era
-traces about a quarter of the line accesses go, and six in ten TLB lookups.
+is a hit on its entry, :func:`cachesim.tlb.tlb_lookup`).
 """
 from __future__ import annotations
 
+import threading
 from contextlib import contextmanager
 from typing import NamedTuple
 
@@ -110,8 +113,9 @@ def skips_certain_hits(hierarchy, line_size: int) -> bool:
 
 def skip_key(hierarchy) -> str:
     """What decides which accesses :func:`pixel_lines` takes out for ``hierarchy``: its levels' line
-    sizes, sets and ways, its inclusion and the data TLB's page size (8 KB without a TLB)."""
-    levels = ",".join(f"{level.line_size}/{level.n_sets}/{level.assoc}" for level in hierarchy.levels)
+    sizes, sets, ways and replacement policies, its inclusion and the data TLB's page size (8 KB without a
+    TLB)."""
+    levels = ",".join(f"{level.line_size}/{level.n_sets}/{level.assoc}/{level.policy}" for level in hierarchy.levels)
     page_size = hierarchy.tlb.page_size if hierarchy.tlb is not None else DEFAULT_PAGE_SIZE
     return f"{levels};{hierarchy.inclusion};page {page_size}"
 
@@ -171,9 +175,10 @@ def _small_pages():
     """Allocate without numpy's advice to back large arrays by transparent huge pages.
 
     The line addresses are gigabytes written once and then read in order: huge pages save them nothing,
-    and where the system must compact memory to hand them out, the first write took 2-6 s of system time a
-    placement (balls at 256 x 256), against 0.7-0.9 s in ordinary pages. Only the advice changes, for every
-    thread while it is off; a numpy without the switch allocates as it does.
+    and where the system must compact memory to hand them out, their first write costs several times the
+    system time it costs in ordinary pages. The advice is numpy's, for every thread: it is off while any
+    caller is inside (a count under a lock, so overlapping callers on the study's threads cannot leave it
+    off); a numpy without the switch allocates as it does.
     """
     try:
         from numpy._core import multiarray
@@ -183,11 +188,22 @@ def _small_pages():
     if switch is None:
         yield
         return
-    before = switch(False)
+    with _SMALL_PAGES_LOCK:
+        if _SMALL_PAGES_USERS[0] == 0:
+            _SMALL_PAGES_USERS[1] = switch(False)
+        _SMALL_PAGES_USERS[0] += 1
     try:
         yield
     finally:
-        switch(before)
+        with _SMALL_PAGES_LOCK:
+            _SMALL_PAGES_USERS[0] -= 1
+            if _SMALL_PAGES_USERS[0] == 0:
+                switch(_SMALL_PAGES_USERS[1])
+
+
+#: Guards :func:`_small_pages`' count of callers inside and the advice it found when the first came in.
+_SMALL_PAGES_LOCK = threading.Lock()
+_SMALL_PAGES_USERS = [0, True]
 
 
 def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
@@ -196,8 +212,9 @@ def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
 
     ``lines`` (every access held, ``skip_mask`` 0, its arrays owned by nothing else and
     :data:`~coherence.record_lines.FILL_AHEAD` entries longer than it shows) is overwritten: its
-    ``line_offsets``, ``addresses`` and ``writes`` become the result's, shrunk in place. ``hierarchy`` must
-    :func:`skips_certain_hits` at ``2**lines.line_shift``-byte lines.
+    ``line_offsets``, ``addresses`` and ``writes`` become the result's, shrunk in place, so neither ``lines``
+    nor any other view of its arrays may be read afterwards (:func:`pixel_lines` calls it on arrays it has
+    just made). ``hierarchy`` must :func:`skips_certain_hits` at ``2**lines.line_shift``-byte lines.
     """
     from cachesim import CacheState
 

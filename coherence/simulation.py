@@ -43,7 +43,7 @@ from coherence.cost import CostModel
 from coherence.distribution import Distribution
 from coherence.layout import PlacedLayout, RecordPlacement
 from coherence.page_placement import PagePlacement
-from coherence.pixel_lines import PixelLines, no_pixel_lines, skip_key
+from coherence.pixel_lines import PixelLines, no_pixel_lines, skip_key, skips_certain_hits
 from coherence.recost import (N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts,
                               fixed_schedule)
 from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES, MIGRATIONS,
@@ -386,7 +386,8 @@ def simulate_run(trace, distribution: Distribution, hierarchy: Hierarchy, placed
     elif lines.line_shift != line_shift or lines.line_offsets.shape != (n_pixels + 1,):
         raise InputError(f"lines are for {lines.line_offsets.shape[0] - 1} pixels of {1 << lines.line_shift}-byte "
                          f"lines; this run needs {n_pixels} pixels of {1 << line_shift}-byte lines")
-    elif lines.skip_mask and lines.skips_for != skip_key(hierarchy):
+    elif lines.skip_mask and (lines.skips_for != skip_key(hierarchy)
+                              or not skips_certain_hits(hierarchy, 1 << line_shift)):
         raise InputError(f"lines had their certain first-level hits taken out for the hierarchy {lines.skips_for!r}; "
                          f"this run's is {skip_key(hierarchy)!r}: make them with pixel_lines(..., hierarchy=) of it")
 

@@ -1,6 +1,8 @@
 """Certain first-level read hits taken out of the shared line addresses (coherence.pixel_lines), the cache walk
 that counts them (cachesim.kernels.simulate_skips_into) and the data TLB on page runs (cachesim.tlb.tlb_lookup
-with a skip mask), against the whole streams walked access by access."""
+with a skip mask), against the whole streams walked access by access: the general compiled walk
+(cachesim.by_access, itself checked against the dict-based reference caches in test_cachesim) and the
+reference TLB of tests/reference_tlb.py."""
 import numpy as np
 import pytest
 
@@ -51,8 +53,8 @@ def held(addresses, writes, offsets, line_shift):
     room_writes = np.zeros(addresses.size + 4, dtype=np.bool_)
     room_addresses[:addresses.size] = addresses
     room_writes[:addresses.size] = writes
-    pixel_writes = np.add.reduceat(writes.astype(np.int64), offsets[:-1]) if addresses.size else np.zeros(0)
-    pixel_writes = np.where(np.diff(offsets) > 0, pixel_writes, 0).astype(np.int64)
+    written = np.concatenate([[0], np.cumsum(writes, dtype=np.int64)])
+    pixel_writes = written[offsets[1:]] - written[offsets[:-1]]  # empty pixels (the last too) count 0
     return PixelLines(offsets.copy(), room_addresses[:addresses.size], room_writes[:addresses.size], pixel_writes,
                       line_shift)
 
@@ -159,8 +161,10 @@ def test_certain_hits_by_hand():
 
 def test_which_hierarchies_take_hits_out_and_lines_of_another_are_refused():
     """The alpha presets take hits out (with or without the DTB, alike: same key); a set-associative first level
-    or another line size does not; a run refuses lines taken out for another hierarchy. Fails when the run
-    does not check the key (the ``elif lines.skip_mask and ...`` check dropped: checked)."""
+    or another line size does not; a run refuses lines taken out for another hierarchy, one whose second
+    level differs only in its replacement policy included. Fails when the run does not check the key (the
+    ``elif lines.skip_mask and ...`` check dropped: checked), or the key leaves the policy out and the run
+    does not ask :func:`skips_certain_hits` of its own hierarchy (both dropped: checked)."""
     from coherence.pixel_lines import pixel_lines, skip_key
     from coherence.simulation import simulate_run
     from coherence.mappings import Strip
@@ -180,5 +184,8 @@ def test_which_hierarchies_take_hits_out_and_lines_of_another_are_refused():
     with pytest.raises(InputError, match="taken out for the hierarchy"):
         simulate_run(trace, Strip().build(8, 6, 2), Hierarchy(other.levels[:1] + (CacheLevel("L2", 3072, 64, 3),)),
                      placed, COST, lines=lines)
+    fifo = Hierarchy(other.levels[:1] + (CacheLevel("L2", 6144, 64, 3, policy="fifo"),))
+    with pytest.raises(InputError, match="taken out for the hierarchy"):  # same sizes, another replacement
+        simulate_run(trace, Strip().build(8, 6, 2), fifo, placed, COST, lines=lines)
     with pytest.raises(InputError, match="take_out_certain_hits"):
         take_out_certain_hits(lines, other)

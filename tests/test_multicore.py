@@ -167,19 +167,24 @@ def test_owned_writes_match_the_reference(seed, owners_size):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_sharer_masks_of_threads_64_apart_match_the_reference(seed):
-    """On a machine of 72 hardware threads (36 cores, SMT 2), threads 64 apart share a bit of the owners
-    table's sharers masks; a stream of runs by a few such threads, to lines they all read and write (many
-    sharers), gives the reference's counts and served counts.
-    Mutation: drop ``machine.instance_of.shape[1] <= 64 and`` in _write_invalidate (a write by thread 0
-    after thread 64 filled the line then searches no other instance)."""
+@pytest.mark.parametrize("n_cores, smt, chosen", [(36, 2, (0, 1, 64, 65, 2, 66)),
+                                                  (24, 3, (0, 1, 63, 64, 65, 2))])
+def test_sharer_masks_of_threads_64_apart_match_the_reference(seed, n_cores, smt, chosen):
+    """On machines of 72 hardware threads, threads 64 apart share a bit of the owners table's sharers masks;
+    a stream of runs by a few such threads, to lines they all read and write (many sharers), gives the
+    reference's counts and served counts. With SMT 3, core 21 serves threads 63-65, whose bits wrap round
+    from 63 to 0 and 1.
+    Mutations: drop ``machine.instance_of.shape[1] <= 64 and`` in _write_invalidate (a write by thread 0
+    after thread 64 filled the line then searches no other instance); drop the wrap-around term
+    ``| (ones >> ...)`` in _instance_bits (SMT 3 cases fail: the core of threads 63-65 is not searched
+    for bits 0 and 1)."""
     rng = np.random.default_rng(400 + seed)
     levels = (CacheLevel("L1", 16 * 2 * 2, 16, 2), CacheLevel("L2", 16 * 4 * 2, 16, 4),
               CacheLevel("L3", 16 * 4 * 8, 16, 4))
     scopes = (str(rng.choice(["thread", "core"])), "core", "machine")
-    machine = SharedHierarchy(Hierarchy(levels), n_cores=36, smt=2, shared_by=scopes)
+    machine = SharedHierarchy(Hierarchy(levels), n_cores=n_cores, smt=smt, shared_by=scopes)
     addresses, threads, writes, sizes, kinds = owned_stream(rng, machine, 1500)
-    threads = np.array([0, 1, 64, 65, 2, 66])[threads % 6]
+    threads = np.array(chosen)[threads % len(chosen)]
     state = SharedState(machine)
     assert state.owners.shape[0] > 0
     result = simulate_threads(addresses, threads, state, writes=writes, sizes=sizes, kinds=kinds)
