@@ -38,6 +38,7 @@ says whether the one-process quantities would hold on a smaller image.
 """
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -137,6 +138,8 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     base : analyses.experiment.Experiment
         Size, workload, mappings, process counts (the verdict's count is
         needed; 1 is always added), trace cache and everything not sampled.
+        With ``progress``, a bar on stderr per scene and phase (Morris
+        samples, size check, Sobol samples) counts its samples.
     scenes : sequence of str
         The study's scenes.
     trajectories : int
@@ -182,7 +185,7 @@ def robustness(base: Experiment = ROBUSTNESS_EXPERIMENT, *, scenes=("tetra",), t
     for scene in scenes:
         clock = _Clock(timings.setdefault(scene, {}))
         replays = _Replays(replace(base, scene=scene), executor)
-        rows, paths = _scene_samples(replace(base, scene=scene), design, seeds, replays)
+        rows, paths = _scene_samples(replace(base, scene=scene), design, seeds, replays, "Morris samples")
         frame = pd.DataFrame(rows)
         indices = morris_indices(names, design, frame["margin"].to_numpy(), seed)
         ranked = sorted(names, key=lambda name: -indices["mu_star"][name])
@@ -243,7 +246,7 @@ def _sobol(base: Experiment, top, base_samples: int, seed: int, replays: _Replay
     design = np.full((partial.shape[0], len(names)), HELD_AT)
     design[:, [names.index(name) for name in top]] = partial
     # every Sobol sample shares one seed: the indices see no noise of the placement's draw
-    rows, paths = _scene_samples(base, design, trajectory_seeds(seed, 1), replays)
+    rows, paths = _scene_samples(base, design, trajectory_seeds(seed, 1), replays, "Sobol samples")
     frame = pd.DataFrame(rows)
     return frame, {**sobol_indices(top, frame["margin"].to_numpy(), seed), "runs": paths}
 
@@ -285,11 +288,13 @@ class _Replays:
         return {path: self.done[path] + (getattr(store, path) if store is not None else 0) for path in RUN_PATHS}
 
 
-def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replays) -> tuple[list[dict], dict]:
+def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replays,
+                   phase: str = "samples") -> tuple[list[dict], dict]:
     """The rows of ``design``'s samples, and how many runs took each path (:data:`RUN_PATHS`) for them.
 
     The samples' studies go through one :func:`coherence.studies.study_stream`: while a sample's last runs
-    are simulated, the next samples' start on the free threads.
+    are simulated, the next samples' start on the free threads. With ``base.progress``, a bar named by the
+    scene and ``phase`` counts the samples as their results come.
     """
     before = replays.paths()
     per_trajectory = design.shape[0] // len(seeds)
@@ -304,16 +309,29 @@ def _scene_samples(base: Experiment, design: np.ndarray, seeds, replays: _Replay
             yield _sample_call(base, replay, values, seeds[trajectory])
 
     rows = []
-    with warnings.catch_warnings(record=True) as caught:  # every sample warns alike: say each thing once
+    with warnings.catch_warnings(record=True) as caught, \
+            _samples_bar(design.shape[0], base, phase) as bar:  # every sample warns alike: say each thing once
         warnings.simplefilter("always")
         for index, result in enumerate(_stream(calls())):
             values, seed, trajectory, scene = samples[index]
             rows.append({"scene": scene, "sample": index, "trajectory": trajectory, "seed": seed,
                          **sample_outputs(result.runs), **values})
+            bar.update(1)
     for message in dict.fromkeys(str(warning.message) for warning in caught):
         warnings.warn(message, stacklevel=3)
     after = replays.paths()
     return rows, {path: after[path] - before[path] for path in RUN_PATHS}
+
+
+def _samples_bar(total: int, base: Experiment, phase: str):
+    """A tqdm bar on stderr of ``total`` samples of ``phase`` of ``base.scene``, off unless ``base.progress``.
+
+    It stays on the terminal when done, so a long study shows what each phase took.
+    """
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=f"{base.scene}: {phase}", unit="sample", disable=not base.progress,
+                file=sys.stderr)
 
 
 def _stream(calls):
@@ -359,12 +377,13 @@ def _size_check(base: Experiment, design: np.ndarray, seeds, replays: _Replays) 
                                    seeds[index // per_trajectory])
 
     values = {size: {name: [] for name in SIZE_CHECK_QUANTITIES} for size in sizes}
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _samples_bar(len(sizes) * len(rows), base, f"size check at {small_size} and {reference_size}") as bar:
         warnings.simplefilter("ignore")  # small images warn of idle processes; the Morris samples said so
         for number, result in enumerate(_stream(calls())):
             differences = one_process_differences(result.runs)
             for name in SIZE_CHECK_QUANTITIES:
                 values[sizes[number // len(rows)]][name].append(differences[name])
+            bar.update(1)
     return {"small_size": small_size, "reference_size": reference_size, "verdict_size": int(base.size),
             "tolerance": SIZE_CHECK_TOLERANCE, "samples": rows.tolist(), "tree_variant": base.tree_variant,
             "quantities": compare_sizes(values[small_size], values[reference_size], base.size)}

@@ -267,3 +267,115 @@ def test_size_check_simulates_its_points_at_both_sizes(small_study):
             runs = _sample_runs(sized, _Replays(base, None)(base.tree_variant, size), values, seed)
         for name, value in one_process_differences(runs).items():
             assert check["quantities"][name][key][-1] == pytest.approx(value, rel=1e-9), (name, size)
+
+
+class _CountingBar:
+    """Stands for tqdm: records each bar's description, total, whether it is shown and how far it counted."""
+
+    made: list = []
+
+    def __init__(self, iterable=None, *, total=None, desc="", disable=False, **_):
+        self.iterable, self.total, self.desc, self.disable, self.n = iterable, total, desc, disable, 0
+        _CountingBar.made.append(self)
+
+    def __iter__(self):
+        for item in self.iterable:
+            self.n += 1
+            yield item
+
+    def update(self, n=1):
+        self.n += n
+
+    def set_postfix_str(self, *_, **__):
+        pass
+
+    def close(self):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_):
+        return False
+
+
+def test_progress_bars_count_every_sample_of_each_scene_and_phase(tmp_path, monkeypatch):
+    """With progress on, one bar per scene and phase (Morris samples, size check, Sobol samples) counts each of
+    its samples once, up to its total. Fails if _size_check's ``bar.update(1)`` is left out (its bar stays at
+    0 of 10)."""
+    import tqdm.auto
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", _CountingBar)
+    _CountingBar.made = []
+    base = replace(ROBUSTNESS_EXPERIMENT, size=16, cache_dir=str(tmp_path), progress=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 16x16
+        robustness(base, scenes=["tetra", "balls"], trajectories=2, seed=1, sobol=2)
+    bars = {bar.desc: bar for bar in _CountingBar.made if bar.desc.startswith(("tetra:", "balls:"))}
+    morris, sobol = 2 * (len(NAMES) + 1), 2 * (4 + 2)
+    expected = {f"{scene}: {phase}": total for scene in ("tetra", "balls")
+                for phase, total in (("Morris samples", morris), ("size check at 8 and 32", 10),
+                                     ("Sobol samples", sobol))}
+    assert {desc: (bar.n, bar.total) for desc, bar in bars.items()} == {d: (t, t) for d, t in expected.items()}
+    assert not any(bar.disable for bar in bars.values())
+
+
+def test_progress_off_prints_nothing_and_bars_change_no_file(tmp_path, capsys):
+    """A study with progress off writes nothing to stderr or stdout; with it on the bars go to stderr only,
+    and the files are byte-identical. Fails if _samples_bar passes ``disable=False``."""
+    base = replace(ROBUSTNESS_EXPERIMENT, size=16, scene="tetra", cache_dir=str(tmp_path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        quiet = robustness(base, scenes=["tetra"], trajectories=2, seed=1, size_check=False)
+        printed_quiet = capsys.readouterr()
+        shown = robustness(replace(base, progress=True), scenes=["tetra"], trajectories=2, seed=1, size_check=False)
+        printed_shown = capsys.readouterr()
+    assert printed_quiet.err == "" and printed_quiet.out == ""
+    samples = 2 * (len(NAMES) + 1)
+    assert "tetra: Morris samples" in printed_shown.err and f"{samples}/{samples}" in printed_shown.err
+    assert printed_shown.out == ""
+    a, b = write_robustness(quiet, tmp_path / "a"), write_robustness(shown, tmp_path / "b")
+    for name in ROBUSTNESS_FILES.values():
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def test_cli_shows_bars_on_a_terminal_unless_told_not_to(monkeypatch, tmp_path):
+    """``coherence robustness`` turns progress on when stderr is a terminal, off with --no-progress or
+    when stderr is not a terminal. Fails if run() leaves ROBUSTNESS_EXPERIMENT's progress (False) as is."""
+    import sys
+
+    import analyses.robustness
+    from analyses.cli import build_parser
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def record(base, **_):
+        seen.append(base.progress)
+        raise Stop
+
+    class Terminal:
+        def __init__(self, tty):
+            self.tty = tty
+
+        def isatty(self):
+            return self.tty
+
+        def write(self, text):
+            return len(text)
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(analyses.robustness, "robustness", record)
+    for tty, extra, expected in ((True, [], True), (True, ["--no-progress"], False), (False, [], False)):
+        args = build_parser().parse_args(["robustness", "--scenes", "tetra", "--size", "16", "--cache",
+                                          str(tmp_path / "cache"), "--out", str(tmp_path / "out"), *extra])
+        monkeypatch.setattr(sys, "stderr", Terminal(tty))
+        with pytest.raises(Stop):
+            args.func(args)
+        monkeypatch.undo()
+        monkeypatch.setattr(analyses.robustness, "robustness", record)
+        assert seen[-1] is expected

@@ -34,6 +34,10 @@ Output folder (default robustness):
 and with --faithfulness-md FILE the faithfulness section, Markdown generated
 from robustness.json alone.
 The same inputs and --seed give byte-identical files.
+Progress: when stderr is a terminal, a bar there per scene and phase counts
+the samples (Morris, size check, Sobol), and a trace being rendered shows
+its own; --no-progress turns them off. Files and stdout are the same either
+way.
 
 examples:
   coherence robustness --scenes tetra --size 64 --trajectories 4
@@ -63,6 +67,9 @@ def register(subparsers) -> None:
                              "samples; by default part of the output)")
     parser.add_argument("--out", metavar="DIR", default="robustness", help="output folder (default robustness)")
     parser.add_argument("--json", action="store_true", help="print robustness.json to stdout")
+    parser.add_argument("--no-progress", dest="progress", action="store_false",
+                        help="no progress bars (by default, when stderr is a terminal, a bar per scene and phase "
+                             "counts the samples: Morris, size check, Sobol)")
     parser.add_argument("--faithfulness-md", metavar="FILE",
                         help="also write the faithfulness section (Markdown) generated from robustness.json to "
                              "FILE; python -m analyses.faithfulness regenerates it from a stored robustness.json")
@@ -97,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder(args.out)
     if args.faithfulness_md:
         check_writable_ancestor(args.faithfulness_md, "--faithfulness-md")
-    base = replace(ROBUSTNESS_EXPERIMENT, size=args.size, cache_dir=args.cache)
+    base = replace(ROBUSTNESS_EXPERIMENT, size=args.size, cache_dir=args.cache,
+                   progress=args.progress and sys.stderr.isatty())
     with dask_executor(args.dask) as executor:
         result = robustness(base, scenes=scenes, trajectories=args.trajectories, seed=args.seed, sobol=args.sobol,
                             size_check=args.size_check, executor=executor)
