@@ -110,9 +110,9 @@ class Experiment:
         processes on its hardware threads interleaving every
         ``interleave_cycles`` (:meth:`study_hierarchy`,
         :mod:`coherence.shared_schedule`); ``page_placement`` must stay
-        ``contiguous``. A report's miss map and texture section are runs
-        on those levels too; a what-if's texture columns take one hardware
-        thread's view (:meth:`hierarchy_object`). Its process counts are
+        ``contiguous``. A report's miss map and texture section and a
+        what-if's texture columns are runs on those levels too. Its
+        process counts are
         :meth:`~coherence.platforms.Platform.default_processes` when a
         caller takes them from it. Under a platform, the trace logs the
         tracer's per-ray data and frame-buffer writes (:meth:`logs_ray_data`).

@@ -72,7 +72,7 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     if shared is None:
         table = _private_texel_table(trace, placements, hierarchy, mappings, n_processes, cost)
     else:
-        table = shared_texel_table(trace, placements, (shared, machine), mappings, n_processes, cost)
+        table = shared_texel_table(trace, placements, shared, machine, mappings, n_processes, cost)
     layouts = table.assign(texel_hit_rate=1.0 - table["misses"] / table["accesses"])
     layouts = layouts[layouts["layout"].isin(LAYOUTS)][["layout", "mapping", "level", "texel_hit_rate"]]
     share = table[table["layout"] == base].rename(columns={"accesses": "texel_reads", "misses": "texel_misses"})
@@ -105,7 +105,7 @@ def _private_texel_table(trace, placements: dict, hierarchy, mappings, n_process
     return texel[["accesses", "misses"]].join(every.rename(columns={"misses": "misses_all"})).reset_index()
 
 
-def shared_texel_table(trace, placements: dict, on, mappings, n_processes: int, cost) -> pd.DataFrame:
+def shared_texel_table(trace, placements: dict, levels, machine, mappings, n_processes: int, cost) -> pd.DataFrame:
     """Texel accesses and misses and the level's misses per (layout, mapping, level), from one run on shared
     levels per placement and mapping.
 
@@ -114,8 +114,10 @@ def shared_texel_table(trace, placements: dict, on, mappings, n_processes: int, 
     trace : tracer.trace.access.AccessTrace
     placements : dict of str to PlacedLayout
         Labelled placements (one per texel order).
-    on : (coherence.shared_run.SharedLevels, coherence.simulation.Machine)
-        The shared levels and the operating system's machine of every run.
+    levels : coherence.shared_run.SharedLevels
+        The shared levels every run is simulated on, and their interleaving.
+    machine : coherence.simulation.Machine
+        The operating system's machine of every run (``n_cpus`` the levels' hardware threads).
     mappings : sequence of Mapping
     n_processes : int
     cost : CostModel
@@ -132,7 +134,6 @@ def shared_texel_table(trace, placements: dict, on, mappings, n_processes: int, 
     from coherence.shared_run import pixel_pieces, simulate_shared_run
     from tracer.trace.access import COUNTER_NAMES
 
-    levels, machine = on
     names = levels.hierarchy.level_names
     compute = cost.compute_cycles(trace.counters, COUNTER_NAMES)
     rows = []

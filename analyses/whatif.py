@@ -18,8 +18,10 @@ much efficiency was lost to imbalance and to coherence and which was larger
 (``verdict``: ``"balance"`` or ``"coherence"``). On a textured scene each
 row also says, per cache level, how often a texel read missed
 (``texel_<level>_misses_per_access``) and what share of the level's misses
-were texels (``texture_<level>_miss_share``), from each process's pixels on
-a cold hierarchy of its own (:mod:`coherence.kind_misses`).
+were texels (``texture_<level>_miss_share``): on private caches from each
+process's pixels on a cold hierarchy of its own (:mod:`coherence.kind_misses`);
+under a platform from the point's own runs on its shared levels, each level's
+texel counts summed over its instances (:func:`shared_texture_columns`).
 """
 from __future__ import annotations
 
@@ -179,7 +181,12 @@ def load_study_file(path) -> WhatIf:
 
 
 def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
-    """The (hierarchy, layout, cost, machine, n_processes) of one grid point."""
+    """The (hierarchy, layout, cost, machine, n_processes) of one grid point.
+
+    ``hierarchy`` is a :class:`cachesim.Hierarchy`, or under a platform the point's shared levels
+    (:func:`analyses.whatif_platform.shared_levels`, a :class:`coherence.shared_run.SharedLevels`): what the
+    point's runs simulate on, either way.
+    """
     from coherence.cost import get_cost_model
     from coherence.layout import get_layout
     from coherence.page_placement import PagePlacement
@@ -188,12 +195,10 @@ def configure(study: WhatIf, point: dict, base: Hierarchy | None = None):
     experiment = point_experiment(study.experiment, point)
     platform = platform_variant(study, point)
     if platform is not None:  # a grid may not vary the hierarchy under a platform
-        hierarchy = platform.thread_view()
-    elif "hierarchy" in point:
-        hierarchy = get_hierarchy(point["hierarchy"])
+        hierarchy = shared_levels(study, point)
     else:
-        hierarchy = base or study.base_hierarchy()
-    hierarchy = point_levels(hierarchy, point)
+        hierarchy = point_levels(get_hierarchy(point["hierarchy"]) if "hierarchy" in point
+                                 else base or study.base_hierarchy(), point)
     cost = get_cost_model(point.get("cost", study.cost))
     scale = require_number("compute_scale", point.get("compute_scale", 1.0), 0)
     if scale == 0:
@@ -224,12 +229,11 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     from tracer.scenes.catalog import load
     from tracer.trace.access import AccessTrace
 
-    hierarchy, layout, cost, machine, n_processes = configure(study, point)
+    caches, layout, cost, machine, n_processes = configure(study, point)  # under a platform, its shared levels
     trace = AccessTrace.load(Path(trace_folder))
     # The scene gives polygons their true sizes in the layout; SPD scenes at
     # other size factors have none.
     scene = load(study.scene) if "scene_size" not in point else None
-    caches = shared_levels(study, point) or hierarchy  # under a platform, its shared levels
     result = run_study(trace, study.mappings, [n_processes], hierarchy=caches, layout=layout, cost=cost,
                        machine=machine, scene=scene, progress=False, execution=Execution(n_jobs=1))
     runs = result.runs[result.runs["n_processes"] == n_processes]
@@ -240,9 +244,12 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
     timing = list(PLATFORM_TIMES) if study.experiment.platform is not None else []
     table = runs[["mapping", "n_processes", *DECOMPOSITION_COLUMNS, *timing, *level_columns]].copy()
     if trace.metadata.get("textures"):
-        texture = pd.DataFrame([_texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost)
-                                for mapping in table["mapping"]], index=table.index)
-        table = pd.concat([table, texture], axis=1)
+        if result.kinds is None:
+            texture = [_texture_columns(trace, scene, mapping, n_processes, caches, layout, cost)
+                       for mapping in table["mapping"]]
+        else:
+            texture = [shared_texture_columns(result, mapping, n_processes) for mapping in table["mapping"]]
+        table = pd.concat([table, pd.DataFrame(texture, index=table.index)], axis=1)
     for key, value in reversed(list(point.items())):
         table.insert(0, key, value if not isinstance(value, (list, dict)) else str(value))
     table["verdict"] = np.where(table["coherence_loss"] > table["imbalance_loss"], "coherence", "balance")
@@ -250,7 +257,7 @@ def evaluate_point(study: WhatIf, point: dict, trace_folder: str) -> pd.DataFram
 
 
 def _texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost) -> dict:
-    """Texel miss rates and shares per level of one mapping (see the module docstring)."""
+    """Texel miss rates and shares per level of one mapping on private caches (see the module docstring)."""
     from coherence.kind_misses import dedicated_task_owners, misses_by_kind, texture_summary
     from coherence.mappings import get_mapping
     from coherence.studies import place_layout
@@ -259,6 +266,31 @@ def _texture_columns(trace, scene, mapping, n_processes, hierarchy, layout, cost
     distribution = get_mapping(mapping).build(trace.width, trace.height, n_processes)
     owner = dedicated_task_owners(trace, distribution, hierarchy, placed, cost)
     return texture_summary(misses_by_kind(trace, placed, hierarchy, distribution, owner))
+
+
+def shared_texture_columns(result, mapping: str, n_processes: int) -> dict:
+    """Texel miss rates and shares per level of one run of a study on shared levels, from its own counts.
+
+    Parameters
+    ----------
+    result : coherence.studies.StudyResult
+        Of a study on shared levels (``result.kinds`` not None).
+    mapping : str
+    n_processes : int
+
+    Returns
+    -------
+    dict
+        :func:`coherence.kind_misses.texture_summary` of the run's per-kind counts (texel reads and misses
+        summed over each level's instances), a level's misses the processes' own (the run's
+        ``<level>_misses`` summed: background reads left out), as the report's texture section counts them.
+    """
+    from coherence.kind_misses import texture_summary
+
+    kinds, processes = result.kinds, result.processes
+    by_kind = kinds[(kinds["mapping"] == mapping) & (kinds["n_processes"] == n_processes)]
+    own = processes[(processes["mapping"] == mapping) & (processes["n_processes"] == n_processes)]
+    return texture_summary(by_kind, {level: own[f"{level}_misses"].sum() for level in by_kind["level"].unique()})
 
 
 def run_whatif(study: WhatIf, *, n_jobs: int | None = None, **choices) -> pd.DataFrame:

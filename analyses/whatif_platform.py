@@ -18,9 +18,10 @@ levels, interleaved every ``interleave_cycles`` of the base; each row then
 also gives the run's times (:data:`PLATFORM_TIMES`) and, per level, the
 machine's coherence and false-sharing misses, and the prefetches issued,
 useful and useless (:data:`PREFETCH_SUFFIXES`; 0 at points without
-prefetchers). The texture columns take the variant's thread view
-(:meth:`coherence.platforms.Platform.thread_view`: each level cut to one
-thread's share, no prefetchers), not the shared levels.
+prefetchers). On a textured scene the texture columns come from the same
+runs: the texel record kind's reads and misses at each level summed over
+its instances (:func:`analyses.whatif.shared_texture_columns`), a level's
+misses the processes' own, as in the report's texture section.
 """
 from __future__ import annotations
 

@@ -225,16 +225,20 @@ def shared_misses_by_kind(shared) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["level", "kind", "accesses", "misses"])
 
 
-def texture_summary(by_kind: pd.DataFrame) -> dict:
-    """Per level, from :func:`misses_by_kind`: ``texel_<level>_misses_per_access``
-    (misses of texel reads over the texel reads that reached the level) and
-    ``texture_<level>_miss_share`` (texel misses over all the level's misses)."""
+def texture_summary(by_kind: pd.DataFrame, level_misses: dict | None = None) -> dict:
+    """Per level of ``by_kind`` (:func:`misses_by_kind` or :func:`shared_misses_by_kind`):
+    ``texel_<level>_misses_per_access`` (misses of texel reads over the texel reads that reached the level)
+    and ``texture_<level>_miss_share`` (texel misses over all the level's misses).
+
+    ``level_misses`` (level name to a count), when given, are the levels' misses the share divides by (a
+    run on shared levels: the processes' own, leaving out background reads, which its kind 0 holds); by
+    default the sum of ``by_kind``'s misses at the level."""
     out = {}
     for level, rows in by_kind.groupby("level", sort=False):
         texel = rows[rows["kind"] == "texel"]
         texel_accesses = int(texel["accesses"].sum())
         texel_misses = int(texel["misses"].sum())
-        all_misses = int(rows["misses"].sum())
+        all_misses = int(rows["misses"].sum()) if level_misses is None else int(level_misses[level])
         out[f"texel_{level}_misses_per_access"] = texel_misses / texel_accesses if texel_accesses else np.nan
         out[f"texture_{level}_miss_share"] = texel_misses / all_misses if all_misses else np.nan
     return out

@@ -17,8 +17,10 @@ A run under a platform simulates its processes on the hardware threads of
 (:mod:`coherence.shared_schedule`). :meth:`Platform.thread_view` is one
 hardware thread with its own copy of every level, a shared level cut to the
 thread's share of its capacity (its size divided by the threads sharing
-it): what the analyses that take one private hierarchy (a what-if's texture
-columns) see of the platform.
+it): no run simulates on it; it is the private hierarchy
+:meth:`analyses.experiment.Experiment.hierarchy_object` gives under a
+platform, and ``benchmarks/platform_views.py`` compares it with the shared
+levels.
 """
 from __future__ import annotations
 
@@ -39,10 +41,9 @@ MAX_DEFAULT_PROCESSES = 32
 SHARED_LEVELS_NOTE = ("shared levels interleaved: processes run on the hardware threads and every access goes "
                       "through the one state of the machine's caches (write-invalidate coherence on), the thread "
                       "whose clock is lowest running interleave_cycles at a time, the levels' prefetchers, if any, "
-                      "trained by every access; the report's miss map and texture section are such runs too, its "
-                      "miss-ratio curves take no machine (fully associative LRU of one process's stream), and a "
-                      "what-if's texture columns take the thread view instead: one thread's share of every "
-                      "level, private, no coherence, no prefetchers; see docs/platforms.md")
+                      "trained by every access; the report's miss map and texture section and a what-if's texture "
+                      "columns are such runs too, the report's miss-ratio curves take no machine (fully "
+                      "associative LRU of one process's stream); see docs/platforms.md")
 
 #: The prefetchers of a platform variant with prefetching on (:meth:`Platform.variant`), for its first
 #: levels in order: next-line on a miss at L1 (Smith 1982), a stride table at L2 fetching two strides
@@ -108,9 +109,12 @@ class Platform:
 
         A level shared by ``k`` threads keeps its line size, ways and
         latency and gets ``size // k`` bytes, rounded down to whole sets
-        (at least one). The levels' prefetchers are left out: the analyses
-        that take this view (a what-if's texture misses) simulate private
-        caches without them. Named ``<platform>-thread``.
+        (at least one). The levels' prefetchers are left out. Named
+        ``<platform>-thread``. No run under a platform simulates on it (they
+        run on :attr:`hierarchy`); it is what
+        :meth:`analyses.experiment.Experiment.hierarchy_object` returns under
+        a platform, and ``benchmarks/platform_views.py`` measures how far its
+        misses are from the shared levels'.
         """
         machine = self.hierarchy
         levels = []

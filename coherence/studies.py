@@ -45,11 +45,17 @@ class StudyResult:
         ``mapping`` and ``n_processes`` columns.
     parameters : dict
         Hierarchy, layout, cost model and machine, as plain data.
+    kinds : DataFrame or None
+        On shared levels (:class:`coherence.shared_run.SharedLevels`), one row per (mapping, n_processes,
+        level, record kind): ``mapping``, ``n_processes`` and the columns of
+        :func:`coherence.kind_misses.shared_misses_by_kind` (accesses and misses summed over the level's
+        instances, background reads in kind 0); None on private caches, whose runs count no kinds.
     """
 
     runs: pd.DataFrame
     processes: pd.DataFrame
     parameters: dict
+    kinds: pd.DataFrame | None = None
 
 
 def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
@@ -409,12 +415,16 @@ class _StudyPlan:
 
     def result(self, bar=None) -> StudyResult:
         """The study's tables, once its runs are simulated (``bar`` counts them)."""
+        from coherence.kind_misses import shared_misses_by_kind
+
         simulated = {}
         shared_rows = {}
+        shared_kinds = {}
         for index in self.to_simulate:
             run = self.futures[index].result()
             if self.shared is not None:
                 shared_rows[index] = shared_run_row(run.shared)
+                shared_kinds[index] = shared_misses_by_kind(run.shared)
                 run = run.run
             simulated[index] = run
             if bar is not None:
@@ -447,9 +457,14 @@ class _StudyPlan:
                                                             if c not in ("mapping", "n_processes")]]
         parameters = {"hierarchy": hierarchy.to_dict(), "layout": self.layout.name, "cost": cost.to_dict(),
                       "machine": asdict(machine), "mappings": self.names, "n_processes": self.counts}
+        kinds = None
         if self.shared is not None:
             parameters["shared_levels"] = self.shared.to_dict()
-        return StudyResult(runs, processes, parameters)
+            kinds = pd.concat([shared_kinds[self.first_of[key]].assign(mapping=mapping.name, n_processes=n)
+                               for (mapping, _), key, n in zip(self.jobs, self.keys, self.process_counts)],
+                              ignore_index=True)
+            kinds = kinds[["mapping", "n_processes", "level", "kind", "accesses", "misses"]]
+        return StudyResult(runs, processes, parameters, kinds)
 
 
 def _pass_on(target: Future, source: Future) -> None:

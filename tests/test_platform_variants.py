@@ -55,7 +55,7 @@ def test_bad_variants_are_refused_by_name(choice, message):
 
 
 def test_whatif_grid_varies_the_platform_and_the_pixel_size():
-    """A point's cores, smt and l3_size make the platform's variant, whose thread view and hardware threads
+    """A point's cores, smt and l3_size make the platform's variant, whose shared levels and hardware threads
     the point simulates; frame_buffer_bytes sets the layout's pixels. Mutation: ``n_cpus = int(point.get(
     "n_cpus", study.n_cpus))`` in configure (the CPUs stay the platform's 32)."""
     zen4 = get_platform("zen4-7950x")
@@ -65,7 +65,7 @@ def test_whatif_grid_varies_the_platform_and_the_pixel_size():
     point = {"cores": 8, "smt": "off", "l3_size": 16 * _MB, "frame_buffer_bytes": 3}
     hierarchy, layout, cost, machine, n_processes = configure(study, point)
     variant = zen4.variant(cores=8, smt=False, l3_size=16 * _MB)
-    assert hierarchy == variant.thread_view() and machine.n_cpus == 8 and cost == zen4.cost
+    assert hierarchy.machine == variant.hierarchy and machine.n_cpus == 8 and cost == zen4.cost
     assert layout.record("frame_buffer").size == 3 and n_processes == 8
     assert configure(study, {"cores": 4, "smt": "on", "l3_size": 16 * _MB, "frame_buffer_bytes": 16})[3].n_cpus == 8
 

@@ -185,15 +185,16 @@ def test_simulate_under_a_platform(saved, capsys):
 
 
 def test_whatif_under_a_platform_varies_the_platforms_machine():
-    """A what-if study whose base has a platform configures each point from the platform's thread view, cost
-    model and hardware threads; a grid over what the platform sets is refused.
-    Mutation: ``n_cpus = property(lambda self: self.experiment.n_cpus)`` in WhatIf (the CPUs stay 8)."""
+    """A what-if study whose base has a platform configures each point from the platform's shared levels (the
+    point's memory latency applied), cost model and hardware threads; a grid over what the platform sets is
+    refused. Mutation: ``n_cpus = property(lambda self: self.experiment.n_cpus)`` in WhatIf (the CPUs stay 8)."""
     from analyses.whatif import WhatIf, configure
 
     m1 = get_platform("apple-m1")
     study = WhatIf.of("latency", {"memory_latency": [100, 200]}, scene="tetra", size=8, platform="apple-m1")
-    hierarchy, _, cost, machine, n_processes = configure(study, {"memory_latency": 200})
-    assert hierarchy == replace(m1.thread_view(), memory_latency=200)
+    shared, _, cost, machine, n_processes = configure(study, {"memory_latency": 200})
+    assert shared.machine == replace(m1.hierarchy, hierarchy=replace(m1.hierarchy.hierarchy, memory_latency=200))
+    assert shared.interleave_cycles == study.experiment.interleave_cycles
     assert cost == m1.cost and machine.n_cpus == 4 and n_processes == 8
     assert study.hierarchy == "apple-m1" and study.cost == "apple-m1"  # its shared levels run the points
     for key, values in (("n_cpus", [2, 4]), ("cost", ["modern"]), ("hierarchy", ["modern"])):

@@ -1,5 +1,6 @@
 """The report's texture section under a platform: texel reads and misses from runs on its shared levels."""
 import numpy as np
+import pytest
 
 from cachesim import CacheLevel, Hierarchy
 from cachesim.sets import ACCESSES, MISSES
@@ -101,3 +102,48 @@ def test_report_share_table_under_a_platform_is_the_shared_runs_texel_counts(tmp
             assert int(at["texel_reads"]) == reads and int(at["texel_misses"]) == misses
             every = int(run.run.processes[f"{name}_misses"].sum())
             assert np.isclose(float(at["texture_miss_share"]), misses / every, rtol=1e-5)
+
+
+def test_whatif_texture_columns_under_a_platform_are_the_points_shared_runs_counts(tmp_path):
+    """A textured what-if under apple-m1 (balls-textured 8x8, S and DB at 2 processes beside one background
+    process, texel orders linear and morton): per row and level, ``texel_<level>_misses_per_access`` is the
+    texel misses over the texel reads of simulate_shared_run on the platform's shared levels and machine with
+    the point's texel order, summed over the level's instances by hand here, and ``texture_<level>_miss_share``
+    those misses over the processes' own misses (the background's reads, kind 0, left out). Mutations:
+    ``shared_texture_columns(result, mapping, n_processes)`` -> ``_texture_columns(trace, scene, mapping,
+    n_processes, caches.hierarchy, layout, cost)`` in evaluate_point (each process's private copy of the
+    levels); drop the second argument of texture_summary in shared_texture_columns (the background's misses
+    counted in the share); drop ``& (kinds["n_processes"] == n_processes)`` there (the 1-process runs added)."""
+    from analyses.traces import cached_trace
+    from analyses.whatif import WhatIf, run_whatif
+    from coherence.texture_layout import TextureLayout
+
+    study = WhatIf.of("texture", {"texture_layout": ["linear", "morton"]}, scene="balls-textured", size=8,
+                      mappings=("S", "DB"), n_processes=(2,), platform="apple-m1", background=1)
+    table = run_whatif(study, n_jobs=1, cache_dir=tmp_path / "cache", progress=False)
+    assert sorted(zip(table["texture_layout"], table["mapping"])) == [
+        ("linear", "DB"), ("linear", "S"), ("morton", "DB"), ("morton", "S")]
+    experiment = study.experiment
+    scene, trace, _ = cached_trace("balls-textured", 8, cache_dir=tmp_path / "cache", kd=experiment.kd,
+                                   max_depth=experiment.max_depth, progress=False,
+                                   workload=experiment.trace_workload(), tree_variant=experiment.tree_variant)
+    shared = experiment.study_hierarchy()
+    machine = experiment.machine()
+    assert machine.n_cpus == shared.machine.n_threads and machine.background_load == 1
+    names = shared.hierarchy.level_names
+    background_seen = False
+    for row in table.itertuples(index=False):
+        layout = experiment.layout_object().with_texels(TextureLayout.from_label(row.texture_layout))
+        run = simulate_shared_run(trace, get_mapping(row.mapping).build(8, 8, 2), shared.machine,
+                                  place_layout(layout, trace, scene), experiment.cost_model(), machine,
+                                  interleave_cycles=shared.interleave_cycles)
+        counts = run.shared.counts
+        for level, name in enumerate(names):
+            reads = sum(int(counts[level, i, RecordKind.TEXEL, ACCESSES]) for i in range(counts.shape[1]))
+            misses = sum(int(counts[level, i, RecordKind.TEXEL, MISSES]) for i in range(counts.shape[1]))
+            own = int(run.run.processes[f"{name}_misses"].sum())
+            background_seen |= own != int(counts[level, :, :, MISSES].sum())
+            assert reads > 0 and own > 0, (row.mapping, name)
+            assert getattr(row, f"texel_{name}_misses_per_access") == pytest.approx(misses / reads, rel=1e-12)
+            assert getattr(row, f"texture_{name}_miss_share") == pytest.approx(misses / own, rel=1e-12)
+    assert background_seen  # the share's denominator leaves out misses that happened
