@@ -40,8 +40,9 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
         Gives polygons their vertex counts in the layout.
     layout : MemoryLayout
     hierarchy : Hierarchy
-        The levels each process replays its pixels on when ``shared`` is None; the curves take its first
-        level's line size and reach four times its largest level.
+        The levels each process replays its pixels on when ``shared`` is None (with ``shared``, the
+        platform's whole levels); the curves take its first level's line size and reach four times its
+        largest level.
     mappings : sequence of Mapping
     n_processes : int
     cost : CostModel

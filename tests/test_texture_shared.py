@@ -63,7 +63,9 @@ def test_report_share_table_under_a_platform_is_the_shared_runs_texel_counts(tmp
     the processes' own (in a run without background load they equal every kind's misses summed over the
     instances); summary.json says the section is a shared run and keeps no thread view. Mutations: drop
     ``shared=...`` in report._assemble's texture_section call (the thread view's counts);
-    ``processes[f"{level}_misses"]`` -> ``processes[f"{level}_hits"]`` in shared_texel_table."""
+    ``processes[f"{level}_misses"]`` -> ``processes[f"{level}_hits"]`` in shared_texel_table. Its texel
+    miss-ratio curves reach four times the platform's whole largest level, as the report's other curves do
+    (mutation: pass ``hierarchy``, the thread view, to texture_section)."""
     from analyses.experiment import Experiment
     from analyses.report import build_report
     from analyses.traces import cached_trace
@@ -82,6 +84,10 @@ def test_report_share_table_under_a_platform_is_the_shared_runs_texel_counts(tmp
     names = shared.hierarchy.level_names
     rows = report.results[report.results["section"] == "texture"]
     assert set(rows["mapping"]) == {"S", "DB"} and set(rows["n_processes"]) == {2}
+    curve_sizes = report.results.loc[report.results["section"] == "texture_miss_ratio", "item"].astype(int)
+    whole = max(level.size for level in experiment.recorded_hierarchy().levels)
+    assert whole > max(level.size for level in experiment.hierarchy_object().levels)
+    assert curve_sizes.max() <= 4 * whole < 2 * curve_sizes.max()  # sizes double from the line size
 
     def run_of(mapping, machine):
         return simulate_shared_run(trace, get_mapping(mapping).build(8, 8, 2), shared.machine, placed,
