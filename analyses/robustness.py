@@ -82,9 +82,11 @@ HELD_AT = 0.5
 RUN_PATHS = ("simulated", "re_costed", "reused")
 
 #: Bytes a scene's runs may share in line addresses worked out once per placement
-#: (:class:`coherence.studies.Execution` ``shared_lines_budget``): the study replays each placement in every
-#: run of many samples, so it holds them for every study scene at the verdict's size under every memory image
-#: (up to 9 bytes a line access); a larger trace is converted per run, with the same counts.
+#: (:class:`coherence.studies.Execution` ``shared_lines_budget``), as held at the peak of making them
+#: (:func:`coherence.pixel_lines.held_bytes`: 9 a line access kept, 8 a page run): the study replays each
+#: placement in every run of many samples. It does not hold every trace at the verdict's size: the largest
+#: (the malloc1997 memory image on the larger tree variants of balls, shell and room) are converted per run,
+#: with the same counts; ``benchmarks/bench_pixel_lines.py`` prints each trace's bytes against it.
 LINES_BUDGET = 3 << 30
 
 #: What the summary's parameters say of re-costing.

@@ -5,12 +5,13 @@ A schedule replay turns each pixel's records into line addresses
 pixel, a large share of a replay's time. A study replays the same trace dozens of times with one layout and one
 smallest line size, so :func:`pixel_lines` does that work once, and
 :func:`coherence.simulation.simulate_run` reads slices of the result instead.
-It costs 9 bytes per line access (address and write flag) and 16 per pixel
-(offset and write count), so a study asks for it only within
-:data:`SHARED_LINES_BUDGET`; the replay's counts are the same either way. The
-budget counts those bytes only: while certain hits are taken out (below) the
-page runs take up to 8 more bytes per access and 8 per pixel, of which the
-runs actually written stay (one per run of accesses to one page).
+It costs 9 bytes per line access held (address and write flag), 8 per page
+run when certain hits are taken out (below) and a few words per pixel, so a
+study asks for it only within a budget (:data:`SHARED_LINES_BUDGET`, or the
+study's own); the replay's counts are the same either way. The budget counts
+the bytes held at the peak of making the lines (:func:`held_bytes`): with
+certain hits taken out, each pixel's accesses are worked out one pixel at a
+time and only the accesses kept and the page runs are ever held.
 
 Given the hierarchy the runs replay, :func:`pixel_lines` also takes out the
 reads its direct-mapped first level is certain to serve whatever state a
@@ -136,8 +137,11 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     line_size : int
         A power of two: the smallest line size of the hierarchy replayed.
     budget_bytes : int, optional
-        Return None, having allocated nothing large, when the result would
-        take more than this many bytes.
+        Return None when the bytes held at the peak of making the result
+        would be more than this (:func:`held_bytes`). Every access held:
+        found before anything large is allocated. Certain hits taken out:
+        found while they are, which stops as soon as the bytes written
+        exceed the budget, and lets them go.
     hierarchy : cachesim.Hierarchy, optional
         The hierarchy every run of these lines replays: its certain
         first-level read hits are taken out when :func:`skips_certain_hits`.
@@ -152,8 +156,10 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
     pixel_offsets = np.asarray(trace.pixel_offsets, dtype=np.int64)
     line_offsets = np.zeros(pixel_offsets.shape[0], dtype=np.int64)
     _pixel_line_offsets(records, pixel_offsets, placed.placement, line_shift, line_offsets)
+    if hierarchy is not None and skips_certain_hits(hierarchy, line_size):
+        return _taken_out_pixel_lines(records, pixel_offsets, placed, line_offsets, hierarchy, budget_bytes)
     n_lines = int(line_offsets[-1])
-    if budget_bytes is not None and n_lines * BYTES_PER_LINE > budget_bytes:
+    if budget_bytes is not None and held_bytes(n_lines, line_offsets.shape[0] - 1) > budget_bytes:
         return None
     # FILL_AHEAD spare entries: the fill writes that many past each pixel's lines.
     with _small_pages():
@@ -164,10 +170,136 @@ def pixel_lines(trace, placed: PlacedLayout, line_size: int, budget_bytes: int |
                       pixel_writes)
     if placed.pages.frame.shape[0] > 0:
         translate_addresses(addresses, n_lines, placed.pages)
-    lines = PixelLines(line_offsets, addresses[:n_lines], writes[:n_lines], pixel_writes, line_shift)
-    if hierarchy is None or not skips_certain_hits(hierarchy, line_size):
-        return lines
-    return take_out_certain_hits(lines, hierarchy)
+    return PixelLines(line_offsets, addresses[:n_lines], writes[:n_lines], pixel_writes, line_shift)
+
+
+#: Bytes held per page run (:attr:`PixelLines.page_runs`).
+BYTES_PER_RUN = 8
+
+
+def held_bytes(n_lines: int, n_pixels: int, n_runs: int | None = None, longest_pixel: int = 0) -> int:
+    """Bytes :func:`pixel_lines` holds at its peak for ``n_lines`` line accesses of ``n_pixels`` pixels.
+
+    Without ``n_runs`` (every access held): the accesses (:data:`BYTES_PER_LINE` each, with
+    :data:`~coherence.record_lines.FILL_AHEAD` spare), their offsets (8 bytes a pixel, and 8) and each pixel's
+    writes (8 a pixel). With ``n_runs`` (certain hits taken out, ``n_lines`` the accesses kept): those
+    accesses without spare, the page runs (:data:`BYTES_PER_RUN` each) and their offsets, the offsets of every
+    access (8 bytes a pixel, and 8, each) and the one pixel's accesses being worked out, ``longest_pixel`` at
+    most, with spare. Not counted: the hierarchy's sets the take-out follows (16 bytes a set).
+    """
+    if n_runs is None:
+        return BYTES_PER_LINE * (n_lines + FILL_AHEAD) + 8 * (2 * n_pixels + 1)
+    return (BYTES_PER_LINE * n_lines + BYTES_PER_RUN * n_runs + 8 * (4 * n_pixels + 3)
+            + BYTES_PER_LINE * (longest_pixel + FILL_AHEAD))
+
+
+def _taken_out_pixel_lines(records, pixel_offsets, placed, line_offsets, hierarchy, budget_bytes):
+    """:func:`pixel_lines` with the certain hits of ``hierarchy`` taken out, given the offsets of every access
+    (``line_offsets``), in one pass over the records that works out one pixel's line accesses at a time.
+
+    The arrays the accesses kept and the page runs go to are reserved at the count of every access, but
+    only their pages written are ever held, a pixel's after another, and they are shrunk to what was written
+    at the end: the most bytes held are :func:`held_bytes` of the result. With ``budget_bytes``, the pass
+    stops (and None is returned) as soon as the bytes written exceed it.
+    """
+    n_pixels = line_offsets.shape[0] - 1
+    n_lines = int(line_offsets[-1])
+    longest = int(np.max(np.diff(line_offsets))) if n_pixels > 0 else 0
+    scratch = (np.empty(longest + FILL_AHEAD, dtype=np.uint64), np.empty(longest + FILL_AHEAD, dtype=np.bool_))
+    bytes_left = NO_BUDGET if budget_bytes is None else budget_bytes - held_bytes(0, n_pixels, 0, longest)
+    take_out = _TakeOut(hierarchy, hierarchy.levels[0].line_size.bit_length() - 1, n_pixels, bytes_left)
+    out = take_out.reserve(n_lines)
+    kept, runs, fits = _take_out_records(records, pixel_offsets, placed.placement, line_offsets, *scratch,
+                                         take_out.sets, take_out.scalars, take_out.counts, out)
+    if not fits:
+        return None
+    return take_out.lines(out, kept, runs, hierarchy)
+
+
+#: ``bytes_left`` of :class:`TakeOutScalars` without a budget.
+NO_BUDGET = 1 << 62
+
+
+class TakenOut(NamedTuple):
+    """Where :func:`_take_out_pixel` writes what it keeps.
+
+    Attributes
+    ----------
+    addresses : ndarray of uint64, shape (K,)
+        The accesses kept, each counting in its low bits the certain hits taken out after it.
+    writes : ndarray of bool, shape (K,)
+        Their write flags.
+    page_runs : ndarray of uint64, shape (R,)
+        Every access as runs on one page (:attr:`PixelLines.page_runs`).
+    """
+
+    addresses: np.ndarray
+    writes: np.ndarray
+    page_runs: np.ndarray
+
+
+class TakeOutScalars(NamedTuple):
+    """The scalars of a take-out: log2 of the line and page sizes, the low bits that count taken-out hits
+    (``2**line_shift - 1``), the bytes held per access kept and per page run, and the bytes they may take."""
+
+    line_shift: int
+    page_shift: int
+    skip_mask: int
+    line_bytes: int
+    run_bytes: int
+    bytes_left: int
+
+
+class TakeOutCounts(NamedTuple):
+    """Per pixel (int64): ``kept_offsets`` (P + 1,) of the accesses kept, ``page_offsets`` (P + 1,) of the page
+    runs, ``pixel_writes`` (P,) the writes among its accesses."""
+
+    kept_offsets: np.ndarray
+    page_offsets: np.ndarray
+    pixel_writes: np.ndarray
+
+
+class _TakeOut:
+    """The arrays and scalars a take-out of ``hierarchy``'s certain hits from lines of ``2**line_shift`` bytes
+    works on: its sets before any access (:class:`SetRuns`), :class:`TakeOutScalars` and
+    :class:`TakeOutCounts`."""
+
+    def __init__(self, hierarchy, line_shift: int, n_pixels: int, bytes_left: int = NO_BUDGET):
+        from cachesim import CacheState
+
+        geometry = CacheState(hierarchy).geometry
+        page_shift = (hierarchy.tlb.page_size if hierarchy.tlb is not None else DEFAULT_PAGE_SIZE).bit_length() - 1
+        self.scalars = TakeOutScalars(line_shift, page_shift, (1 << line_shift) - 1, BYTES_PER_LINE, BYTES_PER_RUN,
+                                      int(bytes_left))
+        self.counts = TakeOutCounts(np.zeros(n_pixels + 1, dtype=np.int64), np.zeros(n_pixels + 1, dtype=np.int64),
+                                    np.zeros(n_pixels, dtype=np.int64))
+        n_sets = np.asarray(geometry.n_sets, dtype=np.int64)
+        set_base = np.concatenate([[0], np.cumsum(n_sets)[:-1]]).astype(np.int64)  # level l's sets, flat
+        owners = np.full(int(n_sets.sum()), -1, dtype=np.int64)
+        self.sets = SetRuns(np.asarray(geometry.rel_shift, dtype=np.int64),
+                            np.asarray(geometry.set_mask, dtype=np.int64), set_base, owners, np.zeros_like(owners),
+                            np.full(n_sets[0], -1, np.int64))
+
+    @staticmethod
+    def reserve(n_lines: int) -> TakenOut:
+        """Arrays with room for ``n_lines`` accesses kept and as many page runs, none of them written yet (so
+        none of their pages held)."""
+        with _small_pages():
+            return TakenOut(np.empty(n_lines, dtype=np.uint64), np.empty(n_lines, dtype=np.bool_),
+                            np.empty(n_lines, dtype=np.uint64))
+
+    def lines(self, out: TakenOut, kept: int, runs: int, hierarchy, pixel_writes=None) -> PixelLines:
+        """The :class:`PixelLines` of the ``kept`` accesses and ``runs`` page runs written into ``out``, whose
+        arrays are shrunk to them in place (giving the rest back without a copy), with ``pixel_writes``
+        (default: the counts the take-out filled)."""
+        out.addresses.resize(kept, refcheck=False)
+        out.writes.resize(kept, refcheck=False)
+        out.page_runs.resize(runs, refcheck=False)
+        scalars, counts = self.scalars, self.counts
+        pixel_writes = counts.pixel_writes if pixel_writes is None else pixel_writes
+        return PixelLines(counts.kept_offsets, out.addresses, out.writes, pixel_writes, scalars.line_shift,
+                          scalars.skip_mask, counts.page_offsets, out.page_runs, scalars.page_shift,
+                          skip_key(hierarchy))
 
 
 @contextmanager
@@ -208,45 +340,25 @@ _SMALL_PAGES_USERS = [0, True]
 
 def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
     """``lines`` with the certain first-level read hits of ``hierarchy`` taken out, and every pixel's page runs
-    (see the module's docstring).
+    (see the module's docstring), in new arrays.
 
-    ``lines`` (every access held, ``skip_mask`` 0, its arrays owned by nothing else and
-    :data:`~coherence.record_lines.FILL_AHEAD` entries longer than it shows) is overwritten: its
-    ``line_offsets``, ``addresses`` and ``writes`` become the result's, shrunk in place, so neither ``lines``
-    nor any other view of its arrays may be read afterwards (:func:`pixel_lines` calls it on arrays it has
-    just made). ``hierarchy`` must :func:`skips_certain_hits` at ``2**lines.line_shift``-byte lines.
+    ``lines`` must hold every access (``skip_mask`` 0); ``hierarchy`` must :func:`skips_certain_hits` at
+    ``2**lines.line_shift``-byte lines. :func:`pixel_lines` given ``hierarchy`` gives the same result without
+    ever holding every access.
     """
-    from cachesim import CacheState
-
     if lines.skip_mask or not skips_certain_hits(hierarchy, 1 << lines.line_shift):
         raise InputError(f"take_out_certain_hits: lines of {1 << lines.line_shift} bytes with every access held "
                          f"and a hierarchy whose first level is direct-mapped at that line size are needed")
-    line_offsets = lines.line_offsets
-    addresses = lines.addresses.base if lines.addresses.base is not None else lines.addresses
-    writes = lines.writes.base if lines.writes.base is not None else lines.writes
-    line_shift = lines.line_shift
-    geometry = CacheState(hierarchy).geometry
-    page_shift = (hierarchy.tlb.page_size if hierarchy.tlb is not None else DEFAULT_PAGE_SIZE).bit_length() - 1
-    skip_mask = (1 << line_shift) - 1
-    n_sets = np.asarray(geometry.n_sets, dtype=np.int64)
-    set_base = np.concatenate([[0], np.cumsum(n_sets)[:-1]]).astype(np.int64)  # level l's sets in the flat arrays
-    owners = np.full(int(n_sets.sum()), -1, dtype=np.int64)
-    page_offsets = np.zeros(line_offsets.shape[0], dtype=np.int64)
-    with _small_pages():
-        page_runs = np.empty(lines.addresses.shape[0], dtype=np.uint64)  # shrunk to the runs written below
-    sets = SetRuns(np.asarray(geometry.rel_shift, dtype=np.int64), np.asarray(geometry.set_mask, dtype=np.int64),
-                   set_base, owners, np.zeros_like(owners), np.full(n_sets[0], -1, np.int64))
-    n_kept, n_runs = _take_out_certain_hits(line_offsets, addresses, writes, line_shift, skip_mask, sets, page_shift,
-                                            page_offsets, page_runs)
-    page_runs.resize(n_runs, refcheck=False)
-    addresses.resize(n_kept + FILL_AHEAD, refcheck=False)  # gives the rest back without a copy
-    writes.resize(n_kept + FILL_AHEAD, refcheck=False)
-    return PixelLines(line_offsets, addresses[:n_kept], writes[:n_kept], lines.pixel_writes, line_shift, skip_mask,
-                      page_offsets, page_runs, page_shift, skip_key(hierarchy))
+    line_offsets = np.asarray(lines.line_offsets, dtype=np.int64)
+    take_out = _TakeOut(hierarchy, lines.line_shift, line_offsets.shape[0] - 1)
+    out = take_out.reserve(int(line_offsets[-1]))
+    kept, runs = _take_out_lines(line_offsets, lines.addresses, lines.writes, take_out.sets, take_out.scalars,
+                                 take_out.counts, out)
+    return take_out.lines(out, kept, runs, hierarchy, np.array(lines.pixel_writes, dtype=np.int64))
 
 
 class SetRuns(NamedTuple):
-    """The hierarchy's sets and what :func:`_take_out_certain_hits` knows of each, levels one after another
+    """The hierarchy's sets and what :func:`_take_out_pixel` knows of each, levels one after another
     (flat; every array int64).
 
     Attributes
@@ -271,79 +383,121 @@ class SetRuns(NamedTuple):
     last_read: np.ndarray
 
 
-@njit(cache=True, nogil=True, **NO_REFCOUNTS)
-def _take_out_certain_hits(line_offsets, addresses, writes, line_shift, skip_mask, sets, page_shift, page_offsets,
-                           page_runs):
-    """Take the certain first-level read hits out of every pixel's accesses, in place, and write its page runs
-    (see the module's docstring), in one pass.
-
-    A read is certain to hit if the last read of its first-level set (``sets.last_read``), made in this
-    pixel, was of its line and, at every level, the run of the line in its set began no later than that read
-    (:class:`SetRuns`). ``line_offsets`` becomes the kept accesses' offsets, ``page_offsets`` (P + 1,) the
-    runs'; ``page_runs`` receives the runs, each at most ``2**page_shift`` accesses long.
+@njit(cache=True, nogil=True)
+def _take_out_records(records, pixel_offsets, placement, line_offsets, scratch, scratch_writes, sets, scalars,
+                      counts, out):
+    """Work out each pixel's line accesses from its records into ``scratch`` (and ``scratch_writes``), then
+    take its certain hits out into ``out`` (:func:`_take_out_pixel`); fills ``counts``. Stops after the first
+    pixel that takes the bytes written past ``scalars.bytes_left``.
 
     Returns
     -------
     kept, runs : int
         Accesses kept and page runs written.
+    fits : bool
+        False when stopped.
+    """
+    kept = 0
+    runs = 0
+    paged = placement.pages.frame.shape[0] > 0
+    for pixel in range(pixel_offsets.shape[0] - 1):
+        count, counts.pixel_writes[pixel] = _fill_lines(records, pixel_offsets[pixel], pixel_offsets[pixel + 1],
+                                                        placement, scalars.line_shift, scratch, scratch_writes)
+        if paged:
+            translate_addresses(scratch, count, placement.pages)
+        kept, runs = _take_out_pixel(scratch, scratch_writes, count, line_offsets[pixel], sets, scalars, out, kept,
+                                     runs)
+        counts.kept_offsets[pixel + 1] = kept
+        counts.page_offsets[pixel + 1] = runs
+        if scalars.line_bytes * kept + scalars.run_bytes * runs > scalars.bytes_left:
+            return kept, runs, False
+    return kept, runs, True
+
+
+@njit(cache=True, nogil=True)
+def _take_out_lines(line_offsets, addresses, writes, sets, scalars, counts, out):
+    """:func:`_take_out_records` (without a budget) from every pixel's line accesses already worked out
+    (``addresses`` and ``writes`` at ``line_offsets``); ``counts.pixel_writes`` is left as it is."""
+    kept = 0
+    runs = 0
+    for pixel in range(line_offsets.shape[0] - 1):
+        start, stop = line_offsets[pixel], line_offsets[pixel + 1]
+        kept, runs = _take_out_pixel(addresses[start:stop], writes[start:stop], stop - start, start, sets, scalars,
+                                     out, kept, runs)
+        counts.kept_offsets[pixel + 1] = kept
+        counts.page_offsets[pixel + 1] = runs
+    return kept, runs
+
+
+@njit(cache=True, nogil=True, **NO_REFCOUNTS)
+def _take_out_pixel(addresses, writes, count, first, sets, scalars, out, kept, runs):
+    """Take the certain first-level read hits out of one pixel's ``count`` line accesses (``addresses``,
+    ``writes``), which are accesses ``first`` onwards of the whole stream, and make its page runs (see the
+    module's docstring).
+
+    A read is certain to hit if the last read of its first-level set (``sets.last_read``), made in this
+    pixel, was of its line and, at every level, the run of the line in its set began no later than that read
+    (:class:`SetRuns`). The accesses kept go to ``out.addresses[kept:]`` and ``out.writes[kept:]``, the runs,
+    each at most ``2**scalars.page_shift`` accesses long, to ``out.page_runs[runs:]``.
+
+    Returns
+    -------
+    kept, runs : int
+        Accesses kept and page runs written, in all, after this pixel's.
     """
     rel_shift = sets.rel_shift
     set_mask = sets.set_mask
     set_base = sets.set_base
     n_levels = rel_shift.shape[0]
-    shift = np.uint64(line_shift)
-    pages = np.uint64(page_shift)
-    longest = np.uint64((1 << page_shift) - 1)  # repeats a run's low bits hold
-    count_full = np.uint64(skip_mask)
+    shift = np.uint64(scalars.line_shift)
+    pages = np.uint64(scalars.page_shift)
+    longest = (1 << scalars.page_shift) - 1  # repeats a run's low bits hold
+    count_full = scalars.skip_mask  # taken-out hits an access's low bits hold
     owner = sets.owner
     since = sets.since
     last_read = sets.last_read
     mask0 = np.uint64(set_mask[0])
-    kept = 0
-    runs = 0
-    start = line_offsets[0]
-    for pixel in range(line_offsets.shape[0] - 1):
-        stop = line_offsets[pixel + 1]
-        carrier = np.uint64(0)  # the kept access the taken-out ones after it count on
-        run_page = np.uint64(1)  # never a page's address: the pixel's first access starts a run
-        run_at = np.uint64(0)
-        for i in range(start, stop):
-            at = np.uint64(i)
-            address = addresses[at]
-            write = writes[at]
-            page = (address >> pages) << pages
-            if page == run_page and page_runs[run_at] - page < longest:
-                page_runs[run_at] += np.uint64(1)
-            else:
-                run_at = np.uint64(runs)
-                page_runs[run_at] = page
-                run_page = page
-                runs += 1
-            line = np.int64(address >> shift)
-            first_set = np.uint64(line) & mask0
-            read_at = last_read[first_set]
-            certain = not write and i > start and read_at >= start and (addresses[carrier] & count_full) < count_full
-            for level in range(n_levels):
-                level_line = line >> rel_shift[level]
-                s = np.uint64(set_base[level] + (level_line & set_mask[level]))
-                if owner[s] != level_line:
-                    certain = False
-                    owner[s] = level_line
-                    since[s] = i
-                elif since[s] > read_at:
-                    certain = False
-            if not write:
-                last_read[first_set] = i
-            if certain:
-                addresses[carrier] += np.uint64(1)
-            else:
-                carrier = np.uint64(kept)
-                addresses[carrier] = address
-                writes[carrier] = write
-                kept += 1
-        line_offsets[pixel + 1] = kept
-        page_offsets[pixel + 1] = runs
-        start = stop
+    carrier = np.uint64(0)  # the kept access the taken-out ones after it count on
+    carried = 0
+    run_page = np.uint64(1)  # never a page's address: the pixel's first access starts a run
+    repeats = 0
+    for j in range(count):
+        i = first + j
+        address = addresses[np.uint64(j)]
+        write = writes[np.uint64(j)]
+        page = (address >> pages) << pages
+        if page == run_page and repeats < longest:
+            repeats += 1
+            out.page_runs[np.uint64(runs - 1)] += np.uint64(1)
+        else:
+            out.page_runs[np.uint64(runs)] = page
+            run_page = page
+            repeats = 0
+            runs += 1
+        line = np.int64(address >> shift)
+        first_set = np.uint64(line) & mask0
+        read_at = last_read[first_set]
+        certain = not write and j > 0 and read_at >= first and carried < count_full
+        for level in range(n_levels):
+            level_line = line >> rel_shift[level]
+            s = np.uint64(set_base[level] + (level_line & set_mask[level]))
+            if owner[s] != level_line:
+                certain = False
+                owner[s] = level_line
+                since[s] = i
+            elif since[s] > read_at:
+                certain = False
+        if not write:
+            last_read[first_set] = i
+        if certain:
+            carried += 1
+            out.addresses[carrier] += np.uint64(1)
+        else:
+            carrier = np.uint64(kept)
+            carried = 0
+            out.addresses[carrier] = address
+            out.writes[carrier] = write
+            kept += 1
     return kept, runs
 
 

@@ -10,7 +10,8 @@ from cachesim import CacheLevel, CacheState, Hierarchy, Tlb, alpha21164, alpha21
 from cachesim import kernels as K
 from cachesim.by_access import _simulate_by_access
 from cachesim.tlb import TlbGeometry, empty_tlb, tlb_lookup, NLU, TLB_FIFO, TLB_LRU
-from coherence.pixel_lines import PixelLines, skips_certain_hits, take_out_certain_hits
+from coherence.pixel_lines import PixelLines, held_bytes, pixel_lines, skips_certain_hits, take_out_certain_hits
+from coherence.record_lines import FILL_AHEAD
 from rtcommon.validate import InputError
 
 from reference_tlb import ReferenceTlb
@@ -189,3 +190,57 @@ def test_which_hierarchies_take_hits_out_and_lines_of_another_are_refused():
         simulate_run(trace, Strip().build(8, 6, 2), fifo, placed, COST, lines=lines)
     with pytest.raises(InputError, match="take_out_certain_hits"):
         take_out_certain_hits(lines, other)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_lines_taken_out_from_the_records_equal_those_of_every_access_held(seed):
+    """pixel_lines given a hierarchy works out one pixel's accesses at a time from the records and never holds
+    every access; on random traces, hierarchies (a TLB of 512 B or 8 KB pages) and page placements its lines
+    equal take_out_certain_hits of every access held (checked against the whole walk above). Fails when the
+    records' pass leaves its addresses virtual (``translate_addresses`` in _take_out_records dropped: checked)."""
+    from dataclasses import replace
+
+    from coherence.page_placement import PagePlacement
+    from test_scheduler import placed_for
+    from trace_factory import random_trace
+
+    rng = np.random.default_rng(200 + seed)
+    hierarchy = replace(random_hierarchy(rng), tlb=Tlb(entries=4, page_size=int(rng.choice([512, 8192])),
+                                                       miss_cycles=1.0))
+    line_size = hierarchy.levels[0].line_size
+    trace = random_trace(width=12, height=9, seed=seed)
+    placed = placed_for().with_pages(PagePlacement(str(rng.choice(["random", "bin-hopping"])), 8192, seed),
+                                     alpha21164())
+    every = pixel_lines(trace, placed, line_size)
+    expected = take_out_certain_hits(every, hierarchy)
+    taken = pixel_lines(trace, placed, line_size, hierarchy=hierarchy)
+    assert taken.addresses.size < every.addresses.size and taken.skips_for == expected.skips_for
+    for name, a, b in zip(PixelLines._fields, taken, expected):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_the_budget_counts_the_bytes_held_at_the_peak():
+    """held_bytes of lines taken out is the bytes of the result's arrays, the offsets of every access and the
+    one pixel's accesses being worked out; pixel_lines returns the lines within that budget and None one byte
+    below it; the room reserved for every access is given back (the arrays own exactly what they show).
+    Fails when the records' pass ignores its budget (its ``bytes_left`` check dropped: checked) or when the
+    result's arrays are views of the reserved ones (``resize`` replaced by slicing: checked)."""
+    from test_scheduler import placed_for
+    from trace_factory import random_trace
+
+    trace, placed, hierarchy = random_trace(width=12, height=9, seed=3), placed_for(), alpha21164_with_dtb()
+    every = pixel_lines(trace, placed, 32)
+    lines = pixel_lines(trace, placed, 32, hierarchy=hierarchy)
+    longest = int(np.diff(every.line_offsets).max())
+    held = held_bytes(lines.addresses.size, lines.pixel_writes.size, lines.page_runs.size, longest)
+    arrays = sum(array.nbytes for array in (lines.line_offsets, lines.addresses, lines.writes, lines.pixel_writes,
+                                            lines.page_offsets, lines.page_runs))
+    assert held == arrays + every.line_offsets.nbytes + (longest + FILL_AHEAD) * (8 + 1)
+    for array in (lines.addresses, lines.writes, lines.page_runs):
+        assert array.base is None and array.flags.owndata
+    within = pixel_lines(trace, placed, 32, budget_bytes=held, hierarchy=hierarchy)
+    for name, a, b in zip(PixelLines._fields, within, lines):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert pixel_lines(trace, placed, 32, budget_bytes=held - 1, hierarchy=hierarchy) is None
+    assert held_bytes(every.addresses.size, every.pixel_writes.size) == (
+        every.line_offsets.nbytes + every.pixel_writes.nbytes + (every.addresses.size + FILL_AHEAD) * (8 + 1))
