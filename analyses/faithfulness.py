@@ -10,8 +10,9 @@ typed in. Per scene: the 5th, 50th and 95th percentiles of the one-process
 B - S and DB - S time differences (in % of S's time), of the verdict's
 margin and of every mapping's coherence and imbalance losses, the verdict's
 probability, the three unknowns of largest Morris
-``mu*`` with their indices and flip regions, and the size check (the
-one-process differences at half and twice the size) when the study ran it.
+``mu*`` with their indices and flip regions, the size check (the
+one-process differences at half and twice the size) when the study ran it,
+and the Sobol indices when it ran Sobol's design.
 Overall: which mechanism
 (:data:`MECHANISMS`) matters most, by the rule of :func:`mechanism_shares`.
 It names the command, seed and commit the summary records, states the image
@@ -174,6 +175,22 @@ def _size_check_lines(check: dict) -> list[str]:
     return lines + [""]
 
 
+def _sobol_lines(sobol: dict, held_at) -> list[str]:
+    """One scene's Sobol indices of the verdict's margin as a table, in the order the study chose the unknowns."""
+    held = "" if held_at is None else f" at unit coordinate {_number(held_at)} of their ranges"
+    lines = [f"Sobol indices of the verdict's margin over the {len(sobol['factors'])} unknowns of largest mu* "
+             f"(Saltelli's design, N = {sobol['base_samples']}, {sobol['n_evaluations']} evaluations; every other "
+             f"unknown held{held}). These are estimates: the first-order one can come out below 0 for an unknown "
+             "whose first-order effect is nil.",
+             "",
+             "| unknown | mechanism | first order S1 | total ST |",
+             "|---|---|---:|---:|"]
+    for factor in sobol["factors"]:
+        lines.append(f"| {factor} | {mechanism_of(factor)} | {_number(sobol['S1'][factor])} | "
+                     f"{_number(sobol['ST'][factor])} |")
+    return lines + [""]
+
+
 def _study_paragraph(n_processes: int) -> list[str]:
     from tracer.scenes.study import StudyScene
 
@@ -283,6 +300,8 @@ def faithfulness_markdown(summary: dict) -> str:
             lines.append(f"| {rank} | {factor} | {mechanism_of(factor)} | {_number(s['mu_star'][factor])} | "
                          f"{_flip_text(s['flip'][factor], units.get(factor, ''))} |")
         lines.append("")
+        if s.get("sobol"):
+            lines += _sobol_lines(s["sobol"], p.get("sobol_held_at"))
     lines += _study_paragraph(p["verdict_n_processes"])
     return "\n".join(lines)
 

@@ -106,6 +106,30 @@ def test_every_figure_of_the_section_is_the_summarys(summary):
     assert re.search(r"Overall: \*\*(.+?)\*\*", text).group(1) == best
 
 
+def test_the_sobol_table_is_the_summarys_indices(tmp_path_factory):
+    """A real 16x16 tetra study with Sobol's design (N = 2): the scene's Sobol table lists the unknowns Sobol
+    varied, in the study's order, each with its mechanism, S1 and ST read back equal to the JSON's, and the
+    design's N and evaluations; the Morris-only study's page has no such table. Fails if _sobol_lines swaps
+    S1 and ST (they differ here) or the call to it is dropped."""
+    base = replace(ROBUSTNESS_EXPERIMENT, size=16, cache_dir=str(tmp_path_factory.mktemp("cache")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # DB has fewer blocks than processes at 16x16
+        result = robustness(base, scenes=["tetra"], trajectories=2, seed=5, sobol=2, size_check=False)
+    summary = json.loads(json.dumps(robustness_summary(result)))
+    sobol = summary["scenes"]["tetra"]["sobol"]
+    lines = faithfulness_markdown(summary).splitlines()
+    assert any(sobol["S1"][f] != pytest.approx(sobol["ST"][f]) for f in sobol["factors"])
+    rows = _table(lines, "| unknown | mechanism | first order S1 |")
+    assert [row[0] for row in rows] == sobol["factors"]
+    for factor, mechanism, first, total in rows:
+        assert factor in MECHANISMS[mechanism] and _close(first, sobol["S1"][factor]) \
+            and _close(total, sobol["ST"][factor])
+    intro = next(line for line in lines if line.startswith("Sobol indices of the verdict's margin"))
+    assert f"N = {sobol['base_samples']}, {sobol['n_evaluations']} evaluations" in intro
+    without = dict(summary, scenes={"tetra": {k: v for k, v in summary["scenes"]["tetra"].items() if k != "sobol"}})
+    assert not any(line.startswith("| unknown | mechanism |") for line in faithfulness_markdown(without).splitlines())
+
+
 def test_the_page_states_the_run_against_the_budgeted_study(summary):
     """robustness.json records the budget (10 trajectories, 17 samples each over the 16 unknowns, Sobol N = 64,
     all five study scenes) and each scene's budgeted evaluations; the page of the 2-trajectory tetra study

@@ -43,6 +43,10 @@ JOBS = {
     "whatif-texture": ["whatif", "texture"],
     "robustness": ["robustness", "--size", "{robustness_size}", "--trajectories", "{trajectories}",
                    "--faithfulness-md", "{out}/faithfulness.md"],
+    # Sobol's design on the two scenes whose samples cost least (docs/results/faithfulness-sobol.md)
+    "robustness-sobol": ["robustness", "--size", "{robustness_size}", "--scenes", "tetra", "fluid",
+                         "--trajectories", "{trajectories}", "--sobol", "64",
+                         "--faithfulness-md", "{out}/faithfulness-sobol.md"],
     "today-report": ["report", "balls", "--platform", "zen4-7950x", "--size", "{today_size}",
                      "--processes", "8", "16", "32"],
     "today-sharing": ["python", "docs/results/today_sharing.py", "--size", "{today_size}", "--platform",

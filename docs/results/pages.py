@@ -310,10 +310,11 @@ def write_pages(work: Path, pages: Path) -> list[str]:
     report = _job(work, "report-balls", "summary.json")
     written = [paper_page(paper, pages) if paper else None, report_page(report, pages) if report else None,
                whatif_page(work, pages), today_page(work, pages)]
-    # faithfulness.md is written by analyses.faithfulness from faithfulness.json beside it
-    # (its command and commit head the page); it is listed, not rewritten
-    if (pages / "faithfulness.md").exists():
-        written.append("faithfulness")
+    # faithfulness.md and faithfulness-sobol.md are written by analyses.faithfulness from the .json beside each
+    # (its command and commit head each page); they are listed, not rewritten
+    for name in ("faithfulness", "faithfulness-sobol"):
+        if (pages / f"{name}.md").exists():
+            written.append(name)
     from ray_orders_page import write_ray_orders_page  # noqa: PLC0415 (beside this script)
     # written from ray-orders.json beside it, which the ray-order jobs found in work update first
     written.append(write_ray_orders_page(work, pages))
