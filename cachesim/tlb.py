@@ -9,9 +9,15 @@ State of one TLB of ``E`` entries (:class:`TlbArrays`):
 
 - ``pages`` int64 (E,): the page number held by each entry, or -1;
 - ``stamps`` int64 (E,): the TLB clock of each entry's last use (LRU only);
-- ``cursor`` int64 (3,): :data:`NEXT_FILL` (the entry the round-robin fill
-  pointer designates), :data:`LAST_USED` (the entry of the last lookup, -1
-  before any) and :data:`CLOCK` (lookups so far);
+- ``cursor`` int64 (N_CURSOR + HINTS,): :data:`NEXT_FILL` (the entry the
+  round-robin fill pointer designates), :data:`LAST_USED` (the entry of the
+  last lookup, -1 before any) and :data:`CLOCK` (lookups so far), then
+  :data:`HINTS` guesses: for each value of a page number's low bits, the
+  entry that last held such a page. A lookup checks its guess before it
+  scans the entries; a page is held by one entry at most, so a guess that
+  holds the page is the entry, and a wrong guess costs only the scan. The
+  guesses change no count and no entry (a cursor of N_CURSOR columns, with
+  none, gives the same results);
 - ``counts`` int64 (3,): :data:`TLB_ACCESSES`, :data:`TLB_HITS`,
   :data:`TLB_MISSES`.
 
@@ -39,6 +45,8 @@ NLU, TLB_LRU, TLB_FIFO = 0, 1, 2
 # Columns of TlbArrays.cursor.
 NEXT_FILL, LAST_USED, CLOCK = 0, 1, 2
 N_CURSOR = 3
+#: Entry guesses after the cursor's columns (:func:`tlb_lookup`), one per value of a page number's low bits.
+HINTS = 256
 # Columns of TlbArrays.counts.
 TLB_ACCESSES, TLB_HITS, TLB_MISSES = 0, 1, 2
 N_TLB_COUNTERS = 3
@@ -71,9 +79,10 @@ class TlbArrays(NamedTuple):
         Page number held by each entry, or -1.
     stamps : ndarray of int64, shape (E,)
         TLB clock of each entry's last use (read by LRU only).
-    cursor : ndarray of int64, shape (N_CURSOR,)
+    cursor : ndarray of int64, shape (N_CURSOR + HINTS,) or (N_CURSOR,)
         Fill pointer, last-used entry and clock (columns :data:`NEXT_FILL`,
-        :data:`LAST_USED`, :data:`CLOCK`).
+        :data:`LAST_USED`, :data:`CLOCK`), then the entry guesses (see the
+        module's docstring; without them, the same results).
     counts : ndarray of int64, shape (N_TLB_COUNTERS,)
         Cumulative lookups, hits and misses.
     """
@@ -86,21 +95,21 @@ class TlbArrays(NamedTuple):
 
 def empty_tlb(entries: int) -> TlbArrays:
     """A TLB of ``entries`` entries with nothing in it and zero counters."""
-    cursor = np.zeros(N_CURSOR, dtype=np.int64)
+    cursor = np.zeros(N_CURSOR + HINTS, dtype=np.int64)
     cursor[LAST_USED] = -1
     return TlbArrays(np.full(entries, -1, dtype=np.int64), np.zeros(entries, dtype=np.int64), cursor,
                      np.zeros(N_TLB_COUNTERS, dtype=np.int64))
 
 
 def empty_tlbs(n_tlbs: int, entries: int) -> TlbArrays:
-    """``n_tlbs`` empty TLBs stacked (shapes (S, E), (S, N_CURSOR), (S, N_TLB_COUNTERS)).
+    """``n_tlbs`` empty TLBs stacked (shapes (S, E), (S, N_CURSOR + HINTS), (S, N_TLB_COUNTERS)).
 
     TLB ``s`` is ``TlbArrays(pages[s], stamps[s], cursor[s], counts[s])``; a
     caller whose TLBs stay with CPUs but whose counters follow processes
     builds the bundle from ``cursor[cpu]`` and another (P, N_TLB_COUNTERS)
     array's row, as for the caches.
     """
-    cursor = np.zeros((n_tlbs, N_CURSOR), dtype=np.int64)
+    cursor = np.zeros((n_tlbs, N_CURSOR + HINTS), dtype=np.int64)
     cursor[:, LAST_USED] = -1
     return TlbArrays(np.full((n_tlbs, entries), -1, dtype=np.int64), np.zeros((n_tlbs, entries), dtype=np.int64),
                      cursor, np.zeros((n_tlbs, N_TLB_COUNTERS), dtype=np.int64))
@@ -147,6 +156,7 @@ def tlb_lookup(addresses, geometry, tlb, skip_mask=0):
     before = np.int64(0)
     before_page = np.int64(-1)
     misses = np.int64(0)
+    hinted = cursor.shape[0] >= N_CURSOR + HINTS  # the entry guesses follow the cursor's columns
     for i in range(addresses.shape[0]):
         address = addresses[i]
         page = np.int64(address >> shift)
@@ -161,10 +171,15 @@ def tlb_lookup(addresses, geometry, tlb, skip_mask=0):
             before, last = last, before
             before_page, last_page = last_page, page
             continue
-        # One pass without early exit over the entries: the host vectorises it.
-        found = -1
-        for entry in range(entries):
-            found = entry if pages[entry] == page else found
+        hint = np.uint64(N_CURSOR) + (np.uint64(page) & np.uint64(HINTS - 1))
+        found = np.int64(0)
+        if hinted:
+            found = cursor[hint]
+        if pages[found] != page:  # the guess (or entry 0) does not hold the page
+            # One pass without early exit over the entries: the host vectorises it.
+            found = -1
+            for entry in range(entries):
+                found = entry if pages[entry] == page else found
         if found < 0:
             misses += 1
             if policy == TLB_LRU:
@@ -181,6 +196,8 @@ def tlb_lookup(addresses, geometry, tlb, skip_mask=0):
                     found = (found + 1) % entries
                 next_fill = (found + 1) % entries
             pages[found] = page
+        if hinted:
+            cursor[hint] = found
         stamps[found] = clock
         before = last if last >= 0 else np.int64(0)
         before_page = last_page

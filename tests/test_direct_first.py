@@ -9,16 +9,18 @@ from cachesim.by_access import _simulate_by_access
 from cachesim.direct_first import _simulate_direct_first, serves_direct_first
 
 
-def random_hierarchy(rng, third_ways=None):
+def random_hierarchy(rng, third_ways=None, second_ways=None):
     """A hierarchy the direct path serves: a direct-mapped L1, an LRU L2 of 1-4
     ways, and 0-2 levels below of any policy, with random write allocation.
-    With ``third_ways``: 1-2 levels below, the first of ``third_ways`` ways."""
+    With ``third_ways``: 1-2 levels below, the first of ``third_ways`` ways.
+    With ``second_ways``: an L2 of that many ways (the same draws)."""
     while True:
         line = 1 << int(rng.integers(4, 7))
         levels = [CacheLevel("L1", line * (1 << int(rng.integers(1, 5))), line, 1, str(rng.choice(["lru", "fifo"])),
                              write_allocate=bool(rng.integers(2)))]
         line2 = line << int(rng.integers(0, 2))
         ways2 = int(rng.integers(1, 5))
+        ways2 = ways2 if second_ways is None else second_ways
         levels.append(CacheLevel("L2", line2 * ways2 * (1 << int(rng.integers(1, 5))), line2, ways2, "lru",
                                  write_allocate=bool(rng.integers(2))))
         for depth in range(int(rng.integers(0, 3) if third_ways is None else rng.integers(1, 3))):
@@ -93,6 +95,37 @@ def test_direct_mapped_third_level_equals_the_general_walk(seed):
     rng = np.random.default_rng(1000 + seed)
     hierarchy = random_hierarchy(rng, third_ways=1 if seed % 5 else int(rng.integers(2, 4)))
     assert_direct_first_equals_the_walk(rng, hierarchy, (500, 4000), bool(seed % 3), bool(seed % 2), 4)
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_three_way_second_level_equals_the_general_walk(seed):
+    """A 3-way L2 (the 21164's S-cache), whose ways the kernel probes in a loop of fixed length, with a
+    direct-mapped third level or any levels below, against the general walk state for state. Fails when
+    the fixed-length probe looks at two ways (``_ways_holding(tags, base, 2, line)`` in ``_find_way``:
+    checked)."""
+    rng = np.random.default_rng(2000 + seed)
+    hierarchy = random_hierarchy(rng, third_ways=1 if seed % 2 else None, second_ways=3)
+    assert_direct_first_equals_the_walk(rng, hierarchy, (500, 4000), bool(seed % 3), bool(seed % 4), 4)
+
+
+def test_three_way_second_level_by_hand():
+    """The 21164 (8 KB direct-mapped L1, 96 KB 3-way LRU L2 of 512 sets, 4 MB direct-mapped L3, 64 B
+    lines below the L1's 32 B), lines 32 KB apart: one L1 set, one L2 set, distinct L3 sets.
+    Fails with the fixed-length probe looking at two ways (the last read's L2 hit is then a miss: checked).
+    """
+    a, b, c, d = (k * 32768 for k in range(4))
+    # a b c: miss everywhere, L2 ways 0-2 = a b c
+    # a:     L1 holds c: miss; L2 hit (way 0)
+    # d:     misses L2 and L3; L2 evicts b, the least recently used: ways = a d c
+    # b:     L2 miss, L3 hit; L2 evicts c (a and d were used since): ways = a d b
+    # a:     L2 hit (way 0)
+    # b:     L2 hit (way 2)
+    stream = np.array([a, b, c, a, d, b, a, b], dtype=np.uint64)
+    result = simulate(stream, alpha21164(), return_levels=True)
+    assert result.served_by.tolist() == [3, 3, 3, 1, 3, 2, 1, 1]
+    hits = result.counts[:, K.HITS].tolist()
+    misses = result.counts[:, K.MISSES].tolist()
+    assert (hits, misses) == ([0, 3, 1], [8, 5, 4])
 
 
 def test_simulate_uses_the_direct_path_with_the_same_results_on_the_alpha_presets():

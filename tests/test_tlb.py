@@ -193,3 +193,53 @@ def test_stacked_tlbs_behave_as_separate_ones():
         for address in stream:
             reference.lookup(address)
         assert stacked.counts[index].tolist() == [300, reference.hits, reference.misses]
+
+
+# --- entry guesses -------------------------------------------------------------
+
+def test_entry_guesses_by_hand():
+    """Four entries, NLU; pages A = 0 and B = 256 share a guess (their low bits), C = 1 has its own.
+    A B C miss (entries 0-2, guesses A -> 0, B -> 1 over it, C -> 2); A: neither of the last two pages,
+    its guess is B's entry, which does not hold it: the scan finds entry 0 (a hit; guess -> 0); B: the guess
+    (0) is A's, the scan finds entry 1 (guess -> 1); C: the guess holds it. Fails when a guess is taken
+    without the check that its entry holds the page (``if pages[found] != page`` made ``if False``: checked).
+    """
+    from cachesim.tlb import HINTS, N_CURSOR, NLU, TlbGeometry, empty_tlb
+
+    a, b, c = 0, HINTS, 1
+    tlb = empty_tlb(4)
+    misses = tlb_lookup(np.array([a, b, c, a, b, c], dtype=np.uint64) * PAGE, TlbGeometry(13, 4, NLU), tlb)
+    assert misses == 3 and tlb.counts.tolist() == [6, 3, 3]
+    assert tlb.pages.tolist() == [a, b, c, -1]
+    assert tlb.cursor[N_CURSOR:N_CURSOR + 2].tolist() == [1, 2]
+
+
+@pytest.mark.parametrize("policy", ["nlu", "lru", "fifo"])
+@pytest.mark.parametrize("entries", [1, 3, 8, 64])
+def test_entry_guesses_change_nothing(policy, entries):
+    """A TLB with entry guesses (:func:`cachesim.tlb.empty_tlb`) against the reference and against the same
+    TLB whose cursor has no guesses, on seeded random streams whose pages crowd a few guesses (pages that
+    share their low bits), in pieces: equal counts, entries, stamps and cursor columns. Fails when a guess
+    is taken without the check that its entry holds the page (checked)."""
+    from cachesim.tlb import HINTS, N_CURSOR, TlbArrays, empty_tlb
+
+    state = CacheState(with_tlb(entries, policy))
+    rng = np.random.default_rng(entries * 7 + len(policy))
+    n = 4000
+    crowded = rng.integers(0, 3 * entries + 2, n) * HINTS + rng.integers(0, 3, n)
+    pair = np.where(np.arange(n) % 2 == 0, crowded[0], crowded[1])
+    streams = [crowded, np.where(rng.random(n) < 0.8, pair, crowded), rng.integers(0, 4 * entries, n)]
+    for pages in streams:
+        stream = (pages * PAGE + rng.integers(0, PAGE, n)).astype(np.uint64)
+        reference = ReferenceTlb(entries, PAGE, policy)
+        for address in stream:
+            reference.lookup(address)
+        guessing = empty_tlb(entries)
+        plain = TlbArrays(guessing.pages.copy(), guessing.stamps.copy(), guessing.cursor[:N_CURSOR].copy(),
+                          guessing.counts.copy())
+        for piece in np.array_split(stream, [1, 7, 1500]):
+            assert tlb_lookup(piece, state.tlb_geometry, guessing) == tlb_lookup(piece, state.tlb_geometry, plain)
+        assert guessing.counts.tolist() == plain.counts.tolist() == [n, reference.hits, reference.misses]
+        np.testing.assert_array_equal(guessing.pages, plain.pages)
+        np.testing.assert_array_equal(guessing.stamps, plain.stamps)
+        np.testing.assert_array_equal(guessing.cursor[:N_CURSOR], plain.cursor)
