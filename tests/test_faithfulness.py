@@ -228,12 +228,14 @@ def test_regenerates_from_a_stored_summary_and_refuses_bad_input(summary, tmp_pa
         assert not target.exists()
 
 
-def test_the_docs_page_is_generated_from_its_json():
-    """docs/results/faithfulness.md is exactly the section generated from the study's summary stored beside it,
-    docs/results/faithfulness.json (robustness.json of the run the page names). Fails if a figure of the page
-    is edited by hand (for example one digit of a percentile)."""
+@pytest.mark.parametrize("page", ["faithfulness", "faithfulness-sobol"])
+def test_the_docs_page_is_generated_from_its_json(page):
+    """docs/results/PAGE.md is exactly the section generated from the study's summary stored beside it,
+    docs/results/PAGE.json (robustness.json of the run the page names), and the results index lists it.
+    Fails if a figure of the page is edited by hand (for example one digit of a percentile)."""
     from pathlib import Path
 
     results = Path(__file__).resolve().parent.parent / "docs" / "results"
-    summary = json.loads((results / "faithfulness.json").read_text(encoding="utf-8"))
-    assert (results / "faithfulness.md").read_text(encoding="utf-8") == faithfulness_markdown(summary)
+    summary = json.loads((results / f"{page}.json").read_text(encoding="utf-8"))
+    assert (results / f"{page}.md").read_text(encoding="utf-8") == faithfulness_markdown(summary)
+    assert page in (results / "index.md").read_text(encoding="utf-8").split()
