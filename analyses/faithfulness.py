@@ -55,6 +55,7 @@ MECHANISMS = {
 
 #: The summary's keys the section reads.
 _REQUIRED = ("parameters", "command", "commit", "scenes")
+_PARAMETERS_REQUIRED = ("size", "seed", "trajectories", "sobol", "verdict_n_processes", "scenes")
 _SCENE_REQUIRED = ("n_evaluations", "b_minus_s", "db_minus_s", "margin", "p_load_balance", "mu_star", "top", "flip")
 
 
@@ -124,6 +125,10 @@ def _check(summary) -> None:
     missing = [key for key in _REQUIRED if key not in summary]
     if missing:
         raise InputError(f"faithfulness: the robustness summary has no {', '.join(missing)}; "
+                         f"write it with this version of coherence robustness")
+    missing = [key for key in _PARAMETERS_REQUIRED if key not in summary.get("parameters", {})]
+    if missing:
+        raise InputError(f"faithfulness: the robustness summary's parameters have no {', '.join(missing)}; "
                          f"write it with this version of coherence robustness")
     if not summary["scenes"]:
         raise InputError("faithfulness: the robustness summary has no scenes")

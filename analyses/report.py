@@ -254,11 +254,8 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
     if trace.metadata.get("textures"):
         from analyses.report_texture import texture_section
 
-        # under a platform its share and layouts come from runs on the shared levels, as the study's, and
-        # its curves reach four times the whole largest level, as the other curves do
-        texture = texture_section(trace, scene, layout,
-                                  hierarchy if experiment.platform is None else experiment.recorded_hierarchy(),
-                                  setup.mappings, verdict_n, cost,
+        # under a platform its share and layouts come from runs on the shared levels, as the study's
+        texture = texture_section(trace, scene, layout, hierarchy, setup.mappings, verdict_n, cost,
                                   shared=None if experiment.platform is None else experiment.study_hierarchy(),
                                   machine=setup.machine)
     ray_orders = None

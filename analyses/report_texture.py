@@ -40,9 +40,9 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
         Gives polygons their vertex counts in the layout.
     layout : MemoryLayout
     hierarchy : Hierarchy
-        The levels each process replays its pixels on when ``shared`` is None (with ``shared``, the
-        platform's whole levels); the curves take its first level's line size and reach four times its
-        largest level.
+        The levels each process replays its pixels on when ``shared`` is None; the curves take its first
+        level's line size and reach four times its largest level (with ``shared``, those of the shared
+        levels' whole hierarchy, as the report's other curves; ``hierarchy`` is then not read).
     mappings : sequence of Mapping
     n_processes : int
     cost : CostModel
@@ -80,7 +80,8 @@ def texture_section(trace, scene, layout, hierarchy, mappings, n_processes: int,
     share = share.assign(misses_per_texel_read=share["texel_misses"] / share["texel_reads"],
                          texture_miss_share=share["texel_misses"] / share["misses_all"])
     share = share[["mapping", "level", "texel_reads", "texel_misses", "misses_per_texel_read", "texture_miss_share"]]
-    curves = pd.concat([_texel_curve(trace, placements[label], hierarchy).assign(layout=label) for label in LAYOUTS],
+    reach = hierarchy if shared is None else shared.hierarchy
+    curves = pd.concat([_texel_curve(trace, placements[label], reach).assign(layout=label) for label in LAYOUTS],
                        ignore_index=True)
     order = {label: k for k, label in enumerate(LAYOUTS)}
     layouts = layouts.sort_values("layout", key=lambda column: column.map(order), kind="stable")

@@ -379,7 +379,8 @@ def _size_check(base: Experiment, design: np.ndarray, seeds, replays: _Replays) 
                                    seeds[index // per_trajectory])
 
     values = {size: {name: [] for name in SIZE_CHECK_QUANTITIES} for size in sizes}
-    with warnings.catch_warnings(), _samples_bar(len(sizes) * len(rows), base, f"size check at {small_size} and {reference_size}") as bar:
+    phase = f"size check at {small_size} and {reference_size}"
+    with warnings.catch_warnings(), _samples_bar(len(sizes) * len(rows), base, phase) as bar:
         warnings.simplefilter("ignore")  # small images warn of idle processes; the Morris samples said so
         for number, result in enumerate(_stream(calls())):
             differences = one_process_differences(result.runs)

@@ -344,7 +344,8 @@ def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
 
     ``lines`` must hold every access (``skip_mask`` 0); ``hierarchy`` must :func:`skips_certain_hits` at
     ``2**lines.line_shift``-byte lines. :func:`pixel_lines` given ``hierarchy`` gives the same result without
-    ever holding every access.
+    ever holding every access, and is what the studies call; this function is the path from lines already
+    held, which the tests compare the records' pass with.
     """
     if lines.skip_mask or not skips_certain_hits(hierarchy, 1 << lines.line_shift):
         raise InputError(f"take_out_certain_hits: lines of {1 << lines.line_shift} bytes with every access held "

@@ -46,7 +46,7 @@ class CpuTlbs(NamedTuple):
     geometry : cachesim.tlb.TlbGeometry
     pages, stamps : ndarray of int64, shape (C, E)
         Each CPU's entries (:class:`cachesim.tlb.TlbArrays` fields).
-    cursor : ndarray of int64, shape (C, N_CURSOR)
+    cursor : ndarray of int64, shape (C, N_CURSOR + HINTS)
     counts : ndarray of int64, shape (n + B, N_TLB_COUNTERS)
         Lookups, hits and misses per process. Updated in place.
     miss_cycles : float

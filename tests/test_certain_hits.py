@@ -13,6 +13,8 @@ from cachesim.tlb import TlbGeometry, empty_tlb, tlb_lookup, NLU, TLB_FIFO, TLB_
 from coherence.pixel_lines import PixelLines, held_bytes, pixel_lines, skips_certain_hits, take_out_certain_hits
 from coherence.record_lines import FILL_AHEAD
 from rtcommon.validate import InputError
+from tracer.trace.access import AccessTrace
+from tracer.trace.records import WRITE_FLAG
 
 from reference_tlb import ReferenceTlb
 
@@ -196,8 +198,9 @@ def test_which_hierarchies_take_hits_out_and_lines_of_another_are_refused():
 def test_lines_taken_out_from_the_records_equal_those_of_every_access_held(seed):
     """pixel_lines given a hierarchy works out one pixel's accesses at a time from the records and never holds
     every access; on random traces, hierarchies (a TLB of 512 B or 8 KB pages) and page placements its lines
-    equal take_out_certain_hits of every access held (checked against the whole walk above). Fails when the
-    records' pass leaves its addresses virtual (``translate_addresses`` in _take_out_records dropped: checked)."""
+    equal take_out_certain_hits of every access held (checked against the whole walk above), with a third of
+    the records writes. Fails when the records' pass leaves its addresses virtual (``translate_addresses`` in
+    _take_out_records dropped: checked)."""
     from dataclasses import replace
 
     from coherence.page_placement import PagePlacement
@@ -209,12 +212,16 @@ def test_lines_taken_out_from_the_records_equal_those_of_every_access_held(seed)
                                                        miss_cycles=1.0))
     line_size = hierarchy.levels[0].line_size
     trace = random_trace(width=12, height=9, seed=seed)
+    records = np.array(trace.records)  # a third of them writes: writes end a line's certain hits
+    records[rng.random(records.size) < 1 / 3] |= np.uint32(WRITE_FLAG)
+    trace = AccessTrace(trace.pixel_offsets, records, trace.counters, trace.width, trace.height, {})
     placed = placed_for().with_pages(PagePlacement(str(rng.choice(["random", "bin-hopping"])), 8192, seed),
                                      alpha21164())
     every = pixel_lines(trace, placed, line_size)
     expected = take_out_certain_hits(every, hierarchy)
     taken = pixel_lines(trace, placed, line_size, hierarchy=hierarchy)
     assert taken.addresses.size < every.addresses.size and taken.skips_for == expected.skips_for
+    assert taken.writes.any() and taken.pixel_writes.sum() == every.writes.sum()
     for name, a, b in zip(PixelLines._fields, taken, expected):
         np.testing.assert_array_equal(a, b, err_msg=name)
 

@@ -207,7 +207,8 @@ def test_mechanism_shares_by_hand():
 def test_regenerates_from_a_stored_summary_and_refuses_bad_input(summary, tmp_path, capsys):
     """``python -m analyses.faithfulness`` writes the same Markdown from robustness.json as the function gives,
     creating the folder; a missing file, a file that is not JSON and a summary without its command each give
-    a one-line error and exit 2, writing nothing. Fails if main drops the check of the summary's keys."""
+    a one-line error and exit 2, writing nothing, as does one whose parameters lack ``sobol``. Fails if main
+    drops the check of the summary's keys (or of its parameters': a KeyError traceback)."""
     stored = tmp_path / "robustness.json"
     stored.write_text(json.dumps(summary, indent=2), encoding="utf-8")
     out = tmp_path / "docs" / "results" / "faithfulness.md"
@@ -218,8 +219,11 @@ def test_regenerates_from_a_stored_summary_and_refuses_bad_input(summary, tmp_pa
     broken.write_text('{"parameters": \n', encoding="utf-8")
     old = tmp_path / "old.json"
     old.write_text(json.dumps({k: v for k, v in summary.items() if k != "command"}), encoding="utf-8")
+    no_sobol = tmp_path / "no_sobol.json"
+    parameters = {k: v for k, v in summary["parameters"].items() if k != "sobol"}
+    no_sobol.write_text(json.dumps({**summary, "parameters": parameters}), encoding="utf-8")
     for path, says in ((tmp_path / "missing.json", "no such"), (broken, "broken.json:2: not JSON"),
-                       (old, "has no command")):
+                       (old, "has no command"), (no_sobol, "parameters have no sobol")):
         target = tmp_path / f"{path.stem}.md"
         capsys.readouterr()
         assert main([str(path), str(target)]) == 2

@@ -65,7 +65,7 @@ def test_report_share_table_under_a_platform_is_the_shared_runs_texel_counts(tmp
     ``shared=...`` in report._assemble's texture_section call (the thread view's counts);
     ``processes[f"{level}_misses"]`` -> ``processes[f"{level}_hits"]`` in shared_texel_table. Its texel
     miss-ratio curves reach four times the platform's whole largest level, as the report's other curves do
-    (mutation: pass ``hierarchy``, the thread view, to texture_section)."""
+    (mutation: ``reach = hierarchy`` in texture_section, the thread view under a platform)."""
     from analyses.experiment import Experiment
     from analyses.report import build_report
     from analyses.traces import cached_trace
