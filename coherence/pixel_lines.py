@@ -197,10 +197,12 @@ def _taken_out_pixel_lines(records, pixel_offsets, placed, line_offsets, hierarc
     """:func:`pixel_lines` with the certain hits of ``hierarchy`` taken out, given the offsets of every access
     (``line_offsets``), in one pass over the records that works out one pixel's line accesses at a time.
 
-    The arrays the accesses kept and the page runs go to are reserved at the count of every access, but
-    only their pages written are ever held, a pixel's after another, and they are shrunk to what was written
-    at the end: the most bytes held are :func:`held_bytes` of the result. With ``budget_bytes``, the pass
-    stops (and None is returned) as soon as the bytes written exceed it.
+    The arrays the accesses kept and the page runs go to are reserved at the count of every access, or with
+    ``budget_bytes`` at what the budget lets be written before the pixel that passes it, and its longest pixel
+    more (the pass checks after each pixel), whichever is less; only their pages written are ever held, a
+    pixel's after another, and they are shrunk to what was written at the end: the most bytes held are
+    :func:`held_bytes` of the result. With ``budget_bytes``, the pass stops (and None is returned) as soon as
+    the bytes written exceed it.
     """
     n_pixels = line_offsets.shape[0] - 1
     n_lines = int(line_offsets[-1])
@@ -208,7 +210,9 @@ def _taken_out_pixel_lines(records, pixel_offsets, placed, line_offsets, hierarc
     scratch = (np.empty(longest + FILL_AHEAD, dtype=np.uint64), np.empty(longest + FILL_AHEAD, dtype=np.bool_))
     bytes_left = NO_BUDGET if budget_bytes is None else budget_bytes - held_bytes(0, n_pixels, 0, longest)
     take_out = _TakeOut(hierarchy, hierarchy.levels[0].line_size.bit_length() - 1, n_pixels, bytes_left)
-    out = take_out.reserve(n_lines)
+    room = max(bytes_left, 0)
+    out = take_out.reserve(min(n_lines, room // BYTES_PER_LINE + longest),
+                           min(n_lines, room // BYTES_PER_RUN + longest))
     kept, runs, fits = _take_out_records(records, pixel_offsets, placed.placement, line_offsets, *scratch,
                                          take_out.sets, take_out.scalars, take_out.counts, out)
     if not fits:
@@ -281,12 +285,12 @@ class _TakeOut:
                             np.full(n_sets[0], -1, np.int64))
 
     @staticmethod
-    def reserve(n_lines: int) -> TakenOut:
-        """Arrays with room for ``n_lines`` accesses kept and as many page runs, none of them written yet (so
-        none of their pages held)."""
+    def reserve(n_lines: int, n_runs: int) -> TakenOut:
+        """Arrays with room for ``n_lines`` accesses kept and ``n_runs`` page runs, none of them written yet
+        (so none of their pages held)."""
         with _small_pages():
             return TakenOut(np.empty(n_lines, dtype=np.uint64), np.empty(n_lines, dtype=np.bool_),
-                            np.empty(n_lines, dtype=np.uint64))
+                            np.empty(n_runs, dtype=np.uint64))
 
     def lines(self, out: TakenOut, kept: int, runs: int, hierarchy, pixel_writes=None) -> PixelLines:
         """The :class:`PixelLines` of the ``kept`` accesses and ``runs`` page runs written into ``out``, whose
@@ -352,7 +356,7 @@ def take_out_certain_hits(lines: PixelLines, hierarchy) -> PixelLines:
                          f"and a hierarchy whose first level is direct-mapped at that line size are needed")
     line_offsets = np.asarray(lines.line_offsets, dtype=np.int64)
     take_out = _TakeOut(hierarchy, lines.line_shift, line_offsets.shape[0] - 1)
-    out = take_out.reserve(int(line_offsets[-1]))
+    out = take_out.reserve(int(line_offsets[-1]), int(line_offsets[-1]))
     kept, runs = _take_out_lines(line_offsets, lines.addresses, lines.writes, take_out.sets, take_out.scalars,
                                  take_out.counts, out)
     return take_out.lines(out, kept, runs, hierarchy, np.array(lines.pixel_writes, dtype=np.int64))

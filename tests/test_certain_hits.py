@@ -249,5 +249,9 @@ def test_the_budget_counts_the_bytes_held_at_the_peak():
     for name, a, b in zip(PixelLines._fields, within, lines):
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert pixel_lines(trace, placed, 32, budget_bytes=held - 1, hierarchy=hierarchy) is None
+    # smaller budgets reserve less room than every access (the pass stops in the pixel that passes them)
+    fixed = held_bytes(0, lines.pixel_writes.size, 0, longest)
+    for budget in np.linspace(fixed - 100, held - 1, 9).astype(np.int64):
+        assert pixel_lines(trace, placed, 32, budget_bytes=int(budget), hierarchy=hierarchy) is None
     assert held_bytes(every.addresses.size, every.pixel_writes.size) == (
         every.line_offsets.nbytes + every.pixel_writes.nbytes + (every.addresses.size + FILL_AHEAD) * (8 + 1))
