@@ -31,8 +31,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cachesim.multicore import (_back_invalidate, _byte_range, _count_hit, _count_miss, _drop_ghost, _filter_slot,
-                                _invalidate_others, _set_of)
+from cachesim.multicore import _count_hit, _count_miss
+from cachesim.multicore_sets import (_back_invalidate, _byte_range, _drop_ghost, _filter_slot, _invalidate_others,
+                                     _set_of)
 from cachesim.prefetch import ISSUED, NO_PREFETCH, USEFUL, _candidates
 from cachesim.prefetch_config import MAX_DEGREE
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,

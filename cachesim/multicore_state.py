@@ -105,7 +105,7 @@ class SharedArrays(NamedTuple):
     ghost_bytes : ndarray of int64, shape (W, 2)
         The first byte and the end of the bytes of the write that invalidated each ghost.
     ghost_filter : ndarray of int32, shape (F,)
-        How many ghosts hash (:func:`_filter_slot`) to each entry: a miss
+        How many ghosts hash (:func:`cachesim.multicore_sets._filter_slot`) to each entry: a miss
         or fill looks for a ghost in its set only where this is nonzero.
         ``F`` is a power of two, :data:`GHOST_FILTER_SIZE` in a
         :class:`SharedState`: small enough to stay in the host's first-level cache.
@@ -117,7 +117,7 @@ class SharedArrays(NamedTuple):
     owners : ndarray of int64, shape (D, 2) or (0, 2)
         The sharers of lately written lines, so that a write searches for
         copies only where they may be: entry ``e`` (a hash of the
-        first-level line, :func:`cachesim.multicore._owner_slot`) is
+        first-level line, :func:`cachesim.multicore_sets._owner_slot`) is
         ``(line, mask)`` after a write by ``t`` removed the line from every
         instance that does not serve ``t`` (``mask`` then holds ``t``'s
         bit alone), and every fill of the line by a thread ``u`` since
