@@ -399,9 +399,15 @@ class _StudyPlan:
                             self.machine, compute=self.compute, lines=self.lines)
 
     def _simulate_shared(self, index, pieces):
-        return simulate_shared_run(self.trace, self.distribution_of(index), self.shared.machine, self.placed,
-                                   self.cost, self.machine, interleave_cycles=self.shared.interleave_cycles,
-                                   compute=self.compute, pieces=pieces)
+        """The run's table, its row of machine counts and its misses per kind: all the study reads of a run on
+        shared levels. The machine's state (tens of MB) is let go as the run ends, not held until every run
+        is done."""
+        from coherence.kind_misses import shared_misses_by_kind
+
+        run = simulate_shared_run(self.trace, self.distribution_of(index), self.shared.machine, self.placed,
+                                  self.cost, self.machine, interleave_cycles=self.shared.interleave_cycles,
+                                  compute=self.compute, pieces=pieces)
+        return run.run, shared_run_row(run.shared), shared_misses_by_kind(run.shared)
 
     def done(self) -> bool:
         return all(future.done() for future in self.futures.values())
@@ -415,17 +421,13 @@ class _StudyPlan:
 
     def result(self, bar=None) -> StudyResult:
         """The study's tables, once its runs are simulated (``bar`` counts them)."""
-        from coherence.kind_misses import shared_misses_by_kind
-
         simulated = {}
         shared_rows = {}
         shared_kinds = {}
         for index in self.to_simulate:
             run = self.futures[index].result()
             if self.shared is not None:
-                shared_rows[index] = shared_run_row(run.shared)
-                shared_kinds[index] = shared_misses_by_kind(run.shared)
-                run = run.run
+                run, shared_rows[index], shared_kinds[index] = run
             simulated[index] = run
             if bar is not None:
                 bar.update(1)
