@@ -92,7 +92,8 @@ def simulate_threads_stream(stream, geometry, machine, state, clock):
     int
         The clock after the last access.
     """
-    clock = _replay(stream, geometry, machine, state, clock, np.empty((3, geometry.rel_shift.shape[0]), np.int64))
+    clock = _replay(stream, geometry, machine, state, clock, np.empty((3, geometry.rel_shift.shape[0]), np.int64),
+                    np.zeros((machine.instance_of.shape[1], N_KINDS), np.int64))
     # Every access is a hit or a miss: the totals follow.
     counts = state.counts
     counts[..., ACCESSES] = counts[..., HITS] + counts[..., MISSES]
@@ -284,9 +285,11 @@ def _fill_level(line, level, instance, base, kind, clock, geometry, machine, sta
 
 
 @njit(cache=True, **NO_REFCOUNTS)
-def _replay(stream, geometry, machine, state, clock, scratch):
+def _replay(stream, geometry, machine, state, clock, scratch, first_hits):
     """The loop of :func:`simulate_threads_stream`, which counts hits and misses only;
-    ``scratch`` (3, L) holds one access's line, instance and set at each level."""
+    ``scratch`` (3, L) holds one access's line, instance and set at each level, ``first_hits`` (T,
+    :data:`N_KINDS`), zeros on entry, the first-level read hits of the loop's own path by thread and
+    kind until they are added to the counts at the end."""
     addresses = stream.addresses
     threads = stream.threads
     writes = stream.writes
@@ -296,12 +299,17 @@ def _replay(stream, geometry, machine, state, clock, scratch):
     has_sizes = sizes.shape[0] > 0
     has_kinds = kinds.shape[0] > 0
     counts = state.counts
-    served_counts = state.served
+    tags = state.tags
     instance_of = machine.instance_of
     shift = np.uint64(geometry.line_shift)
     allocate0 = geometry.write_allocate[0]
+    mask0 = geometry.set_mask[0]
+    n_sets0 = geometry.n_sets[0]
+    ways0 = geometry.ways[0]
+    stamps0 = geometry.policy[0] == LRU
     previous_line = np.int64(-1)  # a line the previous access left in its thread's first level
     previous_thread = np.int64(-1)
+    first_way = np.int64(0)  # the first way of the first-level instance of thread previous_thread
     for i in range(addresses.shape[0]):
         clock += 1
         address = addresses[i]
@@ -309,23 +317,42 @@ def _replay(stream, geometry, machine, state, clock, scratch):
         line0 = np.int64(address >> shift)
         is_write = has_writes and writes[i]
         kind = np.int64(kinds[i]) if has_kinds else np.int64(0)
-        size = sizes[i] if has_sizes else np.int64(0)
-        if line0 == previous_line and thread == previous_thread:
-            # The previous access, by the same thread, left the line in its
-            # first level as the set's most recent entry: a hit that changes
-            # no tag or order (a write still invalidates other copies).
+        if thread != previous_thread:
+            first_way = geometry.offset[0] + instance_of[0, thread] * machine.level_ways[0]
+        if not is_write:
+            # A read that hits the first level changes nothing but the hit's
+            # stamp and the counts. When the previous access, by the same
+            # thread, left the line there as the set's most recent entry, not
+            # even the stamp (the order in the set stays the same).
+            slot = np.int64(-1)
+            if line0 != previous_line or thread != previous_thread:
+                set_index = line0 & mask0 if mask0 >= 0 else line0 % n_sets0
+                slot = _probe(tags, first_way + set_index * ways0, ways0, line0)
+            if slot >= 0 or line0 == previous_line and thread == previous_thread:
+                if slot >= 0 and stamps0:
+                    state.stamps[slot] = clock
+                first_hits[np.uint64(thread), np.uint64(kind)] += 1
+                previous_line = line0
+                previous_thread = thread
+                continue
+        elif line0 == previous_line and thread == previous_thread:
             instance0 = instance_of[0, thread]
             counts[0, instance0, kind, HITS] += 1
-            served_counts[thread, 0] += 1
-            if is_write:
-                counts[0, instance0, kind, WRITE_HITS] += 1
-                first, end = _byte_range(address, size, line0, geometry.line_shift)
-                _write_invalidate(line0, thread, kind, first, end, geometry, machine, state)
+            counts[0, instance0, kind, WRITE_HITS] += 1
+            state.served[thread, 0] += 1
+            first, end = _byte_range(address, sizes[i] if has_sizes else np.int64(0), line0, geometry.line_shift)
+            _write_invalidate(line0, thread, kind, first, end, geometry, machine, state)
             continue
-        served = shared_access(thread, address, is_write, size, kind, geometry, machine, state, clock, scratch)
+        served = shared_access(thread, address, is_write, sizes[i] if has_sizes else np.int64(0), kind, geometry,
+                               machine, state, clock, scratch)
         resident = served == 0 or not (is_write and not allocate0)
         previous_line = line0 if resident else np.int64(-1)
         previous_thread = thread
+    for thread in range(first_hits.shape[0]):
+        instance0 = instance_of[0, thread]
+        for kind in range(first_hits.shape[1]):
+            counts[0, instance0, kind, HITS] += first_hits[thread, kind]
+            state.served[thread, 0] += first_hits[thread, kind]
     return clock
 
 

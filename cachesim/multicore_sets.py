@@ -51,11 +51,14 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
 @njit(cache=True, inline="always")
 def _probe_ways(tags, base, n_ways, line):
     """:func:`cachesim.sets._find` without an early exit or a select per way: the matches (a line is in a
-    set once) and their way numbers are summed, which the compiler turns into vector compares and adds."""
+    set once) and their way numbers are summed, which the compiler turns into vector compares and adds.
+    The index is unsigned: numba tests a signed index for a negative value (counted from the end) with a
+    select per way, which keeps the loop from vectorising."""
     found = np.int64(0)
     where = np.int64(0)
+    first = np.uint64(base)
     for way in range(n_ways):
-        match = np.int64(tags[base + way] == line)
+        match = np.int64(tags[first + np.uint64(way)] == line)
         found += match
         where += match * way
     return base + where if found else np.int64(-1)
@@ -78,16 +81,17 @@ def _probe(tags, base, n_ways, line):
 def _victim_ways(tags, stamps, base, n_ways):
     """The first empty way of the set, else the first of its least stamps, with one comparison per
     way: an empty way ranks below every stamp (stamps are clocks, >= 0), the earlier of two empty
-    ways first. Returns the way and its rank (< 0: empty)."""
-    victim = base
+    ways first. Returns the way and its rank (< 0: empty). Unsigned indices, as in :func:`_probe_ways`."""
+    victim = np.int64(0)
     lowest = np.int64(9223372036854775807)
+    first = np.uint64(base)
     for way in range(n_ways):
-        slot = base + way
+        slot = first + np.uint64(way)
         rank = way - np.int64(9223372036854775807) if tags[slot] < 0 else stamps[slot]
         if rank < lowest:
             lowest = rank
-            victim = slot
-    return victim, lowest
+            victim = way
+    return base + victim, lowest
 
 
 @njit(cache=True, inline="always")

@@ -155,3 +155,15 @@ def reference_threads(addresses, thread_ids, machine, writes=None, sizes=None, k
                         way.ghost = (lines[level], first, end)
                         counts[level, other, kind, 8] += 1
     return counts, served_counts
+
+
+def assert_equals_reference(machine, addresses, thread_ids, writes, sizes, kinds):
+    """Run cachesim.multicore.simulate_threads on the stream, assert that every count and each thread's served
+    counts equal :func:`reference_threads`'s, and return its result."""
+    from cachesim.multicore import simulate_threads
+
+    expected, served = reference_threads(addresses, thread_ids, machine, writes, sizes, kinds)
+    result = simulate_threads(addresses, thread_ids, machine, writes=writes, sizes=sizes, kinds=kinds)
+    np.testing.assert_array_equal(result.counts, expected)
+    np.testing.assert_array_equal(result.served, served)
+    return result
