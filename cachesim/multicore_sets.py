@@ -12,7 +12,10 @@ docstring of :mod:`cachesim.multicore`.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from cachesim.multicore_state import BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS
 from cachesim.sets import RANDOM, _find, _random_way
@@ -48,20 +51,44 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     return offset[level] + instance * level_ways[level] + set_index * ways[level]
 
 
+@intrinsic
+def _trailing_zeros(typingctx, value):
+    """The number of trailing zero bits of an unsigned integer (LLVM's ``cttz``: one instruction; any
+    answer for 0, which callers rule out)."""
+    if not isinstance(value, types.Integer) or value.signed:
+        return None
+
+    def codegen(context, builder, signature, args):
+        width = args[0].type
+        function = cgutils.get_or_insert_function(builder.module, ir.FunctionType(width, [width, ir.IntType(1)]),
+                                                  f"llvm.cttz.i{width.width}")
+        return builder.call(function, [args[0], ir.IntType(1)(1)])
+
+    return value(value), codegen
+
+
 @njit(cache=True, inline="always")
 def _probe_ways(tags, base, n_ways, line):
-    """:func:`cachesim.sets._find` without an early exit or a select per way: the matches (a line is in a
-    set once) and their way numbers are summed, which the compiler turns into vector compares and adds.
-    The index is unsigned: numba tests a signed index for a negative value (counted from the end) with a
-    select per way, which keeps the loop from vectorising."""
-    found = np.int64(0)
-    where = np.int64(0)
+    """:func:`cachesim.sets._find` without an early exit or a branch per way: a bit per way that holds
+    ``line`` (a line is in a set once), which the compiler turns into one vector compare, and the way
+    of the lowest bit set. The index is unsigned: numba tests a signed index for a negative value
+    (counted from the end) with a select per way, which keeps the loop from vectorising. At most 64 ways
+    take this path (:func:`_probe`)."""
+    matches = np.uint64(0)
     first = np.uint64(base)
     for way in range(n_ways):
-        match = np.int64(tags[first + np.uint64(way)] == line)
-        found += match
-        where += match * way
-    return base + where if found else np.int64(-1)
+        matches |= np.uint64(tags[first + np.uint64(way)] == line) << np.uint64(way)
+    return base + np.int64(_trailing_zeros(matches)) if matches else np.int64(-1)
+
+
+@njit(cache=True, inline="always")
+def _probe_any(tags, base, n_ways, line):
+    """:func:`_probe_ways` for sets of any number of ways."""
+    first = np.uint64(base)
+    for way in range(n_ways):
+        if tags[first + np.uint64(way)] == line:
+            return base + way
+    return np.int64(-1)
 
 
 @njit(cache=True, inline="always")
@@ -74,7 +101,9 @@ def _probe(tags, base, n_ways, line):
         return _probe_ways(tags, base, 16, line)
     if n_ways == 12:
         return _probe_ways(tags, base, 12, line)
-    return _probe_ways(tags, base, n_ways, line)
+    if n_ways <= 64:
+        return _probe_ways(tags, base, n_ways, line)
+    return _probe_any(tags, base, n_ways, line)
 
 
 @njit(cache=True, inline="always")

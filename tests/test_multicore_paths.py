@@ -64,3 +64,38 @@ def test_a_first_level_read_hit_renews_its_lru_stamp():
     assert np.flatnonzero(l1[0, :, HITS]).tolist() == [3, 5]
     assert l1[0, :, MISSES].sum() == 4 and l1[1, :, HITS].sum() == 0 and l1[1, :, MISSES].sum() == 2
     assert result.served[:, 0].tolist() == [2, 0]
+
+
+@pytest.mark.parametrize("n_ways", [1, 3, 8, 12, 16, 63, 64, 65, 100])
+def test_a_probe_finds_the_way_holding_the_line_in_sets_of_any_width(n_ways):
+    """A set of ``n_ways`` distinct lines (empty ways, -1, among them) between two other sets: the probe of each
+    line gives its own way, of a line the set lacks (one the next set holds, -1) -1. Hand-checked, every way.
+    Mutations (each checked to fail): ``+ np.int64(_trailing_zeros(matches))`` -> ``+ 0`` in _probe_ways; ``if
+    n_ways <= 64:`` -> ``if n_ways <= 65:`` in _probe (a shift by 64 bits)."""
+    from cachesim.multicore_sets import _probe
+
+    base = n_ways  # one set before it
+    tags = np.full(3 * n_ways, 7, dtype=np.int64)
+    tags[base:base + n_ways] = np.arange(100, 100 + n_ways)
+    tags[base + 1:base + n_ways:4] = -1
+    held = [way for way in range(n_ways) if tags[base + way] >= 0]
+    assert [_probe(tags, base, n_ways, int(tags[base + way])) for way in held] == [base + way for way in held]
+    assert _probe(tags, base, n_ways, 7) == -1 and _probe(tags, base, n_ways, 99) == -1
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_fully_associative_levels_beyond_64_ways_match_the_reference(seed):
+    """An L1 of one set of 72 or 100 ways (the probe's plain loop) and one of 64 (a full bit mask) over a
+    shared L2: counts and served equal the reference's on a stream of twice the L1's lines. Mutation:
+    ``if n_ways <= 64:`` -> ``if n_ways <= 128:`` in _probe (checked to fail)."""
+    rng = np.random.default_rng(400 + seed)
+    ways = [72, 100, 64][seed]
+    l1 = CacheLevel("L1", 16 * ways, 16, ways, str(rng.choice(["lru", "fifo"])))
+    machine = SharedHierarchy(Hierarchy((l1, CacheLevel("L2", 16 * 4 * 64, 16, 4))), n_cores=2,
+                              shared_by=("core", "machine"))
+    n = 3000
+    addresses = rng.integers(0, 2 * ways, n) * 16 + rng.integers(0, 16, n)
+    stream = (addresses, rng.integers(0, 2, n), rng.random(n) < 0.1, np.minimum(rng.integers(1, 9, n),
+              16 - addresses % 16), rng.integers(0, 16, n))
+    result = assert_equals_reference(machine, *stream)
+    assert result.served[:, 0].sum() > 0.3 * n
