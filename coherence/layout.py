@@ -284,11 +284,14 @@ class MemoryLayout:
         good = np.isin(kind, heap_kinds)
         good[good] &= (index[good] >= 0) & (index[good] < counts[kind[good]])
         rows = kind_first[kind[good]] + index[good]
-        if not good.all() or kind.size != expected or np.unique(rows).size != expected:
+        named = np.zeros(record_start.shape[0], dtype=np.bool_)  # each record named at least once
+        named[rows] = True
+        distinct = int(np.count_nonzero(named))
+        if not good.all() or kind.size != expected or distinct != expected:
             names = ", ".join(f"{RecordKind(k).name.lower()} {int(counts[k])}" for k in heap_kinds)
             raise InputError(f"creation must name every record of the heap's kinds once ({names}); it names "
                              f"{kind.size} allocations, {int(good.sum())} of them records of those kinds, "
-                             f"{np.unique(rows).size} distinct")
+                             f"{distinct} distinct")
         blocks = heap_blocks(self.heap, record_size[rows], heap_start)
         record_start[rows] = blocks + self.heap.header
         top = blocks + self.heap.block_sizes(record_size[rows])
@@ -371,12 +374,11 @@ class PlacedLayout:
         shift = placement.page_size.bit_length() - 1
         first_page = int(self.layout.base) >> shift
         n_pages = max(-(-int(self.end) >> shift) - first_page, 1)
-        used = np.zeros(n_pages, dtype=np.int64)
         held = self.record_size > 0
         # +1 at each record's first page, -1 after its last: the running sum marks every page that holds data
-        np.add.at(used, (self.record_start[held] >> shift) - first_page, 1)
+        used = np.bincount((self.record_start[held] >> shift) - first_page, minlength=n_pages)
         after = ((self.record_start[held] + self.record_size[held] - 1) >> shift) - first_page + 1
-        np.add.at(used, after[after < n_pages], -1)
+        used = used - np.bincount(after[after < n_pages], minlength=n_pages)
         table = placement.table(np.cumsum(used) > 0, first_page, placement.colours(hierarchy))
         return PlacedLayout(self.layout, self.record_start, self.record_size, self.kind_first, self.end, table)
 

@@ -53,7 +53,7 @@ from rtcommon.validate import InputError
 
 __all__ = ["READ_HITS", "READ_MISSES", "WRITE_HITS", "WRITE_MISSES", "N_ACCESS_COLUMNS", "MissCounts", "ReplayKey",
            "fixed_schedule", "first_cpus", "recost_run", "RunStore", "CYCLE_COLUMNS", "LINES_KEPT",
-           "COMPUTE_KEPT", "BACKGROUND_FIELDS", "compute_digest"]
+           "COMPUTE_KEPT", "PLACED_KEPT", "BACKGROUND_FIELDS", "compute_digest"]
 
 #: Columns of :attr:`MissCounts.accesses`: read hits and misses, write hits and misses.
 READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES = 0, 1, 2, 3
@@ -67,6 +67,10 @@ LINES_KEPT = 2
 
 #: Cost models' compute cycles per pixel a :class:`RunStore` keeps (the most recently used ones).
 COMPUTE_KEPT = 2
+
+#: Placed layouts (before their page placement) a :class:`RunStore` keeps, the most recently used ones: as
+#: many as the memory images a study of one trace samples.
+PLACED_KEPT = 3
 
 #: Fields of :class:`coherence.simulation.Machine` that describe the other users' processes.
 BACKGROUND_FIELDS = ("background_load", "background_footprint", "background_seed")
@@ -237,8 +241,10 @@ class RunStore:
     in costs, latencies or the machine's schedule but place the trace alike
     read the same addresses (:meth:`pixel_lines`). And it keeps what
     studies of the trace work out alike: compute cycles per pixel of the
-    last :data:`COMPUTE_KEPT` cost models (:meth:`compute_cycles`) and each
-    mapping's replay key per process count (:meth:`replay_of`).
+    last :data:`COMPUTE_KEPT` cost models (:meth:`compute_cycles`), each
+    mapping's replay key per process count (:meth:`replay_of`) and the
+    last :data:`PLACED_KEPT` memory layouts placed for the trace
+    (:meth:`placed_layout`).
 
     Attributes
     ----------
@@ -251,6 +257,7 @@ class RunStore:
         self._lines = {}  # placed layout's key -> PixelLines or None, least recently used first
         self._compute = {}  # cost weights -> (compute cycles per pixel, their digest), least recently used first
         self._replays = {}  # (id of a mapping, process count) -> (the mapping, what replay_of worked out)
+        self._placed = {}  # (layout's repr, id of the scene) -> (the scene, placed layout, _records_digest)
         self._trace = None
         self.simulated = 0
         self.re_costed = 0
@@ -359,9 +366,35 @@ class RunStore:
         self.simulated += 1
         self._runs[keys[0]] = (keys[1], run)
 
+    def placed_layout(self, trace, layout, scene=None):
+        """:func:`coherence.studies.place_layout` of ``layout`` for ``trace`` and ``scene``, worked out once per
+        layout and scene (the last :data:`PLACED_KEPT` are kept): the placement depends on nothing else. It
+        has no page placement; :meth:`~coherence.layout.PlacedLayout.with_pages` of it shares its arrays."""
+        from coherence.studies import place_layout
+
+        self.bind(trace)
+        key = (repr(layout), id(scene))
+        kept = self._placed.pop(key, None)
+        if kept is None or kept[0] is not scene:  # the scene is kept alive with it: its id is not reused
+            while len(self._placed) >= PLACED_KEPT:
+                self._placed.pop(next(iter(self._placed)))
+            placed = place_layout(layout, trace, scene)
+            kept = (scene, placed, _records_digest(placed))
+        self._placed[key] = kept  # most recently used last
+        return kept[1]
+
+    def _lines_key(self, placed, line_size: int, budget_bytes, hierarchy) -> tuple:
+        """:func:`_lines_key`, with the digest of the records of a placed layout this store keeps not worked
+        out again."""
+        for _, kept, digest in self._placed.values():
+            if kept.record_start is placed.record_start and kept.record_size is placed.record_size \
+                    and kept.kind_first is placed.kind_first:
+                return _lines_key(placed, line_size, budget_bytes, hierarchy, digest)
+        return _lines_key(placed, line_size, budget_bytes, hierarchy)
+
     def holds_lines(self, trace, placed, line_size: int, budget_bytes: int | None = None, hierarchy=None) -> bool:
         """Whether :meth:`pixel_lines` of these arguments is served without working anything out."""
-        return _lines_key(placed, line_size, budget_bytes, hierarchy) in self._lines and self._trace is trace
+        return self._lines_key(placed, line_size, budget_bytes, hierarchy) in self._lines and self._trace is trace
 
     def lines_kept_with_new(self) -> list:
         """The line addresses still kept once :meth:`pixel_lines` works out a new placement's: the
@@ -380,7 +413,7 @@ class RunStore:
         from coherence.pixel_lines import pixel_lines
 
         self.bind(trace)
-        key = _lines_key(placed, line_size, budget_bytes, hierarchy)
+        key = self._lines_key(placed, line_size, budget_bytes, hierarchy)
         if key in self._lines:
             self._lines[key] = self._lines.pop(key)  # most recently used last
             return self._lines[key]
@@ -391,19 +424,28 @@ class RunStore:
         return lines
 
 
-def _lines_key(placed, line_size: int, budget_bytes, hierarchy=None) -> tuple:
-    """The key of :meth:`RunStore.pixel_lines`: every record's address and size, the page table,
-    ``line_size``, ``budget_bytes`` (which decides whether there is a result at all) and which accesses
-    ``hierarchy`` takes out (:func:`coherence.pixel_lines.skip_key`; "" for none)."""
+def _lines_key(placed, line_size: int, budget_bytes, hierarchy=None, records_digest: bytes | None = None) -> tuple:
+    """The key of :meth:`RunStore.pixel_lines`: every record's address and size (``records_digest``, their
+    :func:`_records_digest` if already worked out), the page table, ``line_size``, ``budget_bytes`` (which
+    decides whether there is a result at all) and which accesses ``hierarchy`` takes out
+    (:func:`coherence.pixel_lines.skip_key`; "" for none)."""
     from coherence.pixel_lines import skip_key, skips_certain_hits
 
     skips = skip_key(hierarchy) if hierarchy is not None and skips_certain_hits(hierarchy, line_size) else ""
+    if records_digest is None:
+        records_digest = _records_digest(placed)
+    frames = hashlib.blake2b(np.ascontiguousarray(placed.pages.frame, dtype=np.int64).tobytes(), digest_size=16)
+    return (records_digest, frames.digest(), int(placed.end), int(placed.pages.first_page),
+            int(placed.pages.page_shift), int(line_size), budget_bytes, skips)
+
+
+def _records_digest(placed) -> bytes:
+    """A digest of every record's address and size and of the kinds' first rows of a placed layout."""
     digest = hashlib.blake2b(digest_size=16)
-    for array in (placed.record_start, placed.record_size, placed.kind_first, placed.pages.frame):
+    for array in (placed.record_start, placed.record_size, placed.kind_first):
         digest.update(np.ascontiguousarray(array, dtype=np.int64).tobytes())
         digest.update(b"|")
-    return (digest.digest(), int(placed.end), int(placed.pages.first_page), int(placed.pages.page_shift),
-            int(line_size), budget_bytes, skips)
+    return digest.digest()
 
 
 def compute_digest(compute) -> bytes:

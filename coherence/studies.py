@@ -289,9 +289,10 @@ class _StudyPlan:
             raise InputError(f"study: execution must be a coherence.studies.Execution, "
                              f"got {type(self.execution).__name__}")
         self.trace = trace
-        self.placed = place_layout(self.layout, trace, call.scene).with_pages(self.machine.page_placement,
-                                                                                self.hierarchy)
         self.store = self.execution.store if self.shared is None else None  # a store keeps private-cache runs only
+        placed = (place_layout(self.layout, trace, call.scene) if self.store is None
+                  else self.store.placed_layout(trace, self.layout, call.scene))
+        self.placed = placed.with_pages(self.machine.page_placement, self.hierarchy)
         if self.store is None:
             self.compute = self.cost.compute_cycles(trace.counters, COUNTER_NAMES)
         else:

@@ -253,7 +253,8 @@ def test_bad_input_is_named():
     a trace of an unnamed scene without its scene, and a bad allocator field
     each raise one ValueError saying what is wrong. Fails if
     ``MemoryLayout.place`` stops checking that ``creation`` names every record
-    (the left-out node then keeps its unused region address)."""
+    (the left-out node then keeps its unused region address), or stops checking
+    that no record is named twice."""
     layout = get_layout("malloc1997")
     counts = {"kd_node": 2, "sphere": 1}
     with pytest.raises(ValueError, match="creation order"):
@@ -261,6 +262,10 @@ def test_bad_input_is_named():
     short = CreationOrder(np.array([RecordKind.SPHERE, RecordKind.KD_NODE]), np.array([0, 0]))
     with pytest.raises(ValueError, match="every record of the heap's kinds once"):
         layout.place(counts, None, None, short)
+    # as many allocations as records, but node 0 twice and node 1 never: "2 distinct"
+    twice = CreationOrder(np.array([RecordKind.SPHERE, RecordKind.KD_NODE, RecordKind.KD_NODE]), np.array([0, 0, 0]))
+    with pytest.raises(ValueError, match="3 allocations, 3 of them records of those kinds, 2 distinct"):
+        layout.place(counts, None, None, twice)
     with pytest.raises(ValueError, match="creation= is only for a layout with a heap"):
         get_layout("alpha1997").place(counts, None, None, short)
     scene, trace = _scene_and_trace(0)

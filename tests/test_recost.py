@@ -303,6 +303,38 @@ def test_stream_holds_no_more_placements_than_one_study_after_another(monkeypatc
     assert max(held) <= LINES_KEPT - 1
 
 
+def test_store_places_each_layout_once_and_keys_lines_alike():
+    """The store's placed layouts equal place_layout's for every memory image (the heap's included), are
+    worked out once per layout and scene while kept (the least recently used of PLACED_KEPT + 1 goes), and
+    the line key the store makes from a kept placement's digest is the one made from scratch, page placement
+    included. Fails if placed_layout keys on the scene alone (``key = id(scene)``): every image is then
+    served the first one's addresses (checked)."""
+    from coherence.page_placement import PagePlacement
+    from coherence.recost import PLACED_KEPT, _lines_key
+    from tracer.rendering.render import RenderOptions, render
+    from scene_factory import random_scene
+
+    scene = random_scene(n=30, seed=2)
+    trace = render(scene, options=RenderOptions(size=8)).trace
+    store = RunStore()
+    layouts = [get_layout(name) for name in ("compact", "alpha1997", "malloc1997")]
+    layouts.append(layouts[0].scaled(2))
+    assert len(layouts) == PLACED_KEPT + 1
+    kept = []
+    for layout in layouts:
+        placed = store.placed_layout(trace, layout, scene)
+        expected = place_layout(layout, trace, scene)
+        for name in ("record_start", "record_size", "kind_first"):
+            np.testing.assert_array_equal(getattr(placed, name), getattr(expected, name))
+        assert placed.end == expected.end
+        assert store.placed_layout(trace, layout, scene) is placed
+        paged = placed.with_pages(PagePlacement("random", page_size=512, seed=3), SMALL)
+        assert store._lines_key(paged, 32, None, None) == _lines_key(paged, 32, None, None)
+        kept.append(placed)
+    assert store.placed_layout(trace, layouts[-1], scene) is kept[-1]
+    assert store.placed_layout(trace, layouts[0], scene) is not kept[0]  # the least recently used went
+
+
 def test_store_works_out_compute_cycles_and_replay_keys_once_per_input():
     """The store's compute cycles equal the cost model's for each set of weights and are worked out once per
     set (a clock change alone is served the kept ones); a mapping's replay is worked out once per mapping
