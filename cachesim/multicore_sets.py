@@ -70,8 +70,7 @@ def _trailing_zeros(typingctx, value):
 @njit(cache=True, inline="always")
 def _probe_ways(tags, base, n_ways, line):
     """:func:`cachesim.sets._find` without an early exit or a branch per way: a bit per way that holds
-    ``line`` (a line is in a set once), which the compiler turns into one vector compare, and the way
-    of the lowest bit set. The index is unsigned: numba tests a signed index for a negative value
+    ``line`` (a line is in a set once), every way compared, and the way of the lowest bit set. The index is unsigned: numba tests a signed index for a negative value
     (counted from the end) with a select per way, which keeps the loop from vectorising. At most 64 ways
     take this path (:func:`_probe`)."""
     matches = np.uint64(0)
@@ -94,7 +93,7 @@ def _probe_any(tags, base, n_ways, line):
 @njit(cache=True, inline="always")
 def _probe(tags, base, n_ways, line):
     """:func:`_probe_ways`, with a loop of fixed length for the common associativities (8, 12 and 16
-    ways): the compiler then unrolls and vectorises it."""
+    ways), which the compiler unrolls."""
     if n_ways == 8:
         return _probe_ways(tags, base, 8, line)
     if n_ways == 16:
