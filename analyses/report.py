@@ -220,7 +220,7 @@ def build_report(experiment: Experiment, *, out=None, miss_map=None) -> Report:
 
 
 def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
-    from coherence.missmap import miss_map
+    from coherence.missmap import MissMap, miss_map
     from coherence.studies import Execution, place_layout, study
     from tracer.trace.access import COUNTER_NAMES
 
@@ -230,13 +230,16 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
         setup.counts
     names = [m.name for m in setup.mappings]
     placed = place_layout(layout, trace, scene)
+    verdict_n = verdict_process_count(counts)
+    # under a platform the study's runs at the miss map's count keep their misses per pixel: the map is one of them
+    mapped_n = verdict_n if setup.miss_map is None else setup.miss_map[1]
     execution = Execution(n_jobs=setup.n_jobs, executor=executor, trace_folder=Path(info["path"]) / "trace",
-                          shared_lines_budget=setup.shares["shared_lines"])
+                          shared_lines_budget=setup.shares["shared_lines"],
+                          pixel_misses_at=() if experiment.platform is None else (mapped_n,))
     result = study(trace, setup.mappings, counts, hierarchy=experiment.study_hierarchy(), layout=layout, cost=cost,
                    machine=setup.machine, scene=scene, progress=experiment.progress, execution=execution)
     runs = result.runs
 
-    verdict_n = verdict_process_count(counts)
     verdict = compute_verdict(runs, verdict_n, order=names)
 
     miss_map_choice = setup.miss_map
@@ -246,9 +249,13 @@ def _assemble(setup: _Setup, scene, trace, info, executor) -> Report:
         chosen_by = f"default: the mapping that loses most to coherence at {verdict_n} processes"
     else:
         chosen_by = "given"
-    # under a platform the run on its shared levels, as the study's
-    misses = miss_map(trace, *miss_map_choice, layout=layout, cost=cost, machine=setup.machine, scene=scene,
-                      hierarchy=hierarchy if experiment.platform is None else experiment.study_hierarchy())
+    kept = result.pixel_misses.get((miss_map_choice[0].name, miss_map_choice[1]))
+    if kept is not None:
+        misses = MissMap(kept, tuple(experiment.study_hierarchy().hierarchy.level_names), scene.name,
+                         miss_map_choice[0].name, miss_map_choice[1])
+    else:  # under a platform the run on its shared levels, as the study's
+        misses = miss_map(trace, *miss_map_choice, layout=layout, cost=cost, machine=setup.machine, scene=scene,
+                          hierarchy=hierarchy if experiment.platform is None else experiment.study_hierarchy())
 
     texture = None
     if trace.metadata.get("textures"):

@@ -10,7 +10,7 @@ import hashlib
 import os
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from functools import partial
 
 import numpy as np
@@ -50,12 +50,17 @@ class StudyResult:
         level, record kind): ``mapping``, ``n_processes`` and the columns of
         :func:`coherence.kind_misses.shared_misses_by_kind` (accesses and misses summed over the level's
         instances, background reads in kind 0); None on private caches, whose runs count no kinds.
+    pixel_misses : dict
+        On shared levels, for each run at a process count of :attr:`Execution.pixel_misses_at`:
+        ``(mapping name, n_processes)`` -> its :attr:`coherence.simulation.Run.pixel_misses` (H, W, L), each
+        pixel's misses per level. Empty otherwise.
     """
 
     runs: pd.DataFrame
     processes: pd.DataFrame
     parameters: dict
     kinds: pd.DataFrame | None = None
+    pixel_misses: dict = field(default_factory=dict)
 
 
 def place_layout(layout: MemoryLayout, trace, scene=None) -> PlacedLayout:
@@ -112,6 +117,10 @@ class Execution:
         (:mod:`coherence.recost`; the cycles equal a simulation's up to the
         order of floating-point additions), and every simulated run is
         added to it.
+    pixel_misses_at : tuple of int
+        Process counts whose runs on shared levels also keep each pixel's misses
+        (:attr:`StudyResult.pixel_misses`, the map :func:`coherence.missmap.miss_map` would simulate again);
+        only with a :class:`coherence.shared_run.SharedLevels` hierarchy.
     """
 
     n_jobs: int | None = None
@@ -119,6 +128,7 @@ class Execution:
     trace_folder: object = None
     shared_lines_budget: int = SHARED_LINES_BUDGET
     store: RunStore | None = None
+    pixel_misses_at: tuple = ()
 
     def __post_init__(self):
         if self.n_jobs is not None:
@@ -129,6 +139,11 @@ class Execution:
                              "trace_folder, the folder the trace was saved in")
         if self.store is not None and not isinstance(self.store, RunStore):
             raise InputError(f"Execution.store must be a coherence.recost.RunStore, got {type(self.store).__name__}")
+        if not isinstance(self.pixel_misses_at, tuple):
+            raise InputError(f"Execution.pixel_misses_at must be a tuple of process counts, "
+                             f"got {type(self.pixel_misses_at).__name__}")
+        for n in self.pixel_misses_at:
+            require_int("Execution.pixel_misses_at", n, 1)
 
 
 def study(trace, mappings=DEFAULT_MAPPINGS, n_processes=(1, 2, 4, 8, 16), *,
@@ -288,6 +303,9 @@ class _StudyPlan:
         if not isinstance(self.execution, Execution):
             raise InputError(f"study: execution must be a coherence.studies.Execution, "
                              f"got {type(self.execution).__name__}")
+        if self.execution.pixel_misses_at and self.shared is None:
+            raise InputError("study: Execution.pixel_misses_at keeps the misses per pixel of runs on shared levels; "
+                             "give a coherence.shared_run.SharedLevels hierarchy")
         self.trace = trace
         self.store = self.execution.store if self.shared is None else None  # a store keeps private-cache runs only
         placed = (place_layout(self.layout, trace, call.scene) if self.store is None
@@ -405,9 +423,10 @@ class _StudyPlan:
         is done."""
         from coherence.kind_misses import shared_misses_by_kind
 
+        keep = self.jobs[index][1] in self.execution.pixel_misses_at
         run = simulate_shared_run(self.trace, self.distribution_of(index), self.shared.machine, self.placed,
                                   self.cost, self.machine, interleave_cycles=self.shared.interleave_cycles,
-                                  compute=self.compute, pieces=pieces)
+                                  compute=self.compute, pieces=pieces, record=("pixel_misses",) if keep else ())
         return run.run, shared_run_row(run.shared), shared_misses_by_kind(run.shared)
 
     def done(self) -> bool:
@@ -461,13 +480,15 @@ class _StudyPlan:
         parameters = {"hierarchy": hierarchy.to_dict(), "layout": self.layout.name, "cost": cost.to_dict(),
                       "machine": asdict(machine), "mappings": self.names, "n_processes": self.counts}
         kinds = None
+        pixel_misses = {(mapping.name, n): simulated[self.first_of[key]].pixel_misses
+                        for (mapping, n), key in zip(self.jobs, self.keys) if n in self.execution.pixel_misses_at}
         if self.shared is not None:
             parameters["shared_levels"] = self.shared.to_dict()
             kinds = pd.concat([shared_kinds[self.first_of[key]].assign(mapping=mapping.name, n_processes=n)
                                for (mapping, _), key, n in zip(self.jobs, self.keys, self.process_counts)],
                               ignore_index=True)
             kinds = kinds[["mapping", "n_processes", "level", "kind", "accesses", "misses"]]
-        return StudyResult(runs, processes, parameters, kinds)
+        return StudyResult(runs, processes, parameters, kinds, pixel_misses)
 
 
 def _pass_on(target: Future, source: Future) -> None:

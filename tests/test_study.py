@@ -139,3 +139,42 @@ def test_bad_arguments(result):
         study(trace, ["S"], [0], progress=False)
     with pytest.raises(ValueError, match="distinct names"):
         study(trace, ["S", "S"], [2], progress=False)
+
+
+def test_shared_study_keeps_pixel_misses_of_the_asked_counts():
+    """On shared levels, Execution.pixel_misses_at=(1, 2) keeps each run's misses per pixel at 1 and 2
+    processes, equal to simulate_shared_run's (record pixel_misses) of that mapping and count; S and P at one
+    process, simulated once, share theirs; nothing at 3; refused on private caches and for a count < 1.
+    Mutation: ``simulated[self.first_of[key]]`` -> ``simulated[self.first_of[self.keys[0]]]`` in
+    _StudyPlan.result (every map then the first run's): fails."""
+    from cachesim import CacheLevel, Hierarchy
+    from cachesim.sharing import SharedHierarchy
+    from coherence.cost import get_cost_model
+    from coherence.layout import get_layout
+    from coherence.mappings import get_mapping
+    from coherence.shared_run import SharedLevels, simulate_shared_run
+    from coherence.studies import place_layout
+
+    trace = random_trace(width=12, height=8, seed=3)
+    levels = Hierarchy((CacheLevel("L1", 256, 32, 2, "lru", latency=1), CacheLevel("L2", 2048, 32, 4, "lru",
+                                                                                    latency=6)),
+                       memory_latency=40, name="tiny")
+    shared = SharedLevels(SharedHierarchy(levels, n_cores=2, smt=1, shared_by=("thread", "machine")), 50)
+    machine = Machine(n_cpus=2, quantum_cycles=3000)
+    outcome = study(trace, ["S", "P", "DB"], [1, 2, 3], hierarchy=shared, machine=machine, progress=False,
+                    execution=Execution(pixel_misses_at=(1, 2)))
+    assert set(outcome.pixel_misses) == {(name, n) for name in ("S", "P", "DB") for n in (1, 2)}
+    placed = place_layout(get_layout("compact"), trace)
+    for (name, n), kept in outcome.pixel_misses.items():
+        run = simulate_shared_run(trace, get_mapping(name).build(12, 8, n), shared.machine, placed,
+                                  get_cost_model("alpha8400"), machine, interleave_cycles=50,
+                                  record=("pixel_misses",)).run
+        np.testing.assert_array_equal(kept, run.pixel_misses, err_msg=f"{name} at {n}")
+    assert outcome.pixel_misses[("S", 1)] is outcome.pixel_misses[("P", 1)]
+    assert not np.array_equal(outcome.pixel_misses[("S", 2)], outcome.pixel_misses[("P", 2)])
+    with pytest.raises(ValueError, match="pixel_misses_at keeps the misses per pixel of runs on shared levels"):
+        study(trace, ["S"], [2], hierarchy=SMALL, progress=False, execution=Execution(pixel_misses_at=(2,)))
+    with pytest.raises(ValueError, match="Execution.pixel_misses_at"):
+        Execution(pixel_misses_at=(0,))
+    with pytest.raises(ValueError, match="Execution.pixel_misses_at must be a tuple"):
+        Execution(pixel_misses_at=2)
