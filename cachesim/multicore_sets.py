@@ -15,7 +15,7 @@ import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from cachesim.multicore_state import BACK_INVALIDATIONS, COHERENCE_INVALIDATIONS
 from cachesim.sets import RANDOM, _find, _random_way
@@ -51,10 +51,16 @@ def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     return offset[level] + instance * level_ways[level] + set_index * ways[level]
 
 
+def _trailing_zeros(value):
+    """The number of trailing zero bits of a nonzero unsigned integer. Compiled, it is LLVM's ``cttz``
+    (one instruction, :func:`_cttz`); this plain-Python body runs when numba is switched off."""
+    value = int(value)
+    return np.uint64((value & -value).bit_length() - 1)
+
+
 @intrinsic
-def _trailing_zeros(typingctx, value):
-    """The number of trailing zero bits of an unsigned integer (LLVM's ``cttz``: one instruction; any
-    answer for 0, which callers rule out)."""
+def _cttz(typingctx, value):
+    """LLVM's ``cttz`` of an unsigned integer (any answer for 0, which callers rule out)."""
     if not isinstance(value, types.Integer) or value.signed:
         return None
 
@@ -67,12 +73,17 @@ def _trailing_zeros(typingctx, value):
     return value(value), codegen
 
 
+@overload(_trailing_zeros)
+def _trailing_zeros_compiled(value):
+    return lambda value: _cttz(value)
+
+
 @njit(cache=True, inline="always")
 def _probe_ways(tags, base, n_ways, line):
     """:func:`cachesim.sets._find` without an early exit or a branch per way: a bit per way that holds
-    ``line`` (a line is in a set once), every way compared, and the way of the lowest bit set. The index is unsigned: numba tests a signed index for a negative value
-    (counted from the end) with a select per way, which keeps the loop from vectorising. At most 64 ways
-    take this path (:func:`_probe`)."""
+    ``line`` (a line is in a set once), every way compared, and the way of the lowest bit set. The index
+    is unsigned: numba tests a signed index for a negative value (counted from the end), which costs a
+    select per way. At most 64 ways take this path (:func:`_probe`)."""
     matches = np.uint64(0)
     first = np.uint64(base)
     for way in range(n_ways):
