@@ -52,7 +52,7 @@ def test_a_first_level_read_hit_renews_its_lru_stamp():
     """Thread 0 reads A, B, A, C, A, B in one 2-way LRU set of its own L1 (thread 1 reads D, E of its L1's same
     set between them): the hit on A makes B the least recently used, so C evicts B, A hits and B misses.
     L1 hits by kind (the kind is the access's position): thread 0 at 3 and 5, thread 1 none. Counted by hand.
-    Mutation: drop ``state.stamps[slot] = clock`` in _replay (C then evicts A: hits at 3 and 6)."""
+    Mutation: drop ``state.stamps[slot] = clock`` in _replay (C then evicts A: a hit at 3 only)."""
     hierarchy = Hierarchy((CacheLevel("L1", 32, 16, 2), CacheLevel("L2", 1024, 16, 4)))
     machine = SharedHierarchy(hierarchy, n_cores=2, shared_by=("core", "machine"))
     a, b, c, d, e = 0x100, 0x200, 0x300, 0x400, 0x500

@@ -307,8 +307,10 @@ def test_store_places_each_layout_once_and_keys_lines_alike():
     """The store's placed layouts equal place_layout's for every memory image (the heap's included), are
     worked out once per layout and scene while kept (the least recently used of PLACED_KEPT + 1 goes), and
     the line key the store makes from a kept placement's digest is the one made from scratch, page placement
-    included. Fails if placed_layout keys on the scene alone (``key = id(scene)``): every image is then
-    served the first one's addresses (checked)."""
+    included; the same layout without the scene is placed again. Fails if placed_layout keys on the scene
+    alone (``key = id(scene)``): every image is then served the first one's addresses (checked), or on the
+    layout alone without checking the kept scene (``key = repr(layout)`` and ``if kept is None:``: the last
+    assert, checked)."""
     from coherence.page_placement import PagePlacement
     from coherence.recost import PLACED_KEPT, _lines_key
     from tracer.rendering.render import RenderOptions, render
@@ -333,6 +335,8 @@ def test_store_places_each_layout_once_and_keys_lines_alike():
         kept.append(placed)
     assert store.placed_layout(trace, layouts[-1], scene) is kept[-1]
     assert store.placed_layout(trace, layouts[0], scene) is not kept[0]  # the least recently used went
+    # without the scene, polygons and patches get 4 vertices each: a placement of its own
+    assert store.placed_layout(trace, layouts[0], None) is not store.placed_layout(trace, layouts[0], scene)
 
 
 def test_store_works_out_compute_cycles_and_replay_keys_once_per_input():
