@@ -116,6 +116,11 @@ def _probe(tags, base, n_ways, line):
     return _probe_any(tags, base, n_ways, line)
 
 
+#: :func:`_probe` for callers outside cachesim: the way of ``line`` in the set whose first way is ``base``
+#: (-1: not there).
+probe_set = _probe
+
+
 @njit(cache=True, inline="always")
 def _victim_ways(tags, stamps, base, n_ways):
     """The first empty way of the set, else the first of its least stamps, with one comparison per

@@ -360,7 +360,7 @@ class SharedOrderPieces(NamedTuple):
     """An ordered run's accesses for the shared levels (:func:`shared_order_pieces`)."""
 
     trace: PieceTrace  #: the pseudo-trace, aux records renumbered to the buffer rows
-    pieces: object     #: :class:`coherence.shared_schedule.PixelPieces` of its pseudo-pixels
+    pieces: object     #: :class:`coherence.piece_words.PixelPieces` of its pseudo-pixels
 
 
 def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: int, buffers=None,
@@ -391,7 +391,7 @@ def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: in
     """
     from coherence.ray_order_base import OrderBuffers
     from coherence.shared_run import pixel_pieces
-    from coherence.shared_schedule import PixelPieces
+    from coherence.piece_words import pack_pieces
     from coherence.thread_streams import PRIVATE_KINDS
 
     if not work.n_aux:
@@ -415,7 +415,7 @@ def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: in
     placed, trace = with_order_buffers(placed, one_owner, n_records, below_process_zero)
     pieces = pixel_pieces(trace, placed, line_size)
     private = pieces.private | (pieces.kinds == AUXILIARY_KIND)
-    return placed, SharedOrderPieces(trace, PixelPieces(pieces.piece_offsets, pieces.addresses, pieces.sizes,
+    return placed, SharedOrderPieces(trace, pack_pieces(pieces.piece_offsets, pieces.addresses, pieces.sizes,
                                                         pieces.kinds, pieces.writes, private, int(buffers.spacing)))
 
 

@@ -27,7 +27,8 @@ from coherence.layout import PlacedLayout
 from coherence.recost import N_ACCESS_COLUMNS, READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES, MissCounts
 from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, FINISH_CYCLES, FIRST_CPU, MEMORY_CYCLES, MIGRATIONS,
                                 N_CYCLE_COLUMNS, N_PLACEMENT_COLUMNS)
-from coherence.shared_schedule import PixelPieces, SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
+from coherence.piece_words import PixelPieces, pack_pieces
+from coherence.shared_schedule import SharedMachine, SharedOutputs, cpu_threads, run_shared_schedule
 from coherence.simulation import Machine, PixelCost, Run, _counters_by_process, pixel_compute, schedule_of
 from coherence.thread_streams import counter_address, record_places, split_records
 from rtcommon.validate import InputError, require_number
@@ -163,7 +164,7 @@ def pixel_pieces(trace, placed: PlacedLayout, line_size: int) -> PixelPieces:
     # each pixel split as by thread -1: private kinds at their layout address
     stream, counts, _ = split_records(records, offsets, np.full(offsets.shape[0] - 1, -1, dtype=np.int64), places)
     piece_offsets = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
-    return PixelPieces(piece_offsets, stream.addresses, stream.sizes, stream.kinds, stream.writes,
+    return pack_pieces(piece_offsets, stream.addresses, stream.sizes, stream.kinds, stream.writes,
                        places.private_kind[stream.kinds], int(places.span))
 
 
@@ -285,7 +286,7 @@ def _log_room(pieces: PixelPieces, machine: Machine, log: bool, distribution: Di
         return 0
     if machine.background_load:
         raise InputError("simulate_shared_run: record=('log',) is for runs without a background load")
-    return int(pieces.addresses.shape[0]) + (distribution.n_tasks if distribution.dynamic else 0)
+    return int(pieces.words.shape[0]) + (distribution.n_tasks if distribution.dynamic else 0)
 
 
 def _run(trace, distribution, hierarchy: SharedHierarchy, cost: CostModel, machine: Machine, counters,

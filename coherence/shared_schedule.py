@@ -13,7 +13,9 @@ machine's one state (:func:`cachesim.multicore.shared_access`): the instances
 of each level that serve the thread, write-invalidate coherence between
 instances on, so processes running on different cores at the same time warm
 and evict each other's lines at the levels they share and take lines from
-each other's private levels. On a machine whose levels have prefetchers
+each other's private levels. Reads that hit the thread's first level
+take a loop of their own (:mod:`coherence.turn_reads`), with the same
+counts, stamps and cycles. On a machine whose levels have prefetchers
 every access goes through
 :func:`cachesim.multicore_prefetch.prefetching_access` instead, which also
 trains and issues the prefetchers of the levels it reaches (each issued
@@ -72,10 +74,13 @@ from numba import njit
 
 from cachesim.multicore import HITS, shared_access
 from cachesim.multicore_prefetch import prefetching_access
-from coherence.recost import READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES
+from cachesim.sets import LRU
 from coherence.os_rules import (COMPUTE_CYCLES, DISPATCH_CYCLES, MEMORY_CYCLES, after_pixel, background_slice, decide,
                                 finish, lowest_clock_cpu, next_pixel, os_state, place)
+from coherence.piece_words import KIND_MASK, KIND_SHIFT, PRIVATE_BIT, SIZE_MASK, WRITE_BIT
+from coherence.recost import READ_HITS, READ_MISSES, WRITE_HITS, WRITE_MISSES
 from coherence.thread_streams import COUNTER_BYTES
+from coherence.turn_reads import FirstLevel, TurnPace, first_level_reads
 from rtcommon.jit import NO_REFCOUNTS
 from tracer.trace.records import AUXILIARY_KIND
 
@@ -84,35 +89,6 @@ BACKGROUND_READ = -1
 #: Piece index the access log gives an access of the task counter.
 COUNTER_ACCESS = -2
 
-
-
-class PixelPieces(NamedTuple):
-    """Every pixel's accesses with their bytes and kinds, as the kernel reads them.
-
-    Attributes
-    ----------
-    piece_offsets : ndarray of int64, shape (P + 1,)
-        Pixel ``p`` makes accesses ``piece_offsets[p]:piece_offsets[p + 1]``.
-    addresses : ndarray of uint64, shape (N,)
-        First byte of each access, private kinds at their layout address.
-    sizes : ndarray of int64, shape (N,)
-        Bytes each access touches in its line.
-    kinds : ndarray of uint8, shape (N,)
-    writes : ndarray of bool, shape (N,)
-    private : ndarray of bool, shape (N,)
-        Accesses to a process's own copy: ``(p + 1) * private_span`` is
-        added to their address when process ``p`` makes them.
-    private_span : int
-        Bytes between two processes' copies (a multiple of the page size).
-    """
-
-    piece_offsets: np.ndarray
-    addresses: np.ndarray
-    sizes: np.ndarray
-    kinds: np.ndarray
-    writes: np.ndarray
-    private: np.ndarray
-    private_span: int
 
 
 class SharedMachine(NamedTuple):
@@ -160,8 +136,8 @@ class SharedOutputs(NamedTuple):
     log_threads : ndarray of int64, shape (M,) or (0,)
         Hardware thread of each logged access.
     log_pieces : ndarray of int64, shape (M,) or (0,)
-        Index into :class:`PixelPieces` of each logged access (:data:`BACKGROUND_READ`: a background read,
-        :data:`COUNTER_ACCESS`: a task hand-out's access of the counter).
+        Index into :class:`coherence.piece_words.PixelPieces` of each logged access (:data:`BACKGROUND_READ`: a
+        background read, :data:`COUNTER_ACCESS`: a task hand-out's access of the counter).
     log_length : ndarray of int64, shape (1,)
         Accesses logged.
     pixel_misses : ndarray of int64, shape (P, L), or (0, L)
@@ -217,7 +193,7 @@ def run_shared_schedule(pieces, shared, cost, schedule, queues, background, out,
 
     Parameters
     ----------
-    pieces : PixelPieces
+    pieces : coherence.piece_words.PixelPieces
     shared : SharedMachine
         Updated in place.
     cost : coherence.simulation.PixelCost
@@ -256,10 +232,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     line_shift = shared.line_shift
     piece_offsets = pieces.piece_offsets
     piece_addresses = pieces.addresses
-    piece_sizes = pieces.sizes
-    piece_kinds = pieces.kinds
-    piece_writes = pieces.writes
-    piece_private = pieces.private
+    piece_words = pieces.words
     span = np.uint64(pieces.private_span)
     counter = np.uint64(shared.counter_address)
     compute = cost.compute
@@ -284,6 +257,7 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
     first_instance = machine.instance_of[0]
     allocate0 = geometry.write_allocate[0]
     first_shift = np.uint64(geometry.line_shift)
+    fast_reads = prefetchers is None and not logging  # every access trains prefetchers; a log takes each one
 
     ours_left = n_ours
     access_clock = 0
@@ -318,6 +292,9 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
         finished = False
         offset = np.uint64(process + 1) * span
         instance0 = first_instance[thread]
+        first_level = FirstLevel(state.tags, state.stamps, geometry.offset[0] + instance0 * machine.level_ways[0],
+                                 geometry.set_mask[0], geometry.n_sets[0], geometry.ways[0],
+                                 geometry.policy[0] == LRU, first_shift)
         # A line this thread's previous access of the turn left in its first
         # level, as its set's most recent entry (-1: none).
         previous_line = np.int64(-1)
@@ -364,25 +341,35 @@ def _event_loop(pieces, shared, cost, schedule, queues, background, out, interle
             if mapping_pixels:  # the process's misses before, in the pixel's row; the change after
                 _add_misses(pixel_misses, pixel, accesses, process, -1)
             while k < stop and clock + advance - turn_start < interleave_cycles:
+                if fast_reads:  # the reads that hit the first level, in a loop of their own
+                    k, advance, memory, access_clock, previous_line, hits = first_level_reads(
+                        pieces, k, stop, first_level, TurnPace(clock, turn_start, interleave_cycles, share,
+                                                                   latency[0], offset),
+                        counts[0, instance0, :, HITS], (advance, memory, access_clock, previous_line))
+                    served[thread, 0] += hits
+                    accesses[process, 0, READ_HITS] += hits
+                    if k >= stop or clock + advance - turn_start >= interleave_cycles:
+                        break
                 address = piece_addresses[k]
-                if piece_private[k]:
+                word = piece_words[k]
+                if word & PRIVATE_BIT:
                     address += offset
-                is_write = piece_writes[k]
-                kind = np.int64(piece_kinds[k])
+                is_write = (word & WRITE_BIT) != 0
+                kind = np.int64((word >> KIND_SHIFT) & KIND_MASK)
+                size = np.int64(word & SIZE_MASK) + 1
                 line0 = np.int64(address >> first_shift)
                 access_clock += 1
                 if prefetchers is not None:  # every access trains the prefetchers: no shortcut
-                    level_served, access_clock = prefetching_access(thread, address, is_write, piece_sizes[k], kind,
-                                                                    geometry, machine, state, access_clock,
-                                                                    prefetchers)
+                    level_served, access_clock = prefetching_access(thread, address, is_write, size, kind, geometry,
+                                                                    machine, state, access_clock, prefetchers)
                 elif line0 == previous_line and not is_write:
                     # a read hit that changes nothing but the counts (nothing else ran since)
                     counts[0, instance0, kind, HITS] += 1
                     served[thread, 0] += 1
                     level_served = 0
                 else:
-                    level_served = shared_access(thread, address, is_write, piece_sizes[k], kind, geometry, machine,
-                                                 state, access_clock, scratch)
+                    level_served = shared_access(thread, address, is_write, size, kind, geometry, machine, state,
+                                                 access_clock, scratch)
                 previous_line = line0 if (allocate0 or not is_write) else np.int64(-1)
                 if logging:
                     logged = _log(out, logged, address, thread, k)
@@ -439,5 +426,5 @@ def _count_access(accesses, process, level_served, is_write):
         accesses[process, level_served, hit_column] += 1
 
 
-__all__ = ["BACKGROUND_READ", "COUNTER_ACCESS", "PixelPieces", "SharedMachine", "SharedOutputs", "cpu_threads",
+__all__ = ["BACKGROUND_READ", "COUNTER_ACCESS", "SharedMachine", "SharedOutputs", "cpu_threads",
            "run_shared_schedule"]
