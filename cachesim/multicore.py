@@ -60,7 +60,7 @@ from cachesim.multicore_state import (BACK_INVALIDATIONS, COHERENCE_INVALIDATION
                                       FALSE_SHARING_MISSES, N_KINDS, SharedResult, SharedState,
                                       ThreadStream)
 from cachesim.multicore_sets import (_back_invalidate, _byte_range, _drop_ghost, _filter_slot, _note_fill, _place,
-                                     _probe, _set_of, _write_invalidate)
+                                     _probe, _set_of, _write_invalidate, set_index)
 from cachesim.sets import (ACCESSES, EVICTIONS, HITS, INCLUSIVE, LRU, MISSES, WRITE_HITS, WRITE_MISSES, WRITES,
                            _find)
 from cachesim.sharing import SharedHierarchy
@@ -326,8 +326,7 @@ def _replay(stream, geometry, machine, state, clock, scratch, first_hits):
             # even the stamp (the order in the set stays the same).
             slot = np.int64(-1)
             if line0 != previous_line or thread != previous_thread:
-                set_index = line0 & mask0 if mask0 >= 0 else line0 % n_sets0
-                slot = _probe(tags, first_way + set_index * ways0, ways0, line0)
+                slot = _probe(tags, first_way + set_index(line0, mask0, n_sets0) * ways0, ways0, line0)
             if slot >= 0 or line0 == previous_line and thread == previous_thread:
                 if slot >= 0 and stamps0:
                     state.stamps[slot] = clock

@@ -44,11 +44,17 @@ def _byte_range(address, size, line0, line_shift):
 
 
 @njit(cache=True, inline="always")
+def set_index(line, set_mask, n_sets):
+    """The set of ``line`` in a level of ``n_sets`` sets: ``line & set_mask`` when ``set_mask`` >= 0 (a power
+    of two of sets), else ``line % n_sets``."""
+    return line & set_mask if set_mask >= 0 else line % n_sets
+
+
+@njit(cache=True, inline="always")
 def _set_of(line, level, instance, n_sets, set_mask, ways, offset, level_ways):
     """First way of ``line``'s set in instance ``instance`` of ``level``."""
-    mask = set_mask[level]
-    set_index = line & mask if mask >= 0 else line % n_sets[level]
-    return offset[level] + instance * level_ways[level] + set_index * ways[level]
+    return (offset[level] + instance * level_ways[level]
+            + set_index(line, set_mask[level], n_sets[level]) * ways[level])
 
 
 def _trailing_zeros(value):

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cachesim.multicore_sets import probe_set
+from cachesim.multicore_sets import probe_set, set_index
 from coherence.piece_words import KIND_MASK, KIND_SHIFT, PRIVATE_BIT, WRITE_BIT
 from rtcommon.jit import NO_REFCOUNTS
 
@@ -110,8 +110,8 @@ def first_level_reads(pieces, k, stop, first, pace, kind_hits, running):
             address += pace.offset
         line = np.int64(address >> first.line_shift)
         if line != previous_line:
-            set_index = line & first.set_mask if first.set_mask >= 0 else line % first.n_sets
-            slot = probe_set(tags, first.first_way + set_index * first.ways, first.ways, line)
+            slot = probe_set(tags, first.first_way + set_index(line, first.set_mask, first.n_sets) * first.ways,
+                             first.ways, line)
             if slot < 0:
                 break
             if first.lru:
