@@ -391,7 +391,7 @@ def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: in
     """
     from coherence.ray_order_base import OrderBuffers
     from coherence.shared_run import pixel_pieces
-    from coherence.piece_words import pack_pieces
+    from coherence.piece_words import PRIVATE_BIT, PixelPieces
     from coherence.thread_streams import PRIVATE_KINDS
 
     if not work.n_aux:
@@ -414,9 +414,10 @@ def shared_order_pieces(work: OrderedWork, placed, n_records: int, line_size: in
                             np.zeros(work.n_aux, np.int64))
     placed, trace = with_order_buffers(placed, one_owner, n_records, below_process_zero)
     pieces = pixel_pieces(trace, placed, line_size)
-    private = pieces.private | (pieces.kinds == AUXILIARY_KIND)
-    return placed, SharedOrderPieces(trace, pack_pieces(pieces.piece_offsets, pieces.addresses, pieces.sizes,
-                                                        pieces.kinds, pieces.writes, private, int(buffers.spacing)))
+    # the buffers' accesses are private as well: each process's buffers lie one spacing from the next's
+    words = np.where(pieces.kinds == AUXILIARY_KIND, pieces.words | PRIVATE_BIT, pieces.words)
+    return placed, SharedOrderPieces(trace, PixelPieces(pieces.piece_offsets, pieces.addresses, words,
+                                                        int(buffers.spacing)))
 
 
 def with_order_buffers(placed, work: OrderedWork, n_records: int, extents) -> tuple:
